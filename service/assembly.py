@@ -1,0 +1,387 @@
+"""Model assembly: match every signature in the building graph, instantiate and wire the components.
+
+The paper's Sec. 3.3 (Bjørnskov, Jradi & Wetter): each signature is matched; every match becomes a
+component instance representing the building nodes the signature models; each input is connected by
+intersecting its source node with the nodes other components model, and taking the output that
+carries the wanted quantity at that node. Then
+
+* boundary inputs = measuring devices with no connected input (their measured series drive the model),
+* calibration targets = measuring devices with exactly one connected input (Eq. 1),
+* parameters to estimate = all parameters − those mapped from the graph (Eq. 2).
+
+When several signatures claim the same building node, the choice is deterministic and explained in
+``AssembledModel.notes``: a signature whose modelled nodes carry more specific classes wins (class
+depth in the loaded ontology), then the higher ``complexity`` not above the user's cap, then the
+signature covering more nodes, then the id.
+
+Effects (``kind = "effect"`` signatures) are only instantiated where the building graph records them
+(``node gt:hasEffect [ gt:effectSignature <signature IRI> ]``) or where the caller asks for them
+(``extra_effects``, used by the diagnosis to try candidates without touching the graph). An effect is
+spliced into one port of the component that represents its ``splice.node``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import defaultdict
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pyoxigraph as ox
+
+from .assembled_model import (
+    AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef, load_model_class,
+)
+from .measuring_device import MeasuringDevice
+from .namespaces import GTR, RDFS
+from .resources import signatures_dir
+from .signature import PatternTriple, Rule, Signature, load_signature_library
+from .signature_matcher import match_signature, missing_class_report
+from .store import GraphStore
+from .units import convert
+
+__all__ = ["AssemblyError", "IncompleteModelError", "assemble", "EffectRequest", "component_iri"]
+
+
+class AssemblyError(ValueError):
+    """The building graph or the signature library cannot be assembled; the message says why."""
+
+
+class IncompleteModelError(AssemblyError):
+    """Inputs without a source: ``problems`` lists one sentence per missing connection."""
+
+    def __init__(self, problems: Sequence[str]):
+        self.problems = tuple(problems)
+        super().__init__("the model is incomplete:\n  - " + "\n  - ".join(self.problems))
+
+
+@dataclass(frozen=True)
+class EffectRequest:
+    """Add effect signature ``effect`` at building node ``node`` (its splice node binds to it)."""
+
+    effect: str
+    node: str
+
+
+def component_iri(model_name: str, signature: Signature, node_iri: str) -> str:
+    """Stable IRI of a component instance: model name, signature id and the node it represents."""
+    local = node_iri.rstrip("/#").replace("#", "/").rsplit("/", 1)[-1]
+    return f"{GTR}model/{model_name}/component/{signature.id}/{local}"
+
+
+def assemble(
+    store: GraphStore,
+    model_name: str,
+    *,
+    library: Mapping[str, Signature] | None = None,
+    max_complexity: int | None = None,
+    extra_effects: Iterable[EffectRequest] = (),
+    allow_incomplete: bool = False,
+) -> AssembledModel:
+    """Assemble the simulation model of building model ``model_name`` loaded in ``store``.
+
+    :raises AssemblyError: a signature names a class no loaded ontology declares.
+    :raises IncompleteModelError: an input has no source (unless ``allow_incomplete``; the
+        problems are then listed in ``notes`` and the input left unconnected).
+    """
+    library = dict(library) if library is not None else load_signature_library(signatures_dir())
+    dataset = store.matching_dataset(model_name)
+    problems = [p for sig in library.values() for p in missing_class_report(store.store, sig, dataset)]
+    if problems:
+        raise AssemblyError("\n".join(problems))
+
+    notes: list[str] = []
+    components = [s for s in library.values() if s.kind == "component"]
+    if max_complexity is not None:
+        components = [s for s in components if s.complexity <= max_complexity]
+    depth = _class_depth(store, dataset)
+    candidates = []
+    for signature in components:
+        for match in _best_match_per_anchor(match_signature(store.store, signature, default_graph=dataset), signature):
+            candidates.append((signature, match))
+    candidates.sort(key=lambda c: (
+        -sum(depth(cls) for node in c[0].modeled_nodes for cls in c[0].nodes[node].classes),
+        -c[0].complexity, -len(c[0].modeled_nodes), c[0].id, _modeled(c[0], c[1]),
+    ))
+    instances: dict[str, ComponentInstance] = {}
+    claimed: dict[str, ComponentInstance] = {}
+    for signature, match in candidates:
+        nodes = _modeled(signature, match)
+        taken = [n for n in nodes if n in claimed]
+        if taken:
+            winner = claimed[taken[0]]
+            notes.append(
+                f"{_short(taken[0])}: signature {winner.signature.id} chosen over {signature.id} "
+                f"({_why(winner.signature, signature, depth)})"
+            )
+            continue
+        instance = _instantiate(store, model_name, signature, match)
+        instances[instance.iri] = instance
+        for node in nodes:
+            claimed[node] = instance
+
+    effect_requests = list(extra_effects) + _recorded_effects(store, model_name, library)
+    connections, unconnected = _wire(instances)
+    for request in effect_requests:
+        connections = _splice_effect(store, model_name, library, request, instances, connections, dataset)
+    # measuring devices without a modelled source are boundary inputs, not missing connections
+    devices = {iri for iri, inst in instances.items() if issubclass(inst.model_class, MeasuringDevice)}
+    incomplete = [p for iri, p in unconnected if iri not in devices]
+    incomplete += _unmatched_anchor_report(store, library, components, claimed, dataset)
+    if incomplete and not allow_incomplete:
+        raise IncompleteModelError(incomplete)
+    notes.extend(incomplete)
+
+    fed = {c.target for c in connections}
+    boundary = tuple(sorted(i for i in devices if i not in fed))
+    targets = tuple(sorted(i for i in devices if i in fed))
+    mapped, estimated = _parameters(instances)
+    return AssembledModel(
+        components=dict(sorted(instances.items())), connections=tuple(sorted(connections, key=dataclasses.astuple)),
+        boundary_inputs=boundary, targets=targets, mapped_parameters=mapped,
+        estimated_parameters=estimated, building_graph=str(store.model_graph(model_name).value),
+        notes=tuple(notes),
+    )
+
+
+def _modeled(signature: Signature, match: Mapping[str, str | None]) -> tuple[str, ...]:
+    return tuple(str(match[n]) for n in signature.modeled_nodes)
+
+
+def _best_match_per_anchor(matches: Sequence[Mapping[str, str | None]], signature: Signature):
+    """One match per modelled-node tuple: the one binding most optional nodes, then the first in
+    sorted order (several matches arise when, e.g., two sensors sit on parallel upstream branches)."""
+    best: dict[tuple[str, ...], Mapping[str, str | None]] = {}
+    for match in matches:
+        key = _modeled(signature, match)
+        bound = sum(v is not None for v in match.values())
+        current = best.get(key)
+        if current is None or bound > sum(v is not None for v in current.values()):
+            best[key] = match
+    return [best[k] for k in sorted(best)]
+
+
+def _class_depth(store: GraphStore, dataset: list[ox.NamedNode]):
+    cache: dict[str, int] = {}
+    query = "SELECT (COUNT(DISTINCT ?super) AS ?n) WHERE { ?class <%s>+ ?super }" % RDFS.subClassOf.value
+
+    def depth(class_iri: str) -> int:
+        if class_iri not in cache:
+            rows = store.query(query, substitutions={"class": ox.NamedNode(class_iri)}, default_graph=dataset)
+            cache[class_iri] = int(rows[0]["n"].value) if rows else 0
+        return cache[class_iri]
+
+    return depth
+
+
+def _why(winner: Signature, loser: Signature, depth) -> str:
+    win = sum(depth(c) for n in winner.modeled_nodes for c in winner.nodes[n].classes)
+    lose = sum(depth(c) for n in loser.modeled_nodes for c in loser.nodes[n].classes)
+    if win != lose:
+        return f"more specific classes: depth {win} against {lose}"
+    if winner.complexity != loser.complexity:
+        return f"higher complexity {winner.complexity} against {loser.complexity}"
+    if len(winner.modeled_nodes) != len(loser.modeled_nodes):
+        return f"represents {len(winner.modeled_nodes)} nodes against {len(loser.modeled_nodes)}"
+    return "first in identifier order"
+
+
+def _short(iri: str) -> str:
+    return iri.replace("#", "/").rsplit("/", 1)[-1]
+
+
+def _instantiate(store: GraphStore, model_name: str, signature: Signature, match: Mapping[str, str | None]) -> ComponentInstance:
+    model_class = load_model_class(signature)
+    nodes = _modeled(signature, match)
+    mapped: dict[str, float] = {}
+    for mapping in signature.parameters:
+        raw = match.get(mapping.node)
+        if raw is None:
+            continue
+        spec = model_class.parameter(mapping.name)
+        try:
+            value = float(raw)
+        except ValueError:
+            raise AssemblyError(
+                f"{nodes[0]}: parameter {mapping.name} of {signature.id} maps to {raw!r}, which is not a number"
+            ) from None
+        unit = match.get(mapping.unit_node) if mapping.unit_node else None
+        if unit is not None:
+            value = float(convert([value], unit, spec.unit)[0])
+        mapped[mapping.name] = value
+    measurement = None
+    if issubclass(model_class, MeasuringDevice):
+        measurement = _measurement_link(store, model_name, nodes[0])
+    return ComponentInstance(
+        iri=component_iri(model_name, signature, nodes[0]), signature=signature,
+        bindings={k: v for k, v in match.items() if v is not None}, modeled_nodes=nodes,
+        mapped_parameters=mapped, measurement=measurement,
+    )
+
+
+def _measurement_link(store: GraphStore, model_name: str, node: str) -> MeasurementLink:
+    rows = store.run_named_query("measurement-link", model=model_name, device=node)
+    series_id = unit = None
+    if rows:
+        series_id = rows[0]["series_id"].value if rows[0].get("series_id") is not None else None
+        unit = rows[0]["unit"].value if rows[0].get("unit") is not None else None
+    return MeasurementLink(node=node, series_id=series_id, unit=unit)
+
+
+def _outputs_at(instance: ComponentInstance) -> dict[tuple[str, str], str]:
+    """(building node IRI, quantity) → output port of ``instance``."""
+    table = {}
+    for output in instance.signature.outputs:
+        node = instance.bindings.get(output.node)
+        if node is not None:
+            table[(node, output.quantity)] = output.port
+    return table
+
+
+def _wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection], list[tuple[str, str]]]:
+    providers: dict[tuple[str, str], list[tuple[str, str]]] = defaultdict(list)
+    for iri, instance in instances.items():
+        for key, port in _outputs_at(instance).items():
+            providers[key].append((iri, port))
+    connections: list[Connection] = []
+    unconnected: list[tuple[str, str]] = []
+    for iri, instance in instances.items():
+        for mapping in instance.signature.inputs:
+            source_node = instance.bindings.get(mapping.source)
+            where = f"input {mapping.port} of {instance.signature.id} at {instance.node}"
+            if source_node is None:
+                unconnected.append((iri, f"{where}: no {mapping.source} node matched, so nothing feeds it"))
+                continue
+            found = [p for p in providers.get((source_node, mapping.quantity), []) if p[0] != iri]
+            if not found:
+                modelled_by = [i.signature.id for i in instances.values() if source_node in i.modeled_nodes]
+                reason = (
+                    f"{source_node} is modelled by {', '.join(modelled_by)}, which has no output carrying "
+                    f"'{mapping.quantity}' there" if modelled_by else f"no component models {source_node}"
+                )
+                unconnected.append((iri, f"{where}: {reason}"))
+                continue
+            source, port = sorted(found)[0]
+            connections.append(Connection(source, port, iri, mapping.port))
+    return connections, unconnected
+
+
+def _recorded_effects(store: GraphStore, model_name: str, library: Mapping[str, Signature]) -> list[EffectRequest]:
+    by_iri = {sig.iri: sig.id for sig in library.values() if sig.kind == "effect"}
+    requests = []
+    for row in store.run_named_query("applied-effects", model=model_name):
+        signature_iri = row["effect_signature"].value
+        if signature_iri not in by_iri:
+            raise AssemblyError(
+                f"{row['node'].value} records effect {signature_iri}, which is not in the signature library"
+            )
+        requests.append(EffectRequest(by_iri[signature_iri], row["node"].value))
+    return sorted(set(requests), key=lambda r: (r.node, r.effect))
+
+
+def _splice_effect(store, model_name, library, request, instances, connections, dataset) -> list[Connection]:
+    signature = library.get(request.effect)
+    if signature is None or signature.kind != "effect" or signature.splice is None:
+        raise AssemblyError(f"{request.effect!r} is not an effect signature in the library")
+    matches = [m for m in match_signature(store.store, signature, default_graph=dataset)
+               if m.get(signature.splice.node) == request.node]
+    if not matches:
+        raise AssemblyError(
+            f"effect {signature.id} does not apply at {request.node}: its pattern "
+            f"({signature.source_file}) does not match there"
+        )
+    match = _best_match_per_anchor(matches, signature)[0]
+    host = next((i for i in instances.values() if request.node in i.modeled_nodes), None)
+    if host is None:
+        raise AssemblyError(f"effect {signature.id} at {request.node}: no component models that node")
+    effect = _instantiate(store, model_name, signature, match)
+    effect = dataclasses.replace(effect, iri=f"{effect.iri}/on/{_short(host.iri)}")
+    instances[effect.iri] = effect
+    port = signature.splice.port
+    spliced: list[Connection] = []
+    if signature.splice.side == "output":
+        for c in connections:
+            spliced.append(dataclasses.replace(c, source=effect.iri, source_port="value_out")
+                           if (c.source, c.source_port) == (host.iri, port) else c)
+        spliced.append(Connection(host.iri, port, effect.iri, "value_in"))
+    else:
+        feeding = [c for c in connections if (c.target, c.target_port) == (host.iri, port)]
+        if not feeding:
+            raise AssemblyError(f"effect {signature.id} splices input {port} of {host.iri}, which nothing feeds")
+        for c in connections:
+            spliced.append(dataclasses.replace(c, target=effect.iri, target_port="value_in") if c in feeding else c)
+        spliced.append(Connection(effect.iri, "value_out", host.iri, port))
+    extra, missing = _wire({**{effect.iri: effect}, **{k: v for k, v in instances.items() if k != effect.iri}})
+    spliced.extend(c for c in extra if c.target == effect.iri and c.target_port != "value_in")
+    missing_here = [p for iri, p in missing if iri == effect.iri and "value_in" not in p]
+    if missing_here:
+        raise IncompleteModelError(missing_here)
+    return spliced
+
+
+def _unmatched_anchor_report(store, library, components, claimed, dataset) -> list[str]:
+    """For building nodes of a signature's modelled class that no component represents: the first
+    required triple of that signature that finds nothing there, as a sentence."""
+    problems = []
+    for signature in components:
+        anchor = signature.modeled_nodes[0]
+        for node in _instances_of(store, signature.nodes[anchor].classes, dataset):
+            if node in claimed:
+                continue
+            missing = _first_failing_triple(store, signature, anchor, node, dataset)
+            if missing is not None:
+                problems.append(missing)
+    return sorted(set(problems))
+
+
+def _instances_of(store: GraphStore, classes: Sequence[str], dataset) -> list[str]:
+    nodes: set[str] = set()
+    for cls in classes:
+        rows = store.query(
+            "SELECT DISTINCT ?node WHERE { ?node a/<%s>* ?class }" % RDFS.subClassOf.value,
+            substitutions={"class": ox.NamedNode(cls)}, default_graph=dataset,
+        )
+        nodes.update(r["node"].value for r in rows if isinstance(r["node"], ox.NamedNode))
+    return sorted(nodes)
+
+
+def _first_failing_triple(store, signature: Signature, anchor: str, node: str, dataset) -> str | None:
+    required = [t for t in signature.triples if t.rule is not Rule.OPTIONAL and anchor in (t.subject, t.object)]
+    for triple in required:
+        other = triple.object if triple.subject == anchor else triple.subject
+        probe = dataclasses.replace(
+            signature, nodes={anchor: signature.nodes[anchor], other: signature.nodes[other]},
+            triples=(triple,), modeled_nodes=(anchor,), inputs=(), outputs=(), parameters=(), splice=None,
+        )
+        hits = [m for m in match_signature(store.store, probe, default_graph=dataset) if m.get(anchor) == node]
+        if not hits:
+            return f"{node} is not modelled by {signature.id}: {_describe_missing(triple, anchor, signature, node)}"
+    return None
+
+
+def _describe_missing(triple: PatternTriple, anchor: str, signature: Signature, node: str) -> str:
+    other = triple.object if triple.subject == anchor else triple.subject
+    spec = signature.nodes[other]
+    what = " or ".join(_short(c) for c in spec.classes) or (spec.iri or "value")
+    if triple.rule is Rule.TRAVERSE:
+        side = "upstream of" if triple.object == anchor else "downstream of"
+        return f"no {what} {side} {node} along {triple.predicate} (signature {signature.source_file})"
+    if triple.subject == anchor:
+        return f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} (signature {signature.source_file})"
+    return f"no triple ?{other} <{triple.predicate}> <{node}> with ?{other} a {what} (signature {signature.source_file})"
+
+
+def _parameters(instances: Mapping[str, ComponentInstance]) -> tuple[tuple[ParameterRef, ...], tuple[ParameterRef, ...]]:
+    mapped, estimated = [], []
+    for iri, instance in sorted(instances.items()):
+        for spec in instance.model_class.parameters:
+            if spec.name in instance.mapped_parameters:
+                mapped.append(ParameterRef(iri, spec, instance.mapped_parameters[spec.name]))
+            else:
+                estimated.append(ParameterRef(iri, spec))
+    return tuple(mapped), tuple(estimated)
+
+
+def default_library(folder: Path | None = None) -> dict[str, Signature]:
+    return load_signature_library(folder or signatures_dir())

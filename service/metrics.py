@@ -1,0 +1,167 @@
+"""Goodness-of-fit and interval metrics of one target on one window.
+
+With ``y`` the measured and ``ŷ`` the predicted (median) series over the ``n`` measured steps, ``p``
+the number of estimated parameters and ``ȳ`` the mean of ``y``:
+
+* ``RMSE = sqrt(Σ(y − ŷ)² / n)``, ``MAE = Σ|y − ŷ| / n`` (target's unit);
+* ``R² = 1 − Σ(y − ŷ)² / Σ(y − ȳ)²`` (coefficient of determination; negative when the prediction is
+  worse than the mean);
+* ASHRAE Guideline 14-2014, with ``n − p`` degrees of freedom::
+
+      CV(RMSE) = sqrt(Σ(y − ŷ)² / (n − p)) / ȳ · 100 %
+      NMBE     = Σ(y − ŷ) / ((n − p) · ȳ) · 100 %      (sign kept: > 0 means the model under-predicts)
+
+  and its hourly calibration criteria ``CV(RMSE) ≤ 30 %`` and ``|NMBE| ≤ 10 %``. They are computed
+  at the resolution of the data given (pass hourly means for a literal Guideline-14 check). Both are
+  ratios to ȳ, which only means something on a ratio scale, so the criteria are *not applied*
+  (``guideline14_applies = False`` with the reason; the numbers are still reported) when the unit is
+  an interval scale (°C, °F: ȳ moves with the zero of the scale), when ``|ȳ|`` is below 5 % of
+  ``max |y|`` (a mostly-zero signal such as a valve shut most of the day, or signs that cancel:
+  the ratio explodes), or when ``n ≤ p`` (CV(RMSE) and NMBE are then NaN);
+* lag-1 autocorrelation of the residuals ``e = y − ŷ`` (consecutive measured pairs over the variance
+  of all measured residuals): near 0 for white residuals, near 1 when the model misses slow
+  structure;
+* per central prediction interval of nominal level ``1 − α``: empirical coverage
+  ``c = #{lower ≤ y ≤ upper} / n``, average coverage error ``ACE = c − (1 − α)`` (the paper's
+  Table 5; > 0: intervals too wide, < 0: too narrow) and the mean interval width.
+
+NaN in ``y`` marks a step without a measurement: it is left out of every sum.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = [
+    "TargetMetrics", "IntervalCoverage", "target_metrics", "INTERVAL_SCALE_UNITS",
+    "GUIDELINE14_HOURLY_CV_RMSE_PERCENT", "GUIDELINE14_HOURLY_NMBE_PERCENT",
+]
+
+#: Units whose zero is arbitrary: ratios to their mean are meaningless.
+INTERVAL_SCALE_UNITS = frozenset({"degC", "degF", "°C", "°F", "DEG_C", "DEG_F"})
+#: ASHRAE Guideline 14-2014, hourly calibration data.
+GUIDELINE14_HOURLY_CV_RMSE_PERCENT = 30.0
+GUIDELINE14_HOURLY_NMBE_PERCENT = 10.0
+_MEAN_NEAR_ZERO_SHARE = 0.05
+
+
+@dataclass(frozen=True)
+class IntervalCoverage:
+    """Coverage of one central prediction interval: nominal ``level``, empirical ``coverage``, ``ace``
+    (coverage − level) and ``mean_width`` (target's unit)."""
+
+    level: float
+    coverage: float
+    ace: float
+    mean_width: float
+
+
+@dataclass(frozen=True)
+class TargetMetrics:
+    """Metrics of one target on one window (see the module docstring for the definitions)."""
+
+    target: str
+    unit: str
+    n: int
+    n_parameters: int
+    mean_observed: float
+    rmse: float
+    mae: float
+    r2: float
+    cv_rmse_percent: float
+    nmbe_percent: float
+    lag1_autocorrelation: float
+    guideline14_applies: bool
+    guideline14_pass: bool | None
+    guideline14_note: str
+    coverage: tuple[IntervalCoverage, ...] = ()
+
+    def to_dict(self) -> dict:
+        """Plain types only (floats, bools, str, lists): ready for JSON."""
+        result = asdict(self)
+        result["coverage"] = [asdict(c) for c in self.coverage]
+        return result
+
+
+def _guideline14(unit: str, mean: float, max_abs: float, dof: int, cv: float, nmbe: float):
+    if dof <= 0:
+        return False, None, f"n − p = {dof} ≤ 0: CV(RMSE) and NMBE undefined"
+    if unit in INTERVAL_SCALE_UNITS:
+        return False, None, f"not applied: the mean of a value in {unit} depends on the zero of the scale"
+    if abs(mean) < _MEAN_NEAR_ZERO_SHARE * max_abs or mean == 0.0:
+        return False, None, (
+            f"not applied: mean {mean:.4g} is near zero (below {100 * _MEAN_NEAR_ZERO_SHARE:.0f} % of "
+            f"max |y| = {max_abs:.4g}), the ratios are unstable"
+        )
+    passed = cv <= GUIDELINE14_HOURLY_CV_RMSE_PERCENT and abs(nmbe) <= GUIDELINE14_HOURLY_NMBE_PERCENT
+    return True, passed, (
+        f"hourly criteria CV(RMSE) ≤ {GUIDELINE14_HOURLY_CV_RMSE_PERCENT:.0f} %, "
+        f"|NMBE| ≤ {GUIDELINE14_HOURLY_NMBE_PERCENT:.0f} %"
+    )
+
+
+def target_metrics(
+    observed: np.ndarray,
+    predicted: np.ndarray,
+    *,
+    n_parameters: int = 0,
+    intervals: Mapping[float, tuple[np.ndarray, np.ndarray]] | None = None,
+    unit: str = "",
+    target: str = "",
+) -> TargetMetrics:
+    """Metrics of a prediction against the measured series of one target.
+
+    :param observed: ``ndarray[n_steps]``, NaN where not measured.
+    :param predicted: ``ndarray[n_steps]``, the point or median prediction.
+    :param n_parameters: p, the number of estimated parameters (Guideline 14's n − p).
+    :param intervals: ``{level: (lower, upper)}`` central prediction intervals, each ``ndarray[n_steps]``.
+    :param unit: the target's unit (decides whether Guideline 14's criteria apply).
+    :raises ValueError: for mismatched shapes, no measured step, or a non-finite prediction at a
+        measured step (the message names the row).
+    """
+    y_all = np.asarray(observed, dtype=float)
+    y_hat_all = np.asarray(predicted, dtype=float)
+    label = f"target {target}: " if target else ""
+    if y_all.ndim != 1 or y_hat_all.shape != y_all.shape:
+        raise ValueError(f"{label}observed {y_all.shape} and predicted {y_hat_all.shape}: expected equal (n_steps,)")
+    measured = np.isfinite(y_all)
+    if not measured.any():
+        raise ValueError(f"{label}no measured step in the window")
+    bad = np.flatnonzero(measured & ~np.isfinite(y_hat_all))
+    if bad.size:
+        raise ValueError(f"{label}prediction is not finite at row {bad[0]}")
+    y, y_hat = y_all[measured], y_hat_all[measured]
+    n, p = y.size, int(n_parameters)
+    error = y - y_hat
+    mean = float(np.mean(y))
+    total = float(np.sum((y - mean) ** 2))
+    dof = n - p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cv = float(np.sqrt(np.sum(error**2) / dof) / mean * 100.0) if dof > 0 and mean != 0.0 else np.nan
+        nmbe = float(np.sum(error) / (dof * mean) * 100.0) if dof > 0 and mean != 0.0 else np.nan
+    applies, passed, note = _guideline14(unit, mean, float(np.max(np.abs(y))), dof, cv, nmbe)
+    residual = np.where(measured, y_all - y_hat_all, np.nan)
+    centred = residual - np.nanmean(residual)
+    pairs = centred[:-1] * centred[1:]
+    variance = float(np.nansum(centred**2))
+    lag1 = float(np.nansum(pairs) / variance) if variance > 0.0 and np.isfinite(pairs).any() else np.nan
+    coverage = []
+    for level, (lower, upper) in sorted((intervals or {}).items()):
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        if lower.shape != y_all.shape or upper.shape != y_all.shape:
+            raise ValueError(f"{label}interval {level}: bounds of shape {lower.shape}, expected {y_all.shape}")
+        inside = (lower[measured] <= y) & (y <= upper[measured])
+        share = float(np.mean(inside))
+        width = float(np.mean(upper[measured] - lower[measured]))
+        coverage.append(IntervalCoverage(float(level), share, share - float(level), width))
+    return TargetMetrics(
+        target=target, unit=unit, n=n, n_parameters=p, mean_observed=mean,
+        rmse=float(np.sqrt(np.mean(error**2))), mae=float(np.mean(np.abs(error))),
+        r2=1.0 - float(np.sum(error**2)) / total if total > 0.0 else np.nan,
+        cv_rmse_percent=cv, nmbe_percent=nmbe, lag1_autocorrelation=lag1,
+        guideline14_applies=applies, guideline14_pass=passed, guideline14_note=note,
+        coverage=tuple(coverage),
+    )

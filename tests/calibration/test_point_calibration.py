@@ -1,0 +1,109 @@
+"""Point calibration: recovery of a synthetic truth, identifiability verdicts, exact covariance when linear."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from synthetic_zone import NAMES, TRUTH, zone_windows
+
+from service.calibration_problem import CalibrationProblem
+from service.point_calibration import PointCalibrator
+
+
+@pytest.fixture(scope="module")
+def zone_fit():
+    (problem,) = zone_windows(1, seed=1)
+    return problem, PointCalibrator(random_state=0).fit(problem)
+
+
+def test_identifiable_parameters_are_recovered_within_5_percent(zone_fit):
+    _, fit = zone_fit
+    for name in ("UA_W_per_K", "C_J_per_K"):
+        i = NAMES.index(name)
+        assert fit.theta_[i] == pytest.approx(TRUTH[i], rel=0.05)
+        assert fit.identifiability_[name].identified, fit.identifiability_[name].reasons
+    # only the product η·P is determined by the data
+    assert fit.theta_[2] * fit.theta_[3] == pytest.approx(TRUTH[2] * TRUTH[3], rel=0.05)
+
+
+def test_the_unidentifiable_pair_is_flagged_with_its_partner(zone_fit):
+    _, fit = zone_fit
+    efficiency, power = fit.identifiability_["heater_efficiency"], fit.identifiability_["heater_power_W"]
+    assert not efficiency.identified and not power.identified
+    assert any(r.startswith("flat direction") and "moves with heater_power_W" in r for r in efficiency.reasons)
+    assert any("correlated with heater_efficiency" in r for r in power.reasons)
+    assert fit.correlation_[2, 3] < -0.95
+    assert fit.singular_values_[-1] < 1e-3 * fit.singular_values_[0]
+
+
+def test_residuals_and_prediction_are_reported_per_target(zone_fit):
+    problem, fit = zone_fit
+    for key in problem.target_keys:
+        np.testing.assert_allclose(fit.residuals_[key], problem.observed[key] - fit.prediction_[key])
+    weighted = np.concatenate([fit.residuals_[k] / problem.target_scales[k] for k in problem.target_keys])
+    assert fit.cost_ == pytest.approx(0.5 * np.sum(weighted**2), rel=1e-9)
+    # the model is right: residuals are the white sensor noise (σ = 0.1 K)
+    assert np.std(fit.residuals_["zone_temperature"]) == pytest.approx(0.1, rel=0.15)
+
+
+def linear_problem(simulate_log=None, n=40, default=None):
+    t = np.linspace(0.0, 1.0, n)
+    rng = np.random.default_rng(4)
+    observed = 2.0 + 3.0 * t + 0.2 * rng.normal(size=n)
+
+    def simulate(theta):
+        if simulate_log is not None:
+            simulate_log.append(theta.shape[0])
+        return {"y": theta[:, :1] + theta[:, 1:2] * t}
+
+    problem = CalibrationProblem(
+        parameter_names=("intercept", "slope"), lower=np.array([-10.0, -10.0]), upper=np.array([10.0, 10.0]),
+        simulate=simulate, observed={"y": observed}, target_scales={"y": 0.7}, default=default,
+    )
+    return problem, t, observed
+
+
+def test_linear_model_gives_the_ordinary_least_squares_estimate_and_covariance():
+    problem, t, y = linear_problem()
+    fit = PointCalibrator(random_state=1).fit(problem)
+    design = np.column_stack([np.ones_like(t), t])
+    beta, residual_sum, *_ = np.linalg.lstsq(design, y, rcond=None)
+    covariance = residual_sum[0] / (t.size - 2) * np.linalg.inv(design.T @ design)  # σ²(XᵀX)⁻¹, n − p
+    np.testing.assert_allclose(fit.theta_, beta, rtol=1e-6)
+    np.testing.assert_allclose(fit.covariance_, covariance, rtol=1e-4)
+    np.testing.assert_allclose(fit.standard_errors_, np.sqrt(np.diag(covariance)), rtol=1e-4)
+    assert fit.correlation_[0, 1] == pytest.approx(covariance[0, 1] / np.sqrt(covariance[0, 0] * covariance[1, 1]), rel=1e-4)
+
+
+def test_jacobian_and_start_screening_are_one_simulate_call_each():
+    calls: list[int] = []
+    problem, *_ = linear_problem(calls, default=np.array([0.0, 0.0]))
+    fit = PointCalibrator(n_starts=2, n_candidates=16, random_state=0).fit(problem)
+    assert calls[0] == 17  # 16 Latin-hypercube candidates + the default, one call
+    assert set(calls[1:]) == {1, 3}  # residuals (1 member) and Jacobians (p + 1 = 3 members)
+    assert fit.n_simulate_calls_ == len(calls) and fit.n_simulated_members_ == sum(calls)
+
+
+def test_a_seeded_fit_is_reproducible():
+    (problem,) = zone_windows(1, steps_per_day=48, seed=2)
+    first = PointCalibrator(n_starts=2, random_state=3).fit(problem)
+    second = PointCalibrator(n_starts=2, random_state=3).fit(problem)
+    np.testing.assert_array_equal(first.theta_, second.theta_)
+
+
+def test_parameters_against_a_bound_or_too_uncertain_are_flagged():
+    problem, *_ = linear_problem()
+    tight = CalibrationProblem(
+        parameter_names=problem.parameter_names, lower=np.array([-10.0, 2.95]), upper=np.array([10.0, 10.0]),
+        simulate=problem.simulate, observed=problem.observed, target_scales=problem.target_scales,
+    )
+    fit = PointCalibrator(random_state=0).fit(tight)
+    assert any("crosses the prior bounds" in r for r in fit.identifiability_["slope"].reasons)
+
+
+def test_invalid_settings_and_too_little_data_are_refused():
+    problem, *_ = linear_problem(n=2)
+    with pytest.raises(ValueError, match=r"2 measured values cannot determine 2 parameters \(need n > p\)"):
+        PointCalibrator(random_state=0).fit(problem)
+    with pytest.raises(ValueError, match="need 1 ≤ n_starts ≤ n_candidates"):
+        PointCalibrator(n_starts=5, n_candidates=4).fit(problem)
