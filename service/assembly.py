@@ -87,7 +87,7 @@ def assemble(
     """
     library = dict(library) if library is not None else load_signature_library(signatures_dir())
     dataset = store.matching_dataset(model_name)
-    problems = [p for sig in library.values() for p in missing_class_report(store.store, sig, dataset)]
+    problems = [p for sig in library.values() for p in missing_class_report(store, sig, dataset)]
     if problems:
         raise AssemblyError("\n".join(problems))
 
@@ -98,7 +98,7 @@ def assemble(
     depth = _class_depth(store, dataset)
     candidates = []
     for signature in components:
-        for match in _best_match_per_anchor(match_signature(store.store, signature, default_graph=dataset), signature):
+        for match in _best_match_per_anchor(match_signature(store, signature, default_graph=dataset), signature):
             candidates.append((signature, match))
     candidates.sort(key=lambda c: (
         -sum(depth(cls) for node in c[0].modeled_nodes for cls in c[0].nodes[node].classes),
@@ -164,7 +164,7 @@ def _best_match_per_anchor(matches: Sequence[Mapping[str, str | None]], signatur
 
 def _class_depth(store: GraphStore, dataset: list[ox.NamedNode]):
     cache: dict[str, int] = {}
-    query = "SELECT (COUNT(DISTINCT ?super) AS ?n) WHERE { ?class <%s>+ ?super }" % RDFS.subClassOf.value
+    query = "SELECT ?class (COUNT(DISTINCT ?super) AS ?n) WHERE { ?class <%s>+ ?super } GROUP BY ?class" % RDFS.subClassOf.value
 
     def depth(class_iri: str) -> int:
         if class_iri not in cache:
@@ -284,7 +284,7 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
     signature = library.get(request.effect)
     if signature is None or signature.kind != "effect" or signature.splice is None:
         raise AssemblyError(f"{request.effect!r} is not an effect signature in the library")
-    matches = [m for m in match_signature(store.store, signature, default_graph=dataset)
+    matches = [m for m in match_signature(store, signature, default_graph=dataset)
                if m.get(signature.splice.node) == request.node]
     if not matches:
         raise AssemblyError(
@@ -295,6 +295,11 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
     host = next((i for i in instances.values() if request.node in i.modeled_nodes), None)
     if host is None:
         raise AssemblyError(f"effect {signature.id} at {request.node}: no component models that node")
+    if signature.splice.host_models and host.signature.model not in signature.splice.host_models:
+        raise AssemblyError(
+            f"effect {signature.id} at {request.node}: it extends {', '.join(signature.splice.host_models)}, "
+            f"but {request.node} is modelled by {host.signature.model}"
+        )
     effect = _instantiate(store, model_name, signature, match)
     effect = dataclasses.replace(effect, iri=f"{effect.iri}/on/{_short(host.iri)}")
     instances[effect.iri] = effect
@@ -339,7 +344,7 @@ def _instances_of(store: GraphStore, classes: Sequence[str], dataset) -> list[st
     nodes: set[str] = set()
     for cls in classes:
         rows = store.query(
-            "SELECT DISTINCT ?node WHERE { ?node a/<%s>* ?class }" % RDFS.subClassOf.value,
+            "SELECT DISTINCT ?node ?class WHERE { ?node a/<%s>* ?class }" % RDFS.subClassOf.value,
             substitutions={"class": ox.NamedNode(cls)}, default_graph=dataset,
         )
         nodes.update(r["node"].value for r in rows if isinstance(r["node"], ox.NamedNode))
@@ -354,7 +359,7 @@ def _first_failing_triple(store, signature: Signature, anchor: str, node: str, d
             signature, nodes={anchor: signature.nodes[anchor], other: signature.nodes[other]},
             triples=(triple,), modeled_nodes=(anchor,), inputs=(), outputs=(), parameters=(), splice=None,
         )
-        hits = [m for m in match_signature(store.store, probe, default_graph=dataset) if m.get(anchor) == node]
+        hits = [m for m in match_signature(store, probe, default_graph=dataset) if m.get(anchor) == node]
         if not hits:
             return f"{node} is not modelled by {signature.id}: {_describe_missing(triple, anchor, signature, node)}"
     return None

@@ -89,6 +89,11 @@ class PatternTriple:
     predicate: str
     object: str
     rule: Rule = Rule.EXACT
+    optional: bool = False  # True for an optional traverse (rule TRAVERSE); OPTIONAL rule implies it
+
+    @property
+    def is_optional(self) -> bool:
+        return self.optional or self.rule is Rule.OPTIONAL
 
 
 @dataclass(frozen=True)
@@ -122,11 +127,14 @@ class ParameterMapping:
 class EffectSplice:
     """Where an effect enters the model it extends: on an ``input`` port (the effect transforms what
     the port receives) or on an ``output`` port (it transforms what the port emits) of the component
-    that represents node ``node``."""
+    that represents node ``node``. ``host_models`` (``module:Class`` names), when given, restricts the
+    effect to hosts of those models (e.g. coil thermal mass only where the chosen coil model is static).
+    """
 
     node: str
     port: str
     side: str  # "input" or "output"
+    host_models: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -240,7 +248,13 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         if rule is Rule.TRAVERSE and (nodes[obj].literal or nodes[subject].iri or nodes[obj].iri):
             raise _fail(path, where, "traverse needs class-restricted nodes at both ends")
         predicate = _curie(path, where + ".predicate", spec.get("predicate"))
-        triples.append(PatternTriple(subject, predicate, obj, rule))
+        optional = spec.get("optional", False)
+        if not isinstance(optional, bool):
+            raise _fail(path, where + ".optional", "must be true or false")
+        unknown_keys = set(spec) - {"subject", "predicate", "object", "rule", "optional"}
+        if unknown_keys:
+            raise _fail(path, where, f"unknown key(s) {sorted(unknown_keys)}")
+        triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL))
 
     modeled = tuple(known(n, "modeled_nodes") for n in data["modeled_nodes"])
     if not modeled:
@@ -268,7 +282,10 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         side = "input" if "input" in spec else "output" if "output" in spec else None
         if side is None or kind != "effect":
             raise _fail(path, "splice", "an effect's splice names node and one of 'input' or 'output'")
-        splice = EffectSplice(known(spec.get("node"), "splice.node"), spec[side], side)
+        host_models = spec.get("host_models", [])
+        if not isinstance(host_models, list) or not all(isinstance(m, str) and ":" in m for m in host_models):
+            raise _fail(path, "splice.host_models", "expected a list of 'module:Class' names")
+        splice = EffectSplice(known(spec.get("node"), "splice.node"), spec[side], side, tuple(host_models))
     elif kind == "effect":
         raise _fail(path, "splice", "an effect must say where it enters the model ([splice])")
 

@@ -1,0 +1,146 @@
+"""Where along the flow path the model fails: between the last sensor it matches and the first it doesn't.
+
+The building graph's flow topology (``fso:suppliesFluidTo`` for air and water, ``fso:transfersHeatTo``
+from a coil's water side to its air side; ``queries/flow-edges.rq``) is a directed graph, possibly
+with loops (return air mixed back into the supply). For a failing sensor ``f``:
+
+1. its place ``p`` is ``f`` itself when ``f`` sits in the flow path, else the node that has the
+   property it observes (a valve position sensor sits at its valve, a power meter at its fan;
+   ``queries/observed-node.rq``);
+2. walking upstream from ``p``, the walk stops at the first sensor on every branch; those are the
+   nearest upstream sensors. If one of them fails too, the failure came from further up and ``f``
+   only inherits it: ``f`` is not reported (an off-path sensor is still reported at its component);
+3. the suspects are the nodes ``n`` with a walk ``u → n → p`` from a matching upstream sensor ``u``
+   that passes no other sensor: forward-reachable from ``u`` and backward-reachable from ``p``, each
+   search stopping at sensors. On a loop this is still exact, because searches stop at sensors
+   rather than at "already seen upstream" nodes.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict, deque
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+__all__ = ["FlowTopology", "FailureLocation", "localize_failures"]
+
+
+def _short(iri: str) -> str:
+    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+
+
+@dataclass(frozen=True)
+class FailureLocation:
+    """The model fails at ``failing_sensor``; the missing effect sits in ``components``, which lie
+    between ``matching_sensor`` (None when no sensor upstream matches) and the failing one."""
+
+    failing_sensor: str
+    matching_sensor: str | None
+    components: tuple[str, ...]
+
+    def describe(self) -> str:
+        where = " or ".join(_short(c) for c in self.components) or "no modelled component"
+        if self.matching_sensor is None:
+            return f"The model fails at {_short(self.failing_sensor)} with no matching sensor upstream: look at {where}."
+        return (
+            f"The model matches {_short(self.matching_sensor)} but not {_short(self.failing_sensor)}: "
+            f"the missing effect sits in {where} between them."
+        )
+
+    def to_dict(self) -> dict:
+        return {"between": [self.matching_sensor, self.failing_sensor], "components": list(self.components)}
+
+
+class FlowTopology:
+    """Directed flow graph of a building model plus where off-path sensors sit.
+
+    :param edges: (upstream IRI, downstream IRI) pairs.
+    :param observed_owner: sensor IRI → IRI of the node whose property it observes.
+    """
+
+    def __init__(self, edges: Iterable[tuple[str, str]], observed_owner: Mapping[str, str] | None = None):
+        self.downstream: dict[str, set[str]] = defaultdict(set)
+        self.upstream: dict[str, set[str]] = defaultdict(set)
+        for source, target in edges:
+            self.downstream[source].add(target)
+            self.upstream[target].add(source)
+        self.observed_owner = dict(observed_owner or {})
+
+    @classmethod
+    def from_store(cls, store, model_name: str) -> FlowTopology:
+        """Read the topology of ``model_name`` with ``queries/flow-edges.rq`` and ``observed-node.rq``."""
+        edges = [(r["from"].value, r["to"].value) for r in store.run_named_query("flow-edges", model=model_name)]
+        owners: dict[str, str] = {}
+        for row in store.run_named_query("observed-node", model=model_name):
+            if row.get("owner") is not None:
+                owners.setdefault(row["device"].value, row["owner"].value)
+        return cls(edges, owners)
+
+    def in_flow_path(self, node: str) -> bool:
+        return node in self.downstream or node in self.upstream
+
+    def place(self, sensor: str) -> str:
+        """The flow-path node where ``sensor``'s reading is decided."""
+        if self.in_flow_path(sensor):
+            return sensor
+        return self.observed_owner.get(sensor, sensor)
+
+    def _reach(self, start: str, neighbours: Mapping[str, set[str]], stop: set[str]) -> set[str]:
+        seen = {start}
+        queue = deque([start])
+        while queue:
+            node = queue.popleft()
+            for nxt in neighbours.get(node, ()):
+                if nxt in seen:
+                    continue
+                seen.add(nxt)
+                if nxt not in stop:
+                    queue.append(nxt)
+        return seen
+
+    def nearest_upstream_sensors(self, node: str, sensors: set[str]) -> set[str]:
+        """Sensors reached first on every upstream branch of ``node`` (the walk stops at sensors)."""
+        reached = self._reach(node, self.upstream, sensors)
+        return {s for s in reached if s in sensors and s != node}
+
+    def nodes_between(self, upstream_sensor: str, node: str, sensors: set[str]) -> set[str]:
+        """Nodes on a walk ``upstream_sensor → n → node`` passing no other sensor (ends excluded
+        unless ``node`` is not a sensor)."""
+        forward = self._reach(upstream_sensor, self.downstream, sensors | {node})
+        backward = self._reach(node, self.upstream, sensors | {upstream_sensor})
+        between = (forward & backward) - sensors - {upstream_sensor}
+        if node not in sensors:
+            between.add(node)
+        else:
+            between.discard(node)
+        return between
+
+
+def localize_failures(
+    topology: FlowTopology, matches: Mapping[str, bool], sensors: Iterable[str]
+) -> list[FailureLocation]:
+    """Locate every first failure.
+
+    :param matches: sensor IRI → True when the model matches it (boundary inputs count as matching:
+        they are the measurements themselves); only sensors in this mapping are judged.
+    :param sensors: every measuring device of the model (targets and boundary inputs); the upstream
+        walks stop at all of them.
+    :returns: one :class:`FailureLocation` per failing sensor that does not merely inherit a failure
+        from a failing sensor upstream, sorted by sensor IRI.
+    """
+    sensor_set = set(sensors)
+    locations = []
+    for sensor in sorted(s for s, ok in matches.items() if not ok):
+        place = topology.place(sensor)
+        upstream = topology.nearest_upstream_sensors(place, sensor_set - {sensor})
+        good = sorted(u for u in upstream if matches.get(u, True))
+        inherits = any(not matches.get(u, True) for u in upstream)
+        if inherits and place == sensor:
+            continue
+        if not good:
+            locations.append(FailureLocation(sensor, None, (place,) if place != sensor else ()))
+            continue
+        for matching in good:
+            between = topology.nodes_between(matching, place, sensor_set)
+            locations.append(FailureLocation(sensor, matching, tuple(sorted(between))))
+    return locations

@@ -1,0 +1,278 @@
+"""The measured-data contract: a CSV of time stamps and sensor columns, matched to graph nodes.
+
+**Format.** The first column is the time stamp: ISO 8601 (``2025-01-01 00:15:00``,
+``2025-01-01T00:15:00+01:00``; an offset is converted to UTC) or the BMS format ``m/d/yyyy h:mm`` /
+``m/d/yy h:mm`` (the LBNL FLEXLAB export). Every other column is a series; a column is matched to a
+measuring device of the model by the device's full IRI, its local name, or the literal it gives as
+``gt:timeSeriesId`` (header whitespace stripped). Empty cells, ``NaN``, ``NA`` and ``null`` are
+missing values. Values are converted from the device's QUDT unit to the unit of the model port that
+consumes them (:mod:`service.units`).
+
+**Checks**, all reported at once in one :class:`MeasurementError` naming the column and the line:
+non-numeric cells, unparseable, duplicate or unsorted time stamps, columns missing for a boundary
+input or a target. Columns no device claims are listed in ``warnings`` (an error with ``strict``).
+
+**Regular step.** The step is the median spacing of the time stamps. An irregular file is resampled
+to that step by linear interpolation, with a warning. Gaps (missing values or missing rows) of up to
+``max_gap_steps`` steps are interpolated linearly; longer gaps stay NaN and are reported: they are
+never silently filled. The simulator holds a boundary input's last value through a gap and the
+calibration leaves the affected target steps out.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from .units import UnitError, convert
+
+__all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "write_csv"]
+
+_MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
+_BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S")
+
+
+class MeasurementError(ValueError):
+    """Measured data that cannot be used; ``problems`` lists every one (column, line)."""
+
+    def __init__(self, source: str, problems: list[str]):
+        self.source, self.problems = source, tuple(problems)
+        shown = problems[:25] + ([f"... and {len(problems) - 25} more"] if len(problems) > 25 else [])
+        super().__init__(f"{source}:\n  - " + "\n  - ".join(shown))
+
+
+@dataclass(frozen=True)
+class SeriesSpec:
+    """What the model needs from a column: the device ``node`` IRI, the names a column may carry
+    (``series_id``), the QUDT ``unit`` the values are in, the ``port_unit`` the model wants, and
+    whether the model cannot run without it (``required``)."""
+
+    node: str
+    series_id: str | None
+    unit: str | None
+    port_unit: str
+    required: bool = True
+
+    def names(self) -> set[str]:
+        local = self.node.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+        return {n for n in (self.node, local, self.series_id) if n}
+
+
+@dataclass(frozen=True)
+class MeasuredData:
+    """Regular series on one time grid: ``series[node]`` in the port unit ``units[node]``, NaN
+    where not measured (gaps longer than the limit)."""
+
+    timestamps: np.ndarray  # datetime64[s], UTC or naive local as in the file
+    step_s: float
+    series: dict[str, np.ndarray]
+    units: dict[str, str]
+    source: str = "<data>"
+    columns: dict[str, str] = field(default_factory=dict)  # node → CSV column
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.timestamps.size)
+
+    def window(self, start: datetime | str | None, end: datetime | str | None) -> slice:
+        """Index slice of the steps with ``start ≤ t ≤ end`` (None: the data's first / last).
+
+        :raises ValueError: a window outside the data or empty, naming the data's range.
+        """
+        first, last = self.timestamps[0], self.timestamps[-1]
+        lo = first if start is None else np.datetime64(parse_timestamp(str(start)), "s")
+        hi = last if end is None else np.datetime64(parse_timestamp(str(end)), "s")
+        if hi < lo:
+            raise ValueError(f"window {lo} – {hi}: the end is before the start")
+        if lo > last or hi < first:
+            raise ValueError(f"window {lo} – {hi} lies outside the data {self.source} ({first} – {last})")
+        i = int(np.searchsorted(self.timestamps, lo, side="left"))
+        j = int(np.searchsorted(self.timestamps, hi, side="right"))
+        if j - i < 2:
+            raise ValueError(f"window {lo} – {hi} holds fewer than 2 steps of {self.source}")
+        return slice(i, j)
+
+    def select(self, window: slice) -> MeasuredData:
+        return replace(self, timestamps=self.timestamps[window],
+                       series={k: v[window] for k, v in self.series.items()})
+
+
+def parse_timestamp(text: str) -> datetime:
+    """ISO 8601 (an offset is converted to UTC and dropped) or the BMS ``m/d/yy h:mm`` format.
+
+    :raises ValueError: naming the text.
+    """
+    value = text.strip()
+    try:
+        parsed = datetime.fromisoformat(value.replace("Z", "+00:00"))
+    except ValueError:
+        for fmt in _BMS_FORMATS:
+            try:
+                return datetime.strptime(value, fmt)
+            except ValueError:
+                continue
+        raise ValueError(f"time stamp {text!r} is neither ISO 8601 nor m/d/yyyy h:mm") from None
+    if parsed.tzinfo is not None:
+        parsed = parsed.astimezone(timezone.utc).replace(tzinfo=None)
+    return parsed
+
+
+def _fill_short_gaps(values: np.ndarray, max_gap: int) -> tuple[np.ndarray, int]:
+    """Interpolate NaN runs of at most ``max_gap`` steps between two measured values; returns the
+    filled array and the number of longer runs left NaN."""
+    missing = np.isnan(values)
+    if not missing.any() or missing.all():
+        return values, int(missing.all())
+    out = values.copy()
+    index = np.arange(values.size)
+    edges = np.diff(np.concatenate([[0], missing.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    long_runs = 0
+    known = ~missing
+    for start, end in zip(starts, ends):
+        if end - start <= max_gap and start > 0 and end < values.size:
+            out[start:end] = np.interp(index[start:end], index[known], values[known])
+        else:
+            long_runs += 1
+    return out, long_runs
+
+
+def read_measurements(
+    path: Path | str,
+    specs: Mapping[str, SeriesSpec],
+    *,
+    max_gap_steps: int = 5,
+    strict: bool = False,
+) -> MeasuredData:
+    """Read and check a measurement CSV (see the module docstring).
+
+    :param specs: node IRI → what the model needs from it.
+    :raises MeasurementError: every problem found, with column and line.
+    """
+    path = Path(path)
+    source = str(path)
+    problems: list[str] = []
+    warnings: list[str] = []
+    try:
+        handle = path.open(newline="", encoding="utf-8-sig")
+    except OSError as exc:
+        raise MeasurementError(source, [str(exc)]) from None
+    with handle:
+        reader = csv.reader(handle)
+        try:
+            header = [h.strip() for h in next(reader)]
+        except StopIteration:
+            raise MeasurementError(source, ["the file is empty"]) from None
+        rows = list(reader)
+    if len(header) < 2:
+        raise MeasurementError(source, ["line 1: expected a time column and at least one series column"])
+
+    claimed: dict[str, int] = {}
+    for node, spec in specs.items():
+        names = spec.names()
+        found = [i for i, h in enumerate(header[1:], start=1) if h in names]
+        if found:
+            claimed[node] = found[0]
+        elif spec.required:
+            problems.append(
+                f"no column for {node} (expected a header named {' or '.join(sorted(repr(n) for n in names))})"
+            )
+    unknown = sorted(set(range(1, len(header))) - set(claimed.values()))
+    if unknown:
+        message = f"columns no device of the model claims: {', '.join(header[i] for i in unknown)}"
+        (problems if strict else warnings).append(message)
+
+    times: list[datetime] = []
+    values = {node: np.full(len(rows), np.nan) for node in claimed}
+    for line, row in enumerate(rows, start=2):
+        if not row or all(not c.strip() for c in row):
+            problems.append(f"line {line}: empty row")
+            continue
+        try:
+            times.append(parse_timestamp(row[0]))
+        except ValueError as exc:
+            problems.append(f"line {line}, column {header[0]!r}: {exc}")
+            times.append(datetime.min)
+        for node, column in claimed.items():
+            cell = row[column].strip() if column < len(row) else ""
+            if cell.lower() in _MISSING:
+                continue
+            try:
+                values[node][line - 2] = float(cell)
+            except ValueError:
+                problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a number")
+    if len(times) < 2:
+        problems.append("fewer than two data rows")
+    stamps = np.array(times, dtype="datetime64[s]")
+    if len(times) >= 2:
+        steps = np.diff(stamps).astype(np.int64)
+        for i in np.flatnonzero(steps == 0)[:10]:
+            problems.append(f"line {i + 3}: duplicate time stamp {stamps[i + 1]}")
+        for i in np.flatnonzero(steps < 0)[:10]:
+            problems.append(f"line {i + 3}: time stamp {stamps[i + 1]} is before the previous one ({stamps[i]})")
+    converted: dict[str, np.ndarray] = {}
+    for node, column in claimed.items():
+        spec = specs[node]
+        if spec.unit is None:
+            problems.append(f"column {header[column]!r}: device {node} declares no unit (saref:isMeasuredIn)")
+            continue
+        try:
+            converted[node] = convert(values[node], spec.unit, spec.port_unit, where=f"column {header[column]!r}")
+        except UnitError as exc:
+            problems.append(str(exc))
+    if problems:
+        raise MeasurementError(source, problems)
+
+    step_s = float(np.median(np.diff(stamps).astype(np.int64)))
+    regular = np.all(np.diff(stamps).astype(np.int64) == step_s)
+    if not regular:
+        grid = np.arange(stamps[0], stamps[-1] + np.timedelta64(1, "s"), np.timedelta64(int(step_s), "s"))
+        t_old = (stamps - stamps[0]).astype(np.int64).astype(float)
+        t_new = (grid - stamps[0]).astype(np.int64).astype(float)
+        n_irregular = int(np.sum(np.diff(stamps).astype(np.int64) != step_s))
+        warnings.append(
+            f"irregular time stamps ({n_irregular} spacings differ from the median step {step_s:g} s): "
+            f"resampled linearly to {grid.size} steps"
+        )
+        # a row gap longer than the limit must stay a gap: interpolate only between close rows
+        nearest_gap = np.diff(t_old)
+        for node, series in converted.items():
+            finite = np.isfinite(series)
+            resampled = np.interp(t_new, t_old[finite], series[finite]) if finite.sum() >= 2 else np.full(grid.size, np.nan)
+            after = np.clip(np.searchsorted(t_old, t_new, side="right") - 1, 0, t_old.size - 1)
+            too_far = np.zeros(grid.size, dtype=bool)
+            inner = after < t_old.size - 1
+            too_far[inner] = nearest_gap[after[inner]] > max_gap_steps * step_s
+            resampled[too_far] = np.nan
+            converted[node] = resampled
+        stamps = grid
+    for node in list(converted):
+        converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps)
+        if long_runs:
+            warnings.append(
+                f"column {header[claimed[node]]!r}: {long_runs} gap(s) longer than {max_gap_steps} steps left "
+                f"unfilled ({int(np.isnan(converted[node]).sum())} steps)"
+            )
+    return MeasuredData(
+        timestamps=stamps, step_s=step_s, series=converted,
+        units={n: specs[n].port_unit for n in converted}, source=source,
+        columns={n: header[c] for n, c in claimed.items()}, warnings=tuple(warnings),
+    )
+
+
+def write_csv(path: Path, timestamps: np.ndarray, columns: Mapping[str, np.ndarray], *, decimals: int = 4) -> None:
+    """Write ``columns`` beside an ISO time column (``time``); NaN as an empty cell."""
+    with Path(path).open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["time", *columns])
+        arrays = list(columns.values())
+        for i, stamp in enumerate(timestamps):
+            cells = [str(np.datetime64(stamp, "s")).replace("T", " ")]
+            cells += ["" if not np.isfinite(a[i]) else f"{a[i]:.{decimals}f}" for a in arrays]
+            writer.writerow(cells)

@@ -1,0 +1,276 @@
+"""Ensemble-vectorised fixed-step simulation of an assembled model.
+
+:class:`Simulator` prepares once what does not depend on θ (component order, where every input comes
+from, the boundary series as per-step views) and then :meth:`Simulator.run` steps all ensemble
+members together: every component's ``step`` receives arrays of shape ``(n_ensemble,)``, so the
+Python work per step is per component, not per member. A single parameter set is ``n_ensemble = 1``.
+
+**Order and feedback.** Components run in topological order of the connections (ties broken by
+IRI, so runs are deterministic). A control loop (controller → valve → coil → sensor → controller)
+is a cycle; it is broken with a **one-step delay on the loop-closing connection**: the connection
+into an input declared ``Port(..., feedback=True)`` (a controller's measured value) when it lies on
+a cycle. A cycle without such a port is broken at the connection whose target comes first in IRI
+order, with a warning naming it. A delayed input at step ``k`` receives the producer's output of
+step ``k − 1``; at ``k = 0`` it receives the producer's measured value when the producer is a
+measuring device with a series in ``boundary`` (the sensor's first reading), else 0.
+
+**Boundary inputs** (measuring devices with no connected input) receive their measured series
+through their ``measured_value`` input; NaN gaps in a boundary series are held at the last value
+(the calibration leaves those steps out). Dynamic components start from ``initial_state`` with
+their first inputs.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections import defaultdict
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from .assembled_model import AssembledModel, Connection
+
+__all__ = ["Simulator", "SimulationResult", "simulate", "component_order"]
+
+
+@dataclass
+class SimulationResult:
+    """``outputs[(component IRI, port)]``: ``ndarray[n_ensemble, n_steps]``."""
+
+    outputs: dict[tuple[str, str], np.ndarray]
+    step_s: float
+
+    def target(self, component_iri: str) -> np.ndarray:
+        """The virtual sensor's series (a measuring device's ``measured_value`` output)."""
+        return self.outputs[(component_iri, "measured_value")]
+
+
+def _strongly_connected(nodes: list[str], edges: Mapping[str, set[str]]) -> dict[str, int]:
+    """Tarjan's algorithm (iterative): node → component id."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    comp: dict[str, int] = {}
+    counter = 0
+    for root in nodes:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges.get(root, ()))))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            advanced = False
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(edges.get(child, ())))))
+                    advanced = True
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            if advanced:
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    comp[member] = index[node]
+                    if member == node:
+                        break
+    return comp
+
+
+def component_order(model: AssembledModel) -> tuple[list[str], set[Connection], list[str]]:
+    """Topological order, the delayed (loop-closing) connections and warnings (module docstring)."""
+    nodes = sorted(model.components)
+    edges: dict[str, set[str]] = defaultdict(set)
+    for c in model.connections:
+        edges[c.source].add(c.target)
+    scc = _strongly_connected(nodes, edges)
+    delayed: set[Connection] = set()
+    for c in model.connections:
+        port = model.components[c.target].model_class.port(c.target_port)
+        if port.feedback and scc[c.source] == scc[c.target]:
+            delayed.add(c)
+    notes: list[str] = []
+    while True:
+        live = [c for c in model.connections if c not in delayed]
+        indegree = {n: 0 for n in nodes}
+        children: dict[str, list[str]] = defaultdict(list)
+        for c in live:
+            if c.source != c.target:
+                indegree[c.target] += 1
+                children[c.source].append(c.target)
+        ready = sorted(n for n in nodes if indegree[n] == 0)
+        order: list[str] = []
+        while ready:
+            node = ready.pop(0)
+            order.append(node)
+            for child in sorted(children[node]):
+                indegree[child] -= 1
+                if indegree[child] == 0:
+                    ready.append(child)
+                    ready.sort()
+        self_loops = [c for c in live if c.source == c.target]
+        if len(order) == len(nodes) and not self_loops:
+            return order, delayed, notes
+        stuck = sorted(set(nodes) - set(order)) or [self_loops[0].target]
+        candidates = sorted((c for c in live if c.target in stuck and (c.source in stuck or c.source == c.target)),
+                            key=lambda c: (c.target, c.target_port, c.source))
+        chosen = candidates[0]
+        delayed.add(chosen)
+        notes.append(
+            f"cycle without a feedback port: delayed {chosen.source}.{chosen.source_port} → "
+            f"{chosen.target}.{chosen.target_port} by one step"
+        )
+
+
+class Simulator:
+    """Prepared simulation of ``model`` at fixed step ``step_s`` (seconds)."""
+
+    def __init__(self, model: AssembledModel, step_s: float):
+        if not step_s > 0:
+            raise ValueError(f"step must be positive, got {step_s}")
+        self.model = model
+        self.step_s = float(step_s)
+        self.order, self.delayed, self.notes = component_order(model)
+        for note in self.notes:
+            warnings.warn(note, stacklevel=2)
+        self.instances = {iri: model.components[iri].model_class() for iri in self.order}
+        self.column = {ref.key: j for j, ref in enumerate(model.estimated_parameters)}
+        self.n_parameters = len(model.estimated_parameters)
+        feeding: dict[str, list[Connection]] = defaultdict(list)
+        for c in model.connections:
+            feeding[c.target].append(c)
+        self.feeding = feeding
+        boundary = set(model.boundary_inputs)
+        self.unconnected: dict[str, list[str]] = {}
+        for iri in self.order:
+            cls = model.components[iri].model_class
+            fed = {c.target_port for c in feeding[iri]}
+            missing = [p.name for p in cls.inputs if p.name not in fed]
+            if iri in boundary:
+                missing = [m for m in missing if m != "measured_value"]
+            if missing:
+                self.unconnected[iri] = missing
+
+    def _parameters(self, theta: np.ndarray, fixed: Mapping[str, float]) -> dict[str, dict[str, np.ndarray]]:
+        n_ens = theta.shape[0]
+        params: dict[str, dict[str, np.ndarray]] = {iri: {} for iri in self.order}
+        for ref in self.model.mapped_parameters:
+            params[ref.component][ref.name] = np.full(n_ens, float(fixed.get(ref.key, ref.value)))
+        for ref in self.model.estimated_parameters:
+            if ref.key in fixed:
+                params[ref.component][ref.name] = np.full(n_ens, float(fixed[ref.key]))
+            else:
+                params[ref.component][ref.name] = np.ascontiguousarray(theta[:, self.column[ref.key]])
+        return params
+
+    def run(
+        self,
+        boundary: Mapping[str, np.ndarray],
+        theta: np.ndarray,
+        *,
+        fixed: Mapping[str, float] | None = None,
+        record: Iterable[tuple[str, str]] | None = None,
+    ) -> SimulationResult:
+        """Simulate every ensemble member over the boundary series.
+
+        :param boundary: component IRI of a measuring device → ``ndarray[n_steps]`` measured series
+            (every boundary input; targets' series are optional and only serve delayed inputs at
+            step 0).
+        :param theta: ``ndarray[n_ensemble, n_estimated]`` in the order of
+            ``model.estimated_parameters``.
+        :param fixed: parameter key → value overriding θ or a mapped value.
+        :param record: the (component, port) outputs to keep; all when None.
+        :raises ValueError: a boundary input without a series, series of different lengths, θ of
+            the wrong shape.
+        """
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        if theta.shape[1] != self.n_parameters:
+            raise ValueError(f"theta has {theta.shape[1]} columns, the model estimates {self.n_parameters} parameters")
+        missing = [iri for iri in self.model.boundary_inputs if iri not in boundary]
+        if missing:
+            raise ValueError(f"no measured series for boundary input(s): {', '.join(missing)}")
+        lengths = {np.asarray(boundary[iri]).shape[0] for iri in boundary}
+        if len(lengths) != 1:
+            raise ValueError(f"boundary series have different lengths: {sorted(lengths)}")
+        n_steps = lengths.pop()
+        n_ens = theta.shape[0]
+        params = self._parameters(theta, fixed or {})
+        dt = self.step_s
+
+        series: dict[str, np.ndarray] = {}
+        for iri, values in boundary.items():
+            filled = np.asarray(values, dtype=float).copy()
+            bad = ~np.isfinite(filled)
+            if bad.all():
+                if iri in self.model.boundary_inputs:
+                    raise ValueError(f"boundary input {iri} has no finite value in the window")
+                continue
+            if bad.any():
+                index = np.where(~bad, np.arange(filled.size), 0)
+                np.maximum.accumulate(index, out=index)
+                first = np.flatnonzero(~bad)[0]
+                filled = filled[index]
+                filled[:first] = filled[first]
+            series[iri] = np.broadcast_to(filled[:, None], (n_steps, n_ens))
+
+        wanted = None if record is None else set(record)
+        buffers: dict[tuple[str, str], np.ndarray] = {}
+        plan = []
+        for iri in self.order:
+            cls = self.model.components[iri].model_class
+            live = [(c.target_port, (c.source, c.source_port)) for c in self.feeding[iri] if c not in self.delayed]
+            late = [(c.target_port, (c.source, c.source_port)) for c in self.feeding[iri] if c in self.delayed]
+            measured = series.get(iri) if iri in self.model.boundary_inputs else None
+            keep = [p for p in cls.output_names() if wanted is None or (iri, p) in wanted]
+            for port in keep:
+                buffers[(iri, port)] = np.empty((n_steps, n_ens))
+            plan.append((iri, self.instances[iri], params[iri], live, late, measured, keep,
+                         {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])}))
+
+        current: dict[tuple[str, str], np.ndarray] = {}
+        previous: dict[tuple[str, str], np.ndarray] = {}
+        for (iri, _port) in {src for entry in plan for _, src in entry[4]}:
+            start = series.get(iri)
+            previous[(iri, _port)] = start[0].copy() if start is not None else np.zeros(n_ens)
+        states: dict[str, dict] = {}
+        for k in range(n_steps):
+            for iri, instance, p, live, late, measured, keep, constant in plan:
+                inputs = dict(constant)
+                for name, source in live:
+                    inputs[name] = current[source]
+                for name, source in late:
+                    inputs[name] = previous[source]
+                if measured is not None:
+                    inputs["measured_value"] = measured[k]
+                if k == 0:
+                    states[iri] = instance.initial_state(p, inputs, dt)
+                outputs = instance.step(p, inputs, states[iri], dt)
+                for port, value in outputs.items():
+                    current[(iri, port)] = value
+                for port in keep:
+                    buffers[(iri, port)][k] = outputs[port]
+            for key in previous:
+                previous[key] = current[key]
+        return SimulationResult({key: buf.T for key, buf in buffers.items()}, dt)
+
+
+def simulate(
+    model: AssembledModel, boundary: Mapping[str, np.ndarray], theta: np.ndarray, *, step_s: float,
+    fixed: Mapping[str, float] | None = None,
+) -> SimulationResult:
+    """One-shot :class:`Simulator` run (prepare + run)."""
+    return Simulator(model, step_s).run(boundary, theta, fixed=fixed)

@@ -1,0 +1,84 @@
+"""A week of varied operation of the case-study ventilation unit: the boundary inputs of synthetic data.
+
+The truth the diagnosis must see through needs operation that excites every effect: days and nights,
+heating and no heating, fan speed changes and setpoint steps. Every series is in SI units (°C, m³/s)
+and keyed by the ``gt:timeSeriesId`` of the case-study sensor that measures it:
+
+* ``fan_inlet_air_temperature`` (outdoor air, the unit has no heat recovery): a daily sinusoid
+  ``T_mean + A·sin(2π(h − 9)/24)`` (minimum near 03:00, maximum near 15:00) with a daily mean that
+  wanders between days (a seeded random walk, ±3 K a day) plus a slow weather noise (AR(1), 0.3 K);
+  ``T_mean`` = 4 °C and A = 5 K: a heating-season week with mild afternoons where the coil shuts;
+* ``plant_room_air_temperature``: 16 °C + 0.4·(outdoor − 4 °C) + 1.5 K in occupied hours;
+* ``supply_air_flow``: 0.55 m³/s at night (22:00–06:00), in the day one of 1.0, 1.2, 1.35, 1.5 m³/s
+  drawn per 2-hour block (demand-controlled ventilation);
+* ``supply_water_temperature``: a heating curve, 70 °C at −10 °C outdoor to 45 °C at +20 °C,
+  clipped, plus 0.5 K supply noise;
+* ``coil_outlet_air_temperature_setpoint``: 19 °C at night, 21 °C in the day, with a seeded 2 K
+  setpoint step on two afternoons (an operator's change), so the loop's step response is seen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["OperationProfile", "case_study_operation"]
+
+
+@dataclass(frozen=True)
+class OperationProfile:
+    """Boundary series of a synthetic run: ``timestamps`` (datetime64[s]), ``step_s`` and
+    ``series`` (time-series id → ndarray[n_steps], SI units)."""
+
+    timestamps: np.ndarray
+    step_s: float
+    series: dict[str, np.ndarray]
+
+
+def _ar1(rng: np.random.Generator, n: int, sigma: float, correlation: float) -> np.ndarray:
+    noise = rng.normal(0.0, sigma * np.sqrt(1.0 - correlation**2), n)
+    out = np.empty(n)
+    out[0] = rng.normal(0.0, sigma)
+    for i in range(1, n):
+        out[i] = correlation * out[i - 1] + noise[i]
+    return out
+
+
+def case_study_operation(
+    n_days: float = 7.0, step_s: float = 600.0, seed: int = 0, start: str = "2026-01-12T00:00:00"
+) -> OperationProfile:
+    """Boundary inputs for ``n_days`` of operation at ``step_s`` (see the module docstring)."""
+    if step_s <= 0 or n_days <= 0:
+        raise ValueError(f"need positive n_days and step_s, got {n_days} and {step_s}")
+    rng = np.random.default_rng(seed)
+    n = int(round(n_days * 86400.0 / step_s))
+    seconds = np.arange(n) * step_s
+    timestamps = np.datetime64(start, "s") + seconds.astype("timedelta64[s]")
+    hour = (seconds / 3600.0) % 24.0
+    day = (seconds // 86400.0).astype(int)
+    n_day = int(day.max()) + 1
+    daily_mean = 4.0 + np.cumsum(rng.normal(0.0, 3.0, n_day))
+    daily_mean -= daily_mean.mean() - 4.0
+    outdoor = daily_mean[day] + 5.0 * np.sin(2.0 * np.pi * (hour - 9.0) / 24.0)
+    outdoor += _ar1(rng, n, 0.3, np.exp(-step_s / 7200.0))
+    occupied = (hour >= 6.0) & (hour < 22.0)
+    plant_room = 16.0 + 0.4 * (outdoor - 4.0) + 1.5 * occupied
+    block = (seconds // 7200.0).astype(int)
+    levels = rng.choice([1.0, 1.2, 1.35, 1.5], size=int(block.max()) + 1)
+    air_flow = np.where(occupied, levels[block], 0.55)
+    water = np.clip(70.0 - (outdoor + 10.0) * (25.0 / 30.0), 45.0, 70.0) + rng.normal(0.0, 0.5, n)
+    setpoint = np.where(occupied, 21.0, 19.0)
+    for step_day in rng.choice(n_day, size=min(2, n_day), replace=False):
+        afternoon = (day == step_day) & (hour >= 13.0) & (hour < 17.0)
+        setpoint = np.where(afternoon, setpoint + 2.0, setpoint)
+    return OperationProfile(
+        timestamps=timestamps, step_s=float(step_s),
+        series={
+            "fan_inlet_air_temperature": outdoor,
+            "plant_room_air_temperature": plant_room,
+            "supply_air_flow": air_flow,
+            "supply_water_temperature": water,
+            "coil_outlet_air_temperature_setpoint": setpoint,
+        },
+    )

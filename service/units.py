@@ -1,0 +1,117 @@
+"""Units: QUDT unit IRIs in the graph, SI inside the simulator.
+
+A sensor declares its unit with a QUDT unit IRI (``saref:isMeasuredIn unit:DEG_F``); a model port
+declares the unit it works in (``"degC"``, ``"kg/s"``, ``"1"`` …). Conversion is affine,
+``value_port = (value · m_from + o_from − o_to) / m_to`` with QUDT's conversion multiplier ``m`` and
+offset ``o`` to the SI base unit of the dimension (K for temperatures, so °F → °C is
+``(F · 5/9 + 255.372…) − 273.15``). Percent becomes the 0–1 fraction the models use.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label"]
+
+QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
+
+
+class UnitError(ValueError):
+    """An unknown unit, or two units of different dimensions."""
+
+
+@dataclass(frozen=True)
+class UnitSpec:
+    """``si = value · multiplier + offset`` in the SI unit of ``dimension``."""
+
+    dimension: str
+    multiplier: float
+    offset: float = 0.0
+    label: str = ""
+
+
+_F_OFFSET = 459.67 * 5.0 / 9.0
+#: QUDT unit local name → spec (multipliers and offsets as QUDT gives them).
+QUDT_UNITS: dict[str, UnitSpec] = {
+    "DEG_C": UnitSpec("temperature", 1.0, 273.15, "°C"),
+    "DEG_F": UnitSpec("temperature", 5.0 / 9.0, _F_OFFSET, "°F"),
+    "K": UnitSpec("temperature", 1.0, 0.0, "K"),
+    "W": UnitSpec("power", 1.0, 0.0, "W"),
+    "KiloW": UnitSpec("power", 1e3, 0.0, "kW"),
+    "MegaW": UnitSpec("power", 1e6, 0.0, "MW"),
+    "BTU_IT-PER-HR": UnitSpec("power", 0.29307107, 0.0, "BTU/h"),
+    "M3-PER-SEC": UnitSpec("volume_flow", 1.0, 0.0, "m³/s"),
+    "M3-PER-HR": UnitSpec("volume_flow", 1.0 / 3600.0, 0.0, "m³/h"),
+    "L-PER-SEC": UnitSpec("volume_flow", 1e-3, 0.0, "L/s"),
+    "L-PER-MIN": UnitSpec("volume_flow", 1e-3 / 60.0, 0.0, "L/min"),
+    "FT3-PER-MIN": UnitSpec("volume_flow", 0.00047194745, 0.0, "cfm"),
+    "GAL_US-PER-MIN": UnitSpec("volume_flow", 6.30901964e-5, 0.0, "gpm"),
+    "KiloGM-PER-SEC": UnitSpec("mass_flow", 1.0, 0.0, "kg/s"),
+    "KiloGM-PER-HR": UnitSpec("mass_flow", 1.0 / 3600.0, 0.0, "kg/h"),
+    "PERCENT": UnitSpec("fraction", 0.01, 0.0, "%"),
+    "UNITLESS": UnitSpec("fraction", 1.0, 0.0, "1"),
+    "NUM": UnitSpec("fraction", 1.0, 0.0, "1"),
+    "FRACTION": UnitSpec("fraction", 1.0, 0.0, "1"),
+    "PA": UnitSpec("pressure", 1.0, 0.0, "Pa"),
+    "KiloPA": UnitSpec("pressure", 1e3, 0.0, "kPa"),
+    "BAR": UnitSpec("pressure", 1e5, 0.0, "bar"),
+    "IN_H2O": UnitSpec("pressure", 249.08891, 0.0, "inH₂O"),
+    "SEC": UnitSpec("time", 1.0, 0.0, "s"),
+    "MIN": UnitSpec("time", 60.0, 0.0, "min"),
+    "HR": UnitSpec("time", 3600.0, 0.0, "h"),
+    "W-PER-K": UnitSpec("conductance", 1.0, 0.0, "W/K"),
+    "KiloW-PER-K": UnitSpec("conductance", 1e3, 0.0, "kW/K"),
+}
+
+#: Simulator port unit → spec. ``"K"`` on a port means a temperature *difference* (no offset).
+PORT_UNITS: dict[str, UnitSpec] = {
+    "degC": QUDT_UNITS["DEG_C"], "degF": QUDT_UNITS["DEG_F"],
+    "W": QUDT_UNITS["W"], "kW": QUDT_UNITS["KiloW"],
+    "m3/s": QUDT_UNITS["M3-PER-SEC"], "m3/h": QUDT_UNITS["M3-PER-HR"], "L/s": QUDT_UNITS["L-PER-SEC"],
+    "kg/s": QUDT_UNITS["KiloGM-PER-SEC"], "1": QUDT_UNITS["UNITLESS"], "%": QUDT_UNITS["PERCENT"],
+    "Pa": QUDT_UNITS["PA"], "kPa": QUDT_UNITS["KiloPA"], "bar": QUDT_UNITS["BAR"],
+    "s": QUDT_UNITS["SEC"], "h": QUDT_UNITS["HR"], "W/K": QUDT_UNITS["W-PER-K"],
+}
+
+
+def unit_spec(unit: str) -> UnitSpec:
+    """A QUDT unit IRI (or its local name) or a port unit → its spec.
+
+    :raises UnitError: naming the unit and listing the known ones.
+    """
+    if unit in PORT_UNITS:
+        return PORT_UNITS[unit]
+    local = unit[len(QUDT_UNIT_NAMESPACE):] if unit.startswith(QUDT_UNIT_NAMESPACE) else unit
+    if local in QUDT_UNITS:
+        return QUDT_UNITS[local]
+    raise UnitError(
+        f"unknown unit {unit!r}: graphtwin knows the QUDT units {', '.join(sorted(QUDT_UNITS))} "
+        f"(as {QUDT_UNIT_NAMESPACE}<name>) and the port units {', '.join(sorted(PORT_UNITS))}"
+    )
+
+
+def unit_label(unit: str) -> str:
+    """Short label for reports (``°F``, ``m³/s``); the unit text itself when unknown."""
+    try:
+        return unit_spec(unit).label or unit
+    except UnitError:
+        return unit
+
+
+def convert(values: Sequence[float] | np.ndarray, from_unit: str, to_unit: str, *, where: str = "") -> np.ndarray:
+    """Convert ``values`` from ``from_unit`` (QUDT IRI or port unit) to port unit ``to_unit``.
+
+    :param where: what is converted (a port, a column), for the error message.
+    :raises UnitError: unknown unit, or different dimensions (°F into a kg/s port).
+    """
+    source, target = unit_spec(from_unit), unit_spec(to_unit)
+    if source.dimension != target.dimension:
+        context = f" for {where}" if where else ""
+        raise UnitError(
+            f"cannot convert {from_unit} ({source.dimension}) to {to_unit} ({target.dimension}){context}"
+        )
+    array = np.asarray(values, dtype=float)
+    return (array * source.multiplier + source.offset - target.offset) / target.multiplier

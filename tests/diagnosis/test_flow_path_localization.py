@@ -1,0 +1,47 @@
+"""Localisation along the flow path, including a recirculation loop and off-path sensors."""
+
+from service.flow_path_localization import FlowTopology, localize_failures
+
+# outdoor sensor → mixing box → fan → coil → supply sensor → room → return sensor → mixing box (loop)
+LOOP = [
+    ("oat", "mix"), ("mix", "mat"), ("mat", "fan"), ("fan", "coil"), ("coil", "sat"),
+    ("sat", "room"), ("room", "rat"), ("rat", "mix"), ("hw_valve", "coil_water"), ("coil_water", "coil"),
+    ("swt", "hw_valve"),
+]
+SENSORS = {"oat", "mat", "sat", "rat", "swt", "valve_pos"}
+
+
+def test_failure_between_last_matching_and_first_failing_sensor_on_a_loop():
+    topology = FlowTopology(LOOP, {"valve_pos": "hw_valve"})
+    matches = {"oat": True, "mat": True, "sat": False, "rat": True, "swt": True}
+    locations = {loc.matching_sensor: set(loc.components) for loc in localize_failures(topology, matches, SENSORS)}
+    # the air branch from the mixed-air sensor, the water branch from the supply water sensor
+    assert locations == {"mat": {"fan", "coil"}, "swt": {"hw_valve", "coil_water", "coil"}}
+
+
+def test_both_branches_reported_and_room_never_a_suspect_for_the_supply_sensor():
+    topology = FlowTopology(LOOP)
+    matches = {"oat": True, "mat": True, "sat": False, "rat": True, "swt": True}
+    locations = localize_failures(topology, matches, SENSORS)
+    suspects = {c for loc in locations for c in loc.components}
+    assert {loc.matching_sensor for loc in locations} == {"mat", "swt"}
+    assert suspects == {"fan", "coil", "hw_valve", "coil_water"}
+    assert "room" not in suspects and "mix" not in suspects
+
+
+def test_a_failure_inherited_from_upstream_is_not_reported_twice():
+    topology = FlowTopology(LOOP)
+    matches = {"oat": True, "mat": False, "sat": False, "rat": True, "swt": True}
+    locations = localize_failures(topology, matches, SENSORS)
+    # sat only inherits the mixed-air failure; mat is located at the mixing box from both branches
+    assert {loc.failing_sensor for loc in locations} == {"mat"}
+    assert {loc.matching_sensor: loc.components for loc in locations} == {"oat": ("mix",), "rat": ("mix",)}
+
+
+def test_off_path_sensor_is_placed_at_the_node_it_observes():
+    topology = FlowTopology(LOOP, {"valve_pos": "hw_valve"})
+    matches = {"swt": True, "valve_pos": False}
+    [location] = localize_failures(topology, matches, SENSORS)
+    assert location.matching_sensor == "swt"
+    assert location.components == ("hw_valve",)
+    assert "hw_valve" in location.describe() and "valve_pos" in location.describe()
