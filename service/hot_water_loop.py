@@ -5,33 +5,38 @@ check valve, because the water flow is a property of the whole loop.
 
 **Hydraulics** (series resistances in flow-coefficient form, V̇ in m³/h, Δp in bar)::
 
-    V̇ = sqrt(Δp_total / (1/(K_v·u)² + 1/K_v,check² + 1/K_v,fixed²)),   Δp_total = Δp_pump + Δp_source
+    V̇ = sqrt(Δp_loop / (1/(K_v·u)² + 1/K_v,loop²))
 
-a linear valve characteristic K_v·u (u = 0: no flow), ṁ_w = ρ_w·V̇/3600 [kg/s].
+a linear valve characteristic K_v·u (u = 0: no flow), ṁ_w = ρ_w·V̇/3600 [kg/s]. Δp_loop is the
+pump's pressure rise plus the source–sink pressure difference, K_v,loop the check valve, pipes and
+coil in series (1/K_v,loop² = 1/K_v,check² + 1/K_v,fixed²): the paper's four hydraulic parameters
+enter only through these two groups, so graphtwin estimates the groups (four would leave two flat
+directions that no measurement can resolve).
 
 **Heat transfer**: counter-flow ε-NTU with C = ṁ·c_p, NTU = UA/C_min, C_r = C_min/C_max::
 
     ε = (1 − e^{−NTU(1−C_r)}) / (1 − C_r·e^{−NTU(1−C_r)})     (ε = NTU/(1+NTU) at C_r = 1)
     Q_static = ε · C_min · (T_w,in − T_a,in)                                    [W]
 
-with UA varying with both flows (film coefficients ∝ ṁ^0.8, the resistances split equally between
-the water and air side at the nominal flows)::
+with UA varying with both flows (film conductances ∝ ṁ^0.8, Dittus–Boelter)::
 
-    UA = UA_nom / (½·(ṁ_w/ṁ_w,nom)^−0.8 + ½·(ṁ_a/ṁ_a,nom)^−0.8)
+    1/UA = 1/(hA_w·(ṁ_w/ṁ_w,ref)^0.8) + 1/(hA_a·(ṁ_a/ṁ_a,ref)^0.8),   ṁ_w,ref = 0.5, ṁ_a,ref = 2 kg/s
+
+hA_w and hA_a are the water- and air-side conductances at the reference flows. (A UA_nom with two
+nominal flows, three parameters, has one flat direction; the two conductances have none.)
 
 **Dynamics** (exact first-order lags, output including the current step's input):
 * the coil inlet water temperature follows the supply water temperature with the supply-pipe time
-  constant, stretched when the flow is small (transport: τ_pipe·ṁ_w,nom/max(ṁ_w, 0.1·ṁ_w,nom));
+  constant, stretched when the flow is small (transport: τ_pipe·ṁ_w,ref/max(ṁ_w, 0.05 kg/s));
 * the heat rate follows Q_static with the metal time constant (the coil's fins and tubes);
 * the outlet air and water temperatures, T_a,in + Q/C_a and T_w,in − Q/C_w (bounded by the two
   inlet temperatures), follow with the air-side and water-side time constants.
 With the valve shut there is no flow and no heat; the stagnant water side drifts to the air
 temperature through the water-side lag.
 
-**Parameters (12)**: the valve's K_v (mapped from ``s4bldg:flowCoefficient``), check-valve and
-fixed K_v, pump pressure rise, source–sink pressure difference, UA_nom, the two nominal mass flows,
-and four time constants. Only the ratio Δp_total / ΣR of the hydraulic group is observable from
-temperatures: the point calibration reports those as poorly identified, which is honest.
+**Parameters (9)**: the valve's K_v (mapped from ``s4bldg:flowCoefficient``), Δp_loop, K_v,loop,
+hA_w, hA_a and four time constants. With the fan's six and the controller's two the case study has
+17 parameters (3 mapped, 14 estimated) where the paper lists 23: the difference is the groups above.
 """
 
 from __future__ import annotations
@@ -46,6 +51,11 @@ from .component import (
 __all__ = ["HotWaterLoop", "counterflow_effectiveness", "loop_water_flow_m3_per_h"]
 
 _TINY = 1e-9
+#: Floor of ṁ_a·c_p when air heats up from the coil's heat: 0.1 kg/s of air (fan off, stack draught).
+_MINIMUM_AIR_CAPACITY_W_PER_K = 0.1 * 1006.0
+#: Reference flows of the film conductances hA_w and hA_a, kg/s.
+REFERENCE_WATER_MASS_FLOW = 0.5
+REFERENCE_AIR_MASS_FLOW = 2.0
 
 
 def counterflow_effectiveness(ntu: np.ndarray, capacity_ratio: np.ndarray) -> np.ndarray:
@@ -58,10 +68,10 @@ def counterflow_effectiveness(ntu: np.ndarray, capacity_ratio: np.ndarray) -> np
     return np.where(balanced, ntu / (1.0 + ntu), general)
 
 
-def loop_water_flow_m3_per_h(position, kv_valve, kv_check, kv_fixed, pressure_bar) -> np.ndarray:
+def loop_water_flow_m3_per_h(position, kv_valve, kv_loop, pressure_bar) -> np.ndarray:
     """V̇ [m³/h] of the series loop for valve position ``position`` (0–1, linear characteristic)."""
     opening = np.clip(position, 0.0, 1.0) * kv_valve
-    resistance = 1.0 / np.maximum(opening, _TINY) ** 2 + 1.0 / kv_check**2 + 1.0 / kv_fixed**2
+    resistance = 1.0 / np.maximum(opening, _TINY) ** 2 + 1.0 / kv_loop**2
     return np.where(opening > 1e-6, np.sqrt(np.maximum(pressure_bar, 0.0) / resistance), 0.0)
 
 
@@ -84,13 +94,10 @@ class HotWaterLoop(ComponentModel):
     )
     parameters = (
         Parameter("valve_flow_coefficient", "m3/h", 2.5, 0.3, 40.0, "motorised valve flow coefficient, K_v"),
-        Parameter("check_valve_flow_coefficient", "m3/h", 6.0, 0.5, 60.0, "check valve flow coefficient"),
-        Parameter("fixed_flow_coefficient", "m3/h", 4.0, 0.5, 60.0, "pipes and coil as one flow coefficient"),
-        Parameter("pump_pressure_rise", "bar", 0.4, 0.05, 2.0, "pump pressure rise, Δp_pump"),
-        Parameter("source_sink_pressure", "bar", 0.05, 0.0, 1.0, "pressure difference heat source to return"),
-        Parameter("nominal_ua", "W/K", 800.0, 100.0, 5000.0, "UA at the nominal flows, UA_nom"),
-        Parameter("nominal_water_mass_flow", "kg/s", 0.35, 0.05, 3.0, "nominal water mass flow, ṁ_w,nom"),
-        Parameter("nominal_air_mass_flow", "kg/s", 1.8, 0.2, 20.0, "nominal air mass flow, ṁ_a,nom"),
+        Parameter("loop_flow_coefficient", "m3/h", 3.3, 0.5, 40.0, "check valve, pipes and coil in series, K_v,loop"),
+        Parameter("loop_pressure_difference", "bar", 0.45, 0.05, 2.0, "pump rise plus source–sink difference, Δp_loop"),
+        Parameter("water_side_conductance", "W/K", 1600.0, 200.0, 20000.0, "water-side hA at 0.5 kg/s, hA_w"),
+        Parameter("air_side_conductance", "W/K", 1600.0, 200.0, 20000.0, "air-side hA at 2 kg/s, hA_a"),
         Parameter("supply_pipe_time_constant", "s", 90.0, 5.0, 900.0, "supply pipe to coil inlet, τ_pipe"),
         Parameter("metal_time_constant", "s", 120.0, 5.0, 900.0, "coil metal, τ_metal"),
         Parameter("air_side_time_constant", "s", 30.0, 1.0, 600.0, "air side, τ_a"),
@@ -100,8 +107,8 @@ class HotWaterLoop(ComponentModel):
 
     def _water_flow(self, params, position):
         flow_m3_per_h = loop_water_flow_m3_per_h(
-            position, params["valve_flow_coefficient"], params["check_valve_flow_coefficient"],
-            params["fixed_flow_coefficient"], params["pump_pressure_rise"] + params["source_sink_pressure"],
+            position, params["valve_flow_coefficient"], params["loop_flow_coefficient"],
+            params["loop_pressure_difference"],
         )
         return WATER_DENSITY_KG_PER_M3 * flow_m3_per_h / 3600.0
 
@@ -109,9 +116,9 @@ class HotWaterLoop(ComponentModel):
         """Q_static [W], C_w and C_a [W/K] (module docstring)."""
         c_water = np.maximum(water_flow * WATER_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
         c_air = np.maximum(air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
-        ua = params["nominal_ua"] / (
-            0.5 * np.maximum(water_flow / params["nominal_water_mass_flow"], _TINY) ** -0.8
-            + 0.5 * np.maximum(air_flow / params["nominal_air_mass_flow"], _TINY) ** -0.8
+        ua = 1.0 / (
+            1.0 / (params["water_side_conductance"] * np.maximum(water_flow / REFERENCE_WATER_MASS_FLOW, _TINY) ** 0.8)
+            + 1.0 / (params["air_side_conductance"] * np.maximum(air_flow / REFERENCE_AIR_MASS_FLOW, _TINY) ** 0.8)
         )
         c_min, c_max = np.minimum(c_water, c_air), np.maximum(c_water, c_air)
         effectiveness = counterflow_effectiveness(ua / c_min, c_min / c_max)
@@ -119,16 +126,16 @@ class HotWaterLoop(ComponentModel):
         return heat, c_water, c_air
 
     def _pipe_factor(self, params, water_flow, dt_s):
-        stretch = params["nominal_water_mass_flow"] / np.maximum(water_flow, 0.1 * params["nominal_water_mass_flow"])
+        stretch = REFERENCE_WATER_MASS_FLOW / np.maximum(water_flow, 0.05)
         return first_order_lag_factor(dt_s, params["supply_pipe_time_constant"] * stretch)
 
     def initial_state(self, params, inputs, dt_s):
-        shape = np.broadcast(inputs["supply_water_temperature"], params["nominal_ua"]).shape
+        shape = np.broadcast(inputs["supply_water_temperature"], params["air_side_conductance"]).shape
         supply = np.broadcast_to(inputs["supply_water_temperature"], shape).astype(float)
         air_in = np.broadcast_to(inputs["inlet_air_temperature"], shape).astype(float)
         water_flow = self._water_flow(params, np.clip(inputs["valve_position"], 0.0, 1.0))
         heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0), water_flow, supply)
-        c_air_floor = np.maximum(c_air, 0.05 * params["nominal_air_mass_flow"] * AIR_SPECIFIC_HEAT_J_PER_KG_K)
+        c_air_floor = np.maximum(c_air, _MINIMUM_AIR_CAPACITY_W_PER_K)
         low, high = np.minimum(air_in, supply), np.maximum(air_in, supply)
         return {
             "inlet_water_temperature": supply.copy(),
@@ -148,7 +155,7 @@ class HotWaterLoop(ComponentModel):
         heat = state["heat_rate"]
         heat += first_order_lag_factor(dt_s, params["metal_time_constant"]) * (heat_static - heat)
         low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
-        c_air_floor = np.maximum(c_air, 0.05 * params["nominal_air_mass_flow"] * AIR_SPECIFIC_HEAT_J_PER_KG_K)
+        c_air_floor = np.maximum(c_air, _MINIMUM_AIR_CAPACITY_W_PER_K)
         air_target = np.clip(air_in + heat / c_air_floor, low, high)
         water_target = np.where(water_flow > 0.0, np.clip(water_in - heat / c_water, low, high), air_in)
         air_out = state["outlet_air_temperature"]

@@ -14,6 +14,10 @@ order, with a warning naming it. A delayed input at step ``k`` receives the prod
 step ``k − 1``; at ``k = 0`` it receives the producer's measured value when the producer is a
 measuring device with a series in ``boundary`` (the sensor's first reading), else 0.
 
+**Sub-steps.** ``substeps = S`` runs the components at ``step_s / S`` (a PI loop sampled every few
+minutes would oscillate where the real controller, sampled every second, does not) with the
+boundary series interpolated linearly between data steps; outputs are reported at the data steps.
+
 **Boundary inputs** (measuring devices with no connected input) receive their measured series
 through their ``measured_value`` input; NaN gaps in a boundary series are held at the last value
 (the calibration leaves those steps out). Dynamic components start from ``initial_state`` with
@@ -139,11 +143,14 @@ def component_order(model: AssembledModel) -> tuple[list[str], set[Connection], 
 class Simulator:
     """Prepared simulation of ``model`` at fixed step ``step_s`` (seconds)."""
 
-    def __init__(self, model: AssembledModel, step_s: float):
+    def __init__(self, model: AssembledModel, step_s: float, substeps: int = 1):
         if not step_s > 0:
             raise ValueError(f"step must be positive, got {step_s}")
+        if int(substeps) < 1:
+            raise ValueError(f"substeps must be a positive integer, got {substeps}")
         self.model = model
         self.step_s = float(step_s)
+        self.substeps = int(substeps)
         self.order, self.delayed, self.notes = component_order(model)
         for note in self.notes:
             warnings.warn(note, stacklevel=2)
@@ -209,7 +216,9 @@ class Simulator:
         n_steps = lengths.pop()
         n_ens = theta.shape[0]
         params = self._parameters(theta, fixed or {})
-        dt = self.step_s
+        substeps = self.substeps
+        dt = self.step_s / substeps
+        n_internal = (n_steps - 1) * substeps + 1
 
         series: dict[str, np.ndarray] = {}
         for iri, values in boundary.items():
@@ -225,7 +234,9 @@ class Simulator:
                 first = np.flatnonzero(~bad)[0]
                 filled = filled[index]
                 filled[:first] = filled[first]
-            series[iri] = np.broadcast_to(filled[:, None], (n_steps, n_ens))
+            if substeps > 1:
+                filled = np.interp(np.arange(n_internal) / substeps, np.arange(n_steps), filled)
+            series[iri] = np.broadcast_to(filled[:, None], (filled.size, n_ens))
 
         wanted = None if record is None else set(record)
         buffers: dict[tuple[str, str], np.ndarray] = {}
@@ -247,7 +258,8 @@ class Simulator:
             start = series.get(iri)
             previous[(iri, _port)] = start[0].copy() if start is not None else np.zeros(n_ens)
         states: dict[str, dict] = {}
-        for k in range(n_steps):
+        for i in range(n_internal):
+            k, offset = divmod(i, substeps)
             for iri, instance, p, live, late, measured, keep, constant in plan:
                 inputs = dict(constant)
                 for name, source in live:
@@ -255,22 +267,23 @@ class Simulator:
                 for name, source in late:
                     inputs[name] = previous[source]
                 if measured is not None:
-                    inputs["measured_value"] = measured[k]
-                if k == 0:
+                    inputs["measured_value"] = measured[i]
+                if i == 0:
                     states[iri] = instance.initial_state(p, inputs, dt)
                 outputs = instance.step(p, inputs, states[iri], dt)
                 for port, value in outputs.items():
                     current[(iri, port)] = value
-                for port in keep:
-                    buffers[(iri, port)][k] = outputs[port]
+                if offset == 0:
+                    for port in keep:
+                        buffers[(iri, port)][k] = outputs[port]
             for key in previous:
                 previous[key] = current[key]
-        return SimulationResult({key: buf.T for key, buf in buffers.items()}, dt)
+        return SimulationResult({key: buf.T for key, buf in buffers.items()}, self.step_s)
 
 
 def simulate(
     model: AssembledModel, boundary: Mapping[str, np.ndarray], theta: np.ndarray, *, step_s: float,
-    fixed: Mapping[str, float] | None = None,
+    fixed: Mapping[str, float] | None = None, substeps: int = 1,
 ) -> SimulationResult:
     """One-shot :class:`Simulator` run (prepare + run)."""
-    return Simulator(model, step_s).run(boundary, theta, fixed=fixed)
+    return Simulator(model, step_s, substeps).run(boundary, theta, fixed=fixed)

@@ -1,0 +1,128 @@
+"""An assembled model bound to its measured data: windows, simulation and calibration problems.
+
+:class:`ModelData` is where the graph world (device IRIs, QUDT units) meets the numeric one: it says
+which series each measuring device needs and in which unit (the quantity of the device's output:
+temperature in °C, volume flow in m³/s, power in W, position in 1), reads them, and turns a time
+window into a :class:`~service.calibration_problem.CalibrationProblem` whose targets are keyed by
+the sensors' building-node IRIs, the names users see in every report.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .assembled_model import AssembledModel
+from .calibration_problem import CalibrationProblem
+from .measurements import MeasuredData, SeriesSpec, read_measurements
+from .simulator import Simulator
+
+__all__ = ["QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data"]
+
+#: Simulator unit of each quantity a signature output may carry (``signatures/README.md``).
+QUANTITY_UNITS = {
+    "temperature": "degC", "mass_flow": "kg/s", "volume_flow": "m3/s", "power": "W", "position": "1",
+    "heat_rate": "W",
+}
+
+
+def _device_unit(model: AssembledModel, component: str) -> str:
+    instance = model.components[component]
+    quantity = next((o.quantity for o in instance.signature.outputs if o.port == "measured_value"), None)
+    if quantity not in QUANTITY_UNITS:
+        raise ValueError(f"{instance.signature.source_file}: measured_value output has no known quantity ({quantity!r})")
+    return QUANTITY_UNITS[quantity]
+
+
+def series_specs(model: AssembledModel) -> dict[str, SeriesSpec]:
+    """Building-node IRI → what the model needs from its column (boundary inputs are required,
+    targets too: a target without a column cannot be calibrated against)."""
+    specs = {}
+    for component in model.boundary_inputs + model.targets:
+        link = model.measurement(component)
+        specs[link.node] = SeriesSpec(link.node, link.series_id, link.unit, _device_unit(model, component))
+    return specs
+
+
+def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5, strict: bool = False) -> MeasuredData:
+    """Read the CSV at ``path`` for ``model`` (:func:`service.measurements.read_measurements`)."""
+    return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps, strict=strict)
+
+
+@dataclass
+class ModelData:
+    """``model`` with ``data``; ``substeps`` sub-divides the data step for the simulation."""
+
+    model: AssembledModel
+    data: MeasuredData
+    substeps: int = 1
+
+    def __post_init__(self) -> None:
+        nodes = {self.model.measurement(c).node: c for c in self.model.boundary_inputs + self.model.targets}
+        missing = sorted(n for n in nodes if n not in self.data.series)
+        if missing:
+            raise ValueError(f"{self.data.source} has no series for {', '.join(missing)}")
+        self.node_of = {c: self.model.measurement(c).node for c in nodes.values()}
+        self.target_nodes = tuple(self.node_of[c] for c in self.model.targets)
+        self.simulator = Simulator(self.model, self.data.step_s, self.substeps)
+        self.units = {self.node_of[c]: self.data.units[self.node_of[c]] for c in self.model.targets}
+
+    def boundary(self, window: slice) -> dict[str, np.ndarray]:
+        """Component IRI → measured series in ``window`` (targets included: they seed delayed inputs)."""
+        return {c: self.data.series[node][window] for c, node in self.node_of.items()}
+
+    def observed(self, window: slice) -> dict[str, np.ndarray]:
+        """Target node → observed series in ``window`` (NaN where not measured)."""
+        return {self.node_of[c]: self.data.series[self.node_of[c]][window] for c in self.model.targets}
+
+    def simulate_targets(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+        """Target node → ``ndarray[n_ensemble, n_steps]`` for θ ``ndarray[n_ensemble, n_estimated]``."""
+        record = [(c, "measured_value") for c in self.model.targets]
+        result = self.simulator.run(self.boundary(window), theta, fixed=fixed, record=record)
+        return {self.node_of[c]: result.target(c) for c in self.model.targets}
+
+    def simulate_all(self, window: slice, theta: np.ndarray):
+        """Every output of every component (for plots and the residual-dependence search)."""
+        return self.simulator.run(self.boundary(window), np.atleast_2d(theta))
+
+    def default_theta(self) -> np.ndarray:
+        return np.array([ref.spec.default for ref in self.model.estimated_parameters])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        refs = self.model.estimated_parameters
+        return np.array([r.spec.lower for r in refs]), np.array([r.spec.upper for r in refs])
+
+    def problem(
+        self, window: slice, *, default: np.ndarray | None = None, fixed: Mapping[str, float] | None = None,
+        target_scales: Mapping[str, float] | None = None, gp_time_column: bool = True,
+        warmup_s: float = 3600.0,
+    ) -> CalibrationProblem:
+        """The calibration problem of ``window``: θ = the model's estimated parameters.
+
+        :param default: a plausible θ screened with the start candidates (the components'
+            defaults when None).
+        :param target_scales: residual scales per target node (e.g. the training window's, so a
+            test window weighs alike).
+        :param warmup_s: the first ``warmup_s`` seconds of the window are simulated but not compared:
+            the model starts in steady state with the first inputs, the building did not.
+        """
+        lower, upper = self.bounds()
+        start = self.default_theta() if default is None else np.clip(np.asarray(default, float), lower, upper)
+        steps = np.arange(window.stop - window.start if window.stop is not None else self.data.n_steps, dtype=float)
+        warmup = int(round(warmup_s / self.data.step_s))
+        observed = {}
+        for node, values in self.observed(window).items():
+            values = values.copy()
+            values[:warmup] = np.nan
+            observed[node] = values
+        return CalibrationProblem(
+            parameter_names=tuple(ref.key for ref in self.model.estimated_parameters),
+            lower=lower, upper=upper,
+            simulate=lambda theta: self.simulate_targets(window, theta, fixed),
+            observed=observed, units=self.units, default=start,
+            target_scales=dict(target_scales or {}),
+            gp_inputs=(window.start + steps) * self.data.step_s / 3600.0 if gp_time_column else None,
+        )
