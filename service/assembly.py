@@ -221,7 +221,7 @@ def _instantiate(store: GraphStore, model_name: str, signature: Signature, match
 
 
 def _measurement_link(store: GraphStore, model_name: str, node: str) -> MeasurementLink:
-    rows = store.run_named_query("measurement-link", model=model_name, device=node)
+    rows = store.run_named_query("measurement-link", dataset=model_name, device=node)
     series_id = unit = None
     if rows:
         series_id = rows[0]["series_id"].value if rows[0].get("series_id") is not None else None
@@ -270,7 +270,7 @@ def _wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection],
 def _recorded_effects(store: GraphStore, model_name: str, library: Mapping[str, Signature]) -> list[EffectRequest]:
     by_iri = {sig.iri: sig.id for sig in library.values() if sig.kind == "effect"}
     requests = []
-    for row in store.run_named_query("applied-effects", model=model_name):
+    for row in store.run_named_query("applied-effects", dataset=model_name):
         signature_iri = row["effect_signature"].value
         if signature_iri not in by_iri:
             raise AssemblyError(

@@ -69,9 +69,9 @@ class FlowTopology:
     @classmethod
     def from_store(cls, store, model_name: str) -> FlowTopology:
         """Read the topology of ``model_name`` with ``queries/flow-edges.rq`` and ``observed-node.rq``."""
-        edges = [(r["from"].value, r["to"].value) for r in store.run_named_query("flow-edges", model=model_name)]
+        edges = [(r["from"].value, r["to"].value) for r in store.run_named_query("flow-edges", dataset=model_name)]
         owners: dict[str, str] = {}
-        for row in store.run_named_query("observed-node", model=model_name):
+        for row in store.run_named_query("observed-node", dataset=model_name):
             if row.get("owner") is not None:
                 owners.setdefault(row["device"].value, row["owner"].value)
         return cls(edges, owners)

@@ -60,7 +60,7 @@ class SeriesSpec:
 
     def names(self) -> set[str]:
         local = self.node.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
-        return {n for n in (self.node, local, self.series_id) if n}
+        return {n.strip() for n in (self.node, local, self.series_id) if n and n.strip()}
 
 
 @dataclass(frozen=True)

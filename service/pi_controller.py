@@ -30,7 +30,7 @@ class PIController(ComponentModel):
     )
     outputs = (Port("control_signal", "1", "control signal, u (0–1)"),)
     parameters = (
-        Parameter("proportional_gain", "1/K", 0.02, 0.005, 0.05, "proportional gain, K_p"),
+        Parameter("proportional_gain", "1/K", 0.015, 0.003, 0.04, "proportional gain, K_p"),
         Parameter("integral_time", "s", 1200.0, 600.0, 3600.0, "integral time, T_i"),
     )
     states = ("integral",)
@@ -42,7 +42,7 @@ class PIController(ComponentModel):
         error = inputs["setpoint"] - inputs["measured_value"]
         gain, integral = params["proportional_gain"], state["integral"]
         raw = gain * (error + integral / params["integral_time"])
-        signal = np.clip(raw, 0.0, 1.0)
+        signal = np.minimum(np.maximum(raw, 0.0), 1.0)
         winding = ((raw >= 1.0) & (error > 0.0)) | ((raw <= 0.0) & (error < 0.0))
         integral += np.where(winding, 0.0, error * dt_s)
         return {"control_signal": signal}

@@ -361,10 +361,12 @@ class GraphStore:
             raise KeyError(f"no query {name!r} in {queries_dir()} (known: {known})")
         return _named_query_text(path)
 
-    def run_named_query(self, name: str, *, model: str | None = None, **params):
-        """Run ``queries/<name>.rq``; each keyword binds the variable of that name (str starting with
-        http(s):// or urn: → IRI, other str and numbers → literal, pyoxigraph terms as they are)."""
-        return self.query(self.named_query_text(name), substitutions=params, model=model)
+    def run_named_query(self, query_name: str, /, *, dataset: str | None = None, **params):
+        """Run ``queries/<query_name>.rq``; each keyword binds the variable of that name (str starting
+        with http(s):// or urn: → IRI, other str and numbers → literal, pyoxigraph terms as they are).
+        ``dataset=NAME`` matches over model NAME's :meth:`matching_dataset` (queries about a building
+        graph); without it the query sees every named graph through ``GRAPH`` (queries about results)."""
+        return self.query(self.named_query_text(query_name), substitutions=params, model=dataset)
 
     def write_graph(self, graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> None:
         """Replace ``graph`` with ``triples`` in one transaction."""

@@ -88,7 +88,7 @@ def generate_synthetic_data(
     seed: int = 0,
     n_days: float = 7.0,
     step_s: float = 600.0,
-    substeps: int = 2,
+    substeps: int = 5,
 ) -> SyntheticTruth:
     """Write a measurement CSV for ``model_name`` (columns named by the devices' time-series ids).
 

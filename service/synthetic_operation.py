@@ -7,14 +7,16 @@ and keyed by the ``gt:timeSeriesId`` of the case-study sensor that measures it:
 * ``fan_inlet_air_temperature`` (outdoor air, the unit has no heat recovery): a daily sinusoid
   ``T_mean + A·sin(2π(h − 9)/24)`` (minimum near 03:00, maximum near 15:00) with a daily mean that
   wanders between days (a seeded random walk, ±3 K a day) plus a slow weather noise (AR(1), 0.3 K);
-  ``T_mean`` = 4 °C and A = 5 K: a heating-season week with mild afternoons where the coil shuts;
-* ``plant_room_air_temperature``: 16 °C + 0.4·(outdoor − 4 °C) + 1.5 K in occupied hours;
+  ``T_mean`` = 8 °C and A = 6 K: a shoulder-season week, cold nights and mild afternoons;
+* ``plant_room_air_temperature``: 16 °C + 0.4·(outdoor − 8 °C) + 1.5 K in occupied hours;
 * ``supply_air_flow``: 0.55 m³/s at night (22:00–06:00), in the day one of 1.0, 1.2, 1.35, 1.5 m³/s
   drawn per 2-hour block (demand-controlled ventilation);
 * ``supply_water_temperature``: a heating curve, 70 °C at −10 °C outdoor to 45 °C at +20 °C,
   clipped, plus 0.5 K supply noise;
-* ``coil_outlet_air_temperature_setpoint``: 19 °C at night, 21 °C in the day, with a seeded 2 K
-  setpoint step on two afternoons (an operator's change), so the loop's step response is seen.
+* ``coil_outlet_air_temperature_setpoint``: 16 °C at night (setback), 21 °C in the day, 12 °C from
+  13:00 to 16:00 every other day (ventilation only: the valve shuts when the afternoon is mild, so
+  what the coil does not do is seen), and a seeded 2 K step on two mornings (an operator's change),
+  so the loop's step response is seen.
 """
 
 from __future__ import annotations
@@ -58,20 +60,22 @@ def case_study_operation(
     hour = (seconds / 3600.0) % 24.0
     day = (seconds // 86400.0).astype(int)
     n_day = int(day.max()) + 1
-    daily_mean = 4.0 + np.cumsum(rng.normal(0.0, 3.0, n_day))
-    daily_mean -= daily_mean.mean() - 4.0
-    outdoor = daily_mean[day] + 5.0 * np.sin(2.0 * np.pi * (hour - 9.0) / 24.0)
+    daily_mean = np.cumsum(rng.normal(0.0, 3.0, n_day))
+    daily_mean += 8.0 - daily_mean.mean()
+    outdoor = daily_mean[day] + 6.0 * np.sin(2.0 * np.pi * (hour - 9.0) / 24.0)
     outdoor += _ar1(rng, n, 0.3, np.exp(-step_s / 7200.0))
     occupied = (hour >= 6.0) & (hour < 22.0)
-    plant_room = 16.0 + 0.4 * (outdoor - 4.0) + 1.5 * occupied
+    plant_room = 16.0 + 0.4 * (outdoor - 8.0) + 1.5 * occupied
     block = (seconds // 7200.0).astype(int)
     levels = rng.choice([1.0, 1.2, 1.35, 1.5], size=int(block.max()) + 1)
     air_flow = np.where(occupied, levels[block], 0.55)
     water = np.clip(70.0 - (outdoor + 10.0) * (25.0 / 30.0), 45.0, 70.0) + rng.normal(0.0, 0.5, n)
-    setpoint = np.where(occupied, 21.0, 19.0)
+    setpoint = np.where(occupied, 21.0, 16.0)
+    ventilation_only = (day % 2 == 1) & (hour >= 13.0) & (hour < 16.0)
+    setpoint = np.where(ventilation_only, 12.0, setpoint)
     for step_day in rng.choice(n_day, size=min(2, n_day), replace=False):
-        afternoon = (day == step_day) & (hour >= 13.0) & (hour < 17.0)
-        setpoint = np.where(afternoon, setpoint + 2.0, setpoint)
+        morning = (day == step_day) & (hour >= 8.0) & (hour < 11.0)
+        setpoint = np.where(morning, setpoint + 2.0, setpoint)
     return OperationProfile(
         timestamps=timestamps, step_s=float(step_s),
         series={

@@ -1,0 +1,383 @@
+"""The diagnosis loop: where the calibrated model fails and which physical effect is missing.
+
+``diagnose`` calibrates the base model on the training window (point fit), evaluates it on the test
+window (simulated as the continuation of training) and answers, per the README's loop:
+
+1. **compare**: RMSE, MAE, CV(RMSE), NMBE per target on the test window;
+2. **where**: a sensor *fails* when its test RMSE exceeds ``failure_ratio`` × its noise level (the
+   high-frequency noise of the measured series from the first quartile of |Δ²y|, floored at the
+   instrument accuracy of its unit, :func:`noise_level`); failures are located on the flow path
+   (:mod:`service.flow_path_localization`), in operating regimes (:mod:`service.operating_regimes`:
+   per-regime RMSE, the worst named) and in time (:mod:`service.failure_episodes`);
+3. **what is missing**: every (effect, node) pair of the catalog that applies to the model gets a
+   score test at the null, a refit from the base estimate, ΔBIC and the test-window error after
+   (:mod:`service.effect_ranking`); ranked, the best explained in one sentence;
+4. when nothing significant is found: "nothing significant is missing" and, if sensors still fail,
+   what their residual depends on (:mod:`service.residual_dependence`).
+
+The result, :class:`DiagnosisReport`, prints as the CLI contract's JSON and is written as triples.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyoxigraph as ox
+
+from .assembly import EffectRequest, assemble
+from .calibration_data import ModelData
+from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR
+from .calibration_run import DEFAULT_SUBSTEPS, Window, calibrate, continuation
+from .effect_ranking import (
+    EffectEvidence, delta_bic, effective_sample_fraction, rank_evidence, score_test, weighted_test_error,
+)
+from .failure_episodes import find_episodes
+from .flow_path_localization import FlowTopology, localize_failures
+from .namespaces import GT, PROV, RDF, RDFS, XSD
+from .operating_regimes import OperatingRegimes, per_regime_metrics
+from .point_calibration import PointCalibrator
+from .residual_dependence import joint_r2, residual_dependence
+from .signature import Signature, load_signature_library
+from .resources import signatures_dir
+from .signature_matcher import match_signature
+from .store import GraphStore
+from .units import unit_label
+
+__all__ = ["DiagnosisReport", "diagnose", "noise_level", "effect_candidates"]
+
+
+def noise_level(values: np.ndarray, unit: str) -> float:
+    """Measurement noise σ from second differences (module docstring), floored at the accuracy.
+
+    Δ²y of white noise has standard deviation √6·σ; the first quartile of |Δ²y| is 0.3186·√6·σ for
+    Gaussian noise, and stays a noise measure while the signal's own curvature occupies up to half
+    of the steps (a median would not).
+    """
+    finite = np.asarray(values, dtype=float)
+    second = np.diff(finite, n=2)
+    second = second[np.isfinite(second)]
+    sigma = float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
+    floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, 0.01 * float(np.nanmean(np.abs(finite))))
+    return max(sigma, floor)
+
+
+def _short(iri: str) -> str:
+    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+
+
+@dataclass
+class DiagnosisReport:
+    """Everything ``diagnose`` found (see :meth:`to_dict` for the CLI contract)."""
+
+    model_name: str
+    run_id: str
+    sensors: dict[str, dict]
+    localization: list[dict]
+    regimes: list[dict]
+    regime_rule_accuracy: float
+    episodes: dict[str, list[dict]]
+    effects: list[EffectEvidence]
+    not_applicable: list[str]
+    residual_dependence: dict[str, dict] = field(default_factory=dict)
+    summary: str = ""
+    base_test_prediction: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    @property
+    def significant(self) -> list[EffectEvidence]:
+        return [e for e in self.effects if e.significant]
+
+    def to_dict(self) -> dict:
+        return {
+            "model": self.model_name, "run": self.run_id, "summary": self.summary,
+            "sensors": self.sensors, "localization": self.localization,
+            "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
+            "episodes": self.episodes, "effects": [e.to_dict() for e in self.effects],
+            "nothing_significant_missing": not self.significant,
+            "not_applicable": self.not_applicable, "residual_dependence": self.residual_dependence,
+        }
+
+
+def effect_candidates(store: GraphStore, model_name: str, library: dict[str, Signature]):
+    """(effect signature, node, assembled model with it) for every applicable pair; and the reasons
+    the others do not apply."""
+    dataset = store.matching_dataset(model_name)
+    candidates, skipped = [], []
+    for signature in sorted((s for s in library.values() if s.kind == "effect"), key=lambda s: s.id):
+        nodes = sorted({m[signature.splice.node] for m in match_signature(store, signature, default_graph=dataset)
+                        if m.get(signature.splice.node)})
+        if not nodes:
+            skipped.append(f"{signature.id}: its pattern ({signature.source_file.name}) matches nowhere")
+        for node in nodes:
+            try:
+                model = assemble(store, model_name, library=library, extra_effects=[EffectRequest(signature.id, node)])
+            except ValueError as exc:
+                skipped.append(f"{signature.id} at {_short(node)}: {str(exc).splitlines()[0]}")
+                continue
+            candidates.append((signature, node, model))
+    return candidates, skipped
+
+
+@dataclass
+class _CandidateJob:
+    """What a worker needs to evaluate one candidate (picklable)."""
+
+    signature: Signature
+    node: str
+    model: object
+    data: object
+    substeps: int
+    train: slice
+    test: slice
+    base_theta: dict[str, float]
+    base_rss: float
+    sample_fraction: float
+    target_scales: dict[str, float]
+    base_test_prediction: dict[str, np.ndarray]
+    base_train_residual: dict[str, np.ndarray]
+    seed: int
+    refit_max_nfev: int
+
+
+#: Shares of an effect parameter's prior width probed before the refit (0 is its lower bound).
+PROBE_SHARES = (0.05, 0.15, 0.35, 0.65, 1.0)
+
+
+def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int]) -> np.ndarray:
+    """The refit's start: the base estimate with the effect parameters at the best point of a grid
+    (the null and ``PROBE_SHARES`` of each prior width; all combinations, one simulate call).
+
+    A local fit cannot leave some nulls: a first-order lag's response has zero slope at τ = 0, and a
+    stuck valve's position s does nothing while its weight w is 0. The grid gets past both.
+    """
+    axes = []
+    for column in effect_columns:
+        lo, hi = problem.lower[column], problem.upper[column]
+        axes.append(np.unique(np.clip(np.r_[theta0[column], lo + np.array(PROBE_SHARES) * (hi - lo)], lo, hi)))
+    grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T if axes else np.empty((1, 0))
+    ensemble = np.repeat(theta0[None, :], len(grid), axis=0)
+    ensemble[:, effect_columns] = grid
+    cost = np.sum(problem.weighted_residuals(problem.run(ensemble)) ** 2, axis=1)
+    return ensemble[int(np.argmin(cost))]
+
+
+def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    md = ModelData(job.model, job.data, job.substeps)
+    refs = job.model.estimated_parameters
+    effect_columns = [j for j, r in enumerate(refs) if r.key not in job.base_theta]
+    theta0 = np.array([
+        job.base_theta.get(r.key, r.spec.null if r.spec.null is not None else r.spec.default) for r in refs
+    ])
+    problem = md.problem(job.train, default=theta0, target_scales=job.target_scales)
+    score = score_test(problem, theta0, effect_columns, sample_fraction=job.sample_fraction)
+    problem = md.problem(job.train, default=_probe_start(problem, theta0, effect_columns), target_scales=job.target_scales)
+    calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev)
+    calibrator.fit(problem)
+    rss = 2.0 * calibrator.cost_
+    n = problem.n_observations
+    evidence = EffectEvidence(
+        effect=job.signature.id, effect_iri=job.signature.iri, node=job.node, label=job.signature.label,
+        parameter_names=tuple(refs[j].name for j in effect_columns), score=score,
+        delta_bic=delta_bic(job.base_rss, rss, job.sample_fraction * n, len(effect_columns)),
+        estimates={refs[j].name: float(calibrator.theta_[j]) for j in effect_columns},
+        standard_errors={refs[j].name: float(calibrator.standard_errors_[j]) for j in effect_columns},
+    )
+    joined = continuation(job.train, job.test)
+    offset = job.test.start - joined.start
+    after = {k: v[0][offset:] for k, v in md.simulate_targets(joined, calibrator.theta_[None, :]).items()}
+    observed = md.observed(job.test)
+    before_error = weighted_test_error(observed, job.base_test_prediction, job.target_scales)
+    after_error = weighted_test_error(observed, after, job.target_scales)
+    evidence.test_improvement = 1.0 - after_error / before_error if before_error > 0 else 0.0
+    for node, values in observed.items():
+        mask = np.isfinite(values)
+        evidence.rmse_before[node] = float(np.sqrt(np.mean((values[mask] - job.base_test_prediction[node][mask]) ** 2)))
+        evidence.rmse_after[node] = float(np.sqrt(np.mean((values[mask] - after[node][mask]) ** 2)))
+    best = max(observed, key=lambda k: (evidence.rmse_before[k] ** 2 - evidence.rmse_after[k] ** 2) / job.target_scales[k] ** 2)
+    change = after[best] - job.base_test_prediction[best]
+    residual = observed[best] - job.base_test_prediction[best]
+    mask = np.isfinite(residual) & np.isfinite(change)
+    rho = float(np.corrcoef(residual[mask], change[mask])[0, 1]) if np.std(change[mask]) > 0 else 0.0
+    evidence.residual_correlation = (best, rho)
+    removed = 1.0 - evidence.rmse_after[best] ** 2 / max(evidence.rmse_before[best] ** 2, 1e-300)
+    estimates = "; ".join(
+        f"{name} = {evidence.estimates[name]:.3g} ± {evidence.standard_errors[name]:.2g}" for name in evidence.parameter_names
+    )
+    evidence.explanation = (
+        f"residual on {_short(best)} correlates {rho:.2f} with what {job.signature.id} at {_short(job.node)} adds; "
+        f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "
+        f"sensors); {estimates}"
+    )
+    return evidence
+
+
+def diagnose(
+    store: GraphStore,
+    model_name: str,
+    data_path: Path | str,
+    *,
+    train: Window,
+    test: Window,
+    seed: int = 0,
+    substeps: int = DEFAULT_SUBSTEPS,
+    library: dict[str, Signature] | None = None,
+    failure_ratio: float = 2.0,
+    refit_max_nfev: int = 30,
+    workers: int | None = None,
+    on_progress: Callable[[str], None] | None = None,
+) -> DiagnosisReport:
+    """Calibrate on ``train``, compare on ``test``, locate the failures and rank the missing effects."""
+    say = on_progress or (lambda message: None)
+    library = library or load_signature_library(signatures_dir())
+    say("calibrating the base model")
+    base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps)
+    md, model = base.model_data, base.model
+    data = md.data
+    train_slice, test_slice = base.train, base.test
+    if test_slice is None or continuation(train_slice, test_slice) is None:
+        raise ValueError("diagnose needs a test window after the start of the training window")
+    observed = md.observed(test_slice)
+    predicted = base.predictions["test"]
+    sensors: dict[str, dict] = {}
+    matches: dict[str, bool] = {md.node_of[c]: True for c in model.boundary_inputs}
+    for node, metrics in base.record.metrics["test"].items():
+        sigma = noise_level(data.series[node], md.units[node])
+        fails = metrics.rmse > failure_ratio * sigma
+        matches[node] = not fails
+        sensors[node] = {
+            "rmse": metrics.rmse, "mae": metrics.mae, "cv_rmse": metrics.cv_rmse_percent,
+            "nmbe": metrics.nmbe_percent, "r2": metrics.r2, "unit": md.units[node], "noise": sigma,
+            "rmse_over_noise": metrics.rmse / sigma, "fails": bool(fails),
+        }
+    say("locating the failures")
+    topology = FlowTopology.from_store(store, model_name)
+    all_devices = [md.node_of[c] for c in model.boundary_inputs + model.targets]
+    locations = localize_failures(topology, matches, all_devices)
+    localization = [dict(loc.to_dict(), text=loc.describe()) for loc in locations]
+
+    signal_nodes = [md.node_of[c] for c in model.boundary_inputs]
+    signals = np.column_stack([data.series[n] for n in signal_nodes])
+    finite_rows = np.isfinite(signals).all(axis=1)
+    regimes_model = OperatingRegimes(random_state=seed)
+    features, names, units = regimes_model.features(
+        np.where(np.isfinite(signals), signals, np.nanmean(signals, axis=0)),
+        [_short(n).replace("_", " ") for n in signal_nodes], [unit_label(md.units.get(n, data.units[n])) for n in signal_nodes],
+        data.step_s,
+    )
+    regimes_model.fit(features[finite_rows], names, units)
+    labels = regimes_model.predict(features[test_slice])
+    rmse = lambda y, yhat: float(np.sqrt(np.mean((y - yhat) ** 2))) if y.size else float("nan")  # noqa: E731
+    regimes = per_regime_metrics(labels, observed, predicted, rmse)
+    for row in regimes:
+        row["rule"] = regimes_model.rules_[row["regime"]]
+        row["rmse"] = row.pop("metric")
+        row["worst"] = False
+    if regimes:
+        scaled = [np.nanmean([row["rmse"][k] / sensors[k]["noise"] for k in row["rmse"]]) for row in regimes]
+        regimes[int(np.nanargmax(scaled))]["worst"] = True
+
+    episodes = {}
+    for node in observed:
+        found = find_episodes(data.timestamps[test_slice], observed[node], predicted[node],
+                              floor=failure_ratio * sensors[node]["noise"], unit=unit_label(md.units[node]))
+        if found:
+            episodes[node] = [e.to_dict() for e in found]
+
+    say("testing the effect catalog")
+    candidates, skipped = effect_candidates(store, model_name, library)
+    base_problem = md.problem(train_slice)
+    base_outputs = base_problem.run(base.theta[None, :])
+    base_residuals = base_problem.weighted_residuals(base_outputs)[0]
+    fraction = effective_sample_fraction(base_residuals)
+    base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, base.theta)}
+    jobs = [
+        _CandidateJob(signature, node, cand_model, data, substeps, train_slice, test_slice, base_theta,
+                      float(np.dot(base_residuals, base_residuals)), fraction, dict(base_problem.target_scales),
+                      predicted, {}, seed, refit_max_nfev)
+        for signature, node, cand_model in candidates
+    ]
+    workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
+    if workers > 1 and len(jobs) > 1:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            evidence = list(pool.map(_evaluate_candidate, jobs))
+    else:
+        evidence = [_evaluate_candidate(job) for job in jobs]
+    ranked = rank_evidence(evidence)
+
+    dependence: dict[str, dict] = {}
+    failing = [n for n, s in sensors.items() if s["fails"]]
+    if not any(e.significant for e in ranked) and failing:
+        everything = md.simulate_all(slice(train_slice.start, test_slice.stop), base.theta)
+        offset = test_slice.start - train_slice.start
+        candidates_signals = {f"measured {_short(n)}": data.series[n][test_slice] for n in data.series}
+        for (component, port), values in everything.outputs.items():
+            candidates_signals[f"model {_short(component)}.{port}"] = values[0][offset:]
+        for node in failing:
+            residual = observed[node] - predicted[node]
+            ranked_signals, _ = residual_dependence(
+                residual, {k: v for k, v in candidates_signals.items() if _short(node) not in k})
+            top = ranked_signals[:3]
+            dependence[node] = {"signals": [d.to_dict() | {"text": d.describe(data.step_s)} for d in top],
+                                "joint_r2": joint_r2(residual, candidates_signals, top)}
+
+    report = DiagnosisReport(
+        model_name=model_name, run_id=base.record.run_id, sensors=sensors, localization=localization,
+        regimes=regimes, regime_rule_accuracy=regimes_model.rule_accuracy_, episodes=episodes,
+        effects=ranked, not_applicable=skipped, residual_dependence=dependence, base_test_prediction=predicted,
+    )
+    report.summary = _summary(report)
+    store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
+    return report
+
+
+def _summary(report: DiagnosisReport) -> str:
+    failing = [n for n, s in report.sensors.items() if s["fails"]]
+    if not report.significant:
+        if not failing:
+            return "The model matches every sensor within its noise; nothing significant is missing."
+        return (f"The model fails at {', '.join(_short(n) for n in failing)}, but no effect in the catalog explains "
+                "it significantly: see residual_dependence for what the residual follows.")
+    best = report.significant[0]
+    return f"Missing: {best.label} at {_short(best.node)}. {best.explanation}."
+
+
+def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
+    """The diagnosis as triples: a gt:DiagnosisRun with its ranked candidates and failure locations."""
+    from .calibration_triples import run_iri
+
+    run = ox.NamedNode(run_iri(report.run_id).value + "/diagnosis")
+    calibration = run_iri(report.run_id)
+    dbl = lambda v: ox.Literal(repr(float(v)), datatype=XSD.double)  # noqa: E731
+    t = [ox.Triple(run, RDF.type, GT.DiagnosisRun), ox.Triple(run, RDF.type, PROV.Activity),
+         ox.Triple(run, GT.basedOnCalibration, calibration), ox.Triple(run, GT.forModel, ox.Literal(report.model_name)),
+         ox.Triple(run, RDFS.comment, ox.Literal(report.summary))]
+    for rank, item in enumerate(report.effects, start=1):
+        node = ox.NamedNode(f"{run.value}/candidate/{item.effect}/{_short(item.node)}")
+        t += [ox.Triple(node, RDF.type, GT.EffectCandidate), ox.Triple(node, PROV.wasGeneratedBy, run),
+              ox.Triple(node, GT.candidateEffect, ox.NamedNode(item.effect_iri)),
+              ox.Triple(node, GT.onNode, ox.NamedNode(item.node)),
+              ox.Triple(node, GT.rank, ox.Literal(str(rank), datatype=XSD.integer)),
+              ox.Triple(node, GT.significant, ox.Literal("true" if item.significant else "false", datatype=XSD.boolean)),
+              ox.Triple(node, GT.explanation, ox.Literal(item.explanation))]
+        for predicate, value in ((GT.scoreStatistic, item.score.statistic), (GT.pValue, item.score.p_value),
+                                 (GT.deltaBic, item.delta_bic), (GT.testImprovement, item.test_improvement)):
+            if np.isfinite(value):
+                t.append(ox.Triple(node, predicate, dbl(value)))
+    for index, location in enumerate(report.localization):
+        node = ox.NamedNode(f"{run.value}/location/{index}")
+        matching, failing = location["between"]
+        t += [ox.Triple(node, RDF.type, GT.FailureLocation), ox.Triple(node, PROV.wasGeneratedBy, run),
+              ox.Triple(node, GT.failingSensor, ox.NamedNode(failing)), ox.Triple(node, RDFS.comment, ox.Literal(location["text"]))]
+        if matching:
+            t.append(ox.Triple(node, GT.matchingSensor, ox.NamedNode(matching)))
+        t += [ox.Triple(node, GT.suspect, ox.NamedNode(c)) for c in location["components"]]
+    for row in report.regimes:
+        node = ox.NamedNode(f"{run.value}/regime/{row['regime']}")
+        t += [ox.Triple(node, RDF.type, GT.OperatingRegime), ox.Triple(node, PROV.wasGeneratedBy, run),
+              ox.Triple(node, GT.regimeRule, ox.Literal(row["rule"])), ox.Triple(node, GT.share, dbl(row["share"]))]
+    return t

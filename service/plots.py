@@ -1,0 +1,73 @@
+"""Figures people would rather look at than read: measured vs model per sensor, and error history.
+
+matplotlib with the non-interactive Agg backend (no display needed); every function writes one PNG
+and returns its path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .units import unit_label  # noqa: E402
+
+__all__ = ["plot_measured_vs_model", "plot_error_history"]
+
+
+def _short(iri: str) -> str:
+    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+
+
+def plot_measured_vs_model(
+    path: Path,
+    timestamps: np.ndarray,
+    observed: Mapping[str, np.ndarray],
+    models: Mapping[str, Mapping[str, np.ndarray]],
+    units: Mapping[str, str],
+    intervals: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
+    title: str = "",
+) -> Path:
+    """One panel per sensor: the measurement and each named model prediction (e.g. ``before`` and
+    ``after``), with a shaded prediction interval where given."""
+    sensors = list(observed)
+    fig, axes = plt.subplots(len(sensors), 1, figsize=(11, 2.2 * len(sensors)), sharex=True, squeeze=False)
+    for ax, sensor in zip(axes[:, 0], sensors):
+        if intervals and sensor in intervals:
+            low, high = intervals[sensor]
+            ax.fill_between(timestamps, low, high, color="tab:blue", alpha=0.2, label="prediction interval")
+        ax.plot(timestamps, observed[sensor], color="black", lw=0.8, label="measured")
+        for (name, prediction), color in zip(models.items(), ("tab:red", "tab:green", "tab:blue")):
+            ax.plot(timestamps, prediction[sensor], color=color, lw=1.0, label=name)
+        ax.set_ylabel(f"{_short(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=4)
+    if title:
+        axes[0, 0].set_title(title)
+    fig.autofmt_xdate()
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_error_history(path: Path, versions: list[str], rmse: Mapping[str, list[float]], units: Mapping[str, str]) -> Path:
+    """Test-window RMSE per sensor (one panel each) across model versions: the error falling."""
+    sensors = list(rmse)
+    fig, axes = plt.subplots(1, len(sensors), figsize=(2.6 * len(sensors), 3.2), squeeze=False)
+    for ax, sensor in zip(axes[0], sensors):
+        ax.bar(range(len(versions)), rmse[sensor], color="tab:blue")
+        ax.set_xticks(range(len(versions)), [v.replace("+", "\n+") for v in versions], fontsize=7)
+        ax.set_title(_short(sensor), fontsize=8)
+        ax.set_ylabel(f"test RMSE [{unit_label(units.get(sensor, ''))}]", fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,18 @@
+"""Shared fixtures: an in-memory store with the case-study model loaded."""
+
+import os
+
+import pytest
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from case_study import CASE_STUDY  # noqa: E402
+
+from service.store import GraphStore  # noqa: E402
+
+
+@pytest.fixture
+def case_store() -> GraphStore:
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    return store

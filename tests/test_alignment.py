@@ -1,0 +1,60 @@
+"""Alignment: canonical SAREF/FSO triples from v3 or v4 spellings, inferred device classes."""
+
+import pyoxigraph as ox
+
+from case_study import EX
+
+from service.namespaces import GT, RDF
+from service.store import GraphStore
+
+V4 = b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
+@prefix ex: <https://example.org/a#> .
+ex:fan a s4bldg:Fan ; saref:hasPropertyValue ex:nom . ex:nom a saref:PropertyValue ;
+  saref:isValueOfProperty s4bldg:nominalAirFlowRate ; saref:hasValue "1.5" .
+ex:sensor a s4bldg:Sensor ; saref:observes ex:t . ex:t a saref:Temperature .
+"""
+V3 = b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
+@prefix ex: <https://example.org/a#> .
+ex:fan a s4bldg:Fan ; s4bldg:nominalAirFlowRate ex:nom . ex:nom a saref:Measurement ; saref:hasValue "1.5" .
+ex:sensor a s4bldg:Sensor ; saref:measuresProperty ex:t . ex:t saref:isPropertyOf ex:room ;
+  <http://qudt.org/schema/qudt/hasQuantityKind> <http://qudt.org/vocab/quantitykind/Temperature> .
+"""
+
+CANONICAL = """PREFIX saref: <https://saref.etsi.org/core/> PREFIX gt: <https://w3id.org/graphtwin/ontology#>
+SELECT ?s ?p ?o WHERE {
+  { ?s saref:hasPropertyValue ?o . BIND(saref:hasPropertyValue AS ?p) }
+  UNION { ?s saref:isValueOfProperty ?o . BIND(saref:isValueOfProperty AS ?p) }
+  UNION { ?s saref:observes ?o . BIND(saref:observes AS ?p) }
+  UNION { ?s a gt:TemperatureSensor . BIND(gt:TemperatureSensor AS ?o) BIND(<urn:type> AS ?p) }
+}"""
+
+
+def _canonical(store: GraphStore, name: str) -> set:
+    return {(r["s"].value, r["p"].value, r["o"].value) for r in store.query(CANONICAL, model=name)}
+
+
+def test_case_study_devices_get_their_measuring_class(case_store):
+    inferred = case_store.inferred_graph("case")
+    typed = {(q.subject.value, q.object.value) for q in case_store.backend.store.quads_for_pattern(None, RDF.type, None, inferred)}
+    assert (EX + "coil_outlet_air_temperature_sensor", GT.TemperatureSensor.value) in typed
+    assert (EX + "supply_air_flow_meter", GT.FlowSensor.value) in typed  # an s4bldg:FlowMeter, not a saref:Sensor
+    assert (EX + "fan_power_meter", GT.PowerMeter.value) in typed
+    assert (EX + "valve_position_sensor", GT.PositionSensor.value) in typed
+    # the controller observes the temperature it controls but is not a sensor
+    assert not any(s == EX + "coil_outlet_air_temperature_controller" for s, _ in typed)
+
+
+def test_v3_spellings_give_the_same_canonical_triples_as_v4():
+    store = GraphStore.embedded(None)
+    store.load_model("v4", V4)
+    store.load_model("v3", V3)
+    v4, v3 = _canonical(store, "v4"), _canonical(store, "v3")
+    assert v3 == v4
+    assert ("https://example.org/a#sensor", "urn:type", GT.TemperatureSensor.value) in v3
+
+
+def test_the_users_graph_is_never_changed():
+    store = GraphStore.embedded(None)
+    store.load_model("v3", V3)
+    model = store.model_graph("v3")
+    assert not list(store.backend.store.quads_for_pattern(None, ox.NamedNode("https://saref.etsi.org/core/observes"), None, model))

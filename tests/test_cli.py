@@ -1,0 +1,68 @@
+"""The command line: JSON output, clear errors with exit code 2, add-effect round trip."""
+
+import json
+
+from case_study import CASE_STUDY, EX
+from typer.testing import CliRunner
+
+from service.assembly import assemble
+from service.cli import app
+from service.store import GraphStore
+
+runner = CliRunner()
+
+
+def test_assemble_prints_the_model_as_json():
+    result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--memory", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert len(data["targets"]) == 5 and len(data["boundary_inputs"]) == 5
+    assert len(data["parameters"]["estimated"]) == 14
+
+
+def test_a_broken_model_fails_with_line_and_column(tmp_path):
+    broken = tmp_path / "broken.ttl"
+    broken.write_text("@prefix ex: <https://example.org/x#> .\nex:a ex:b ex:c .\nex:d zz:e ex:f .\n")
+    result = runner.invoke(app, ["assemble", str(broken), "--memory"])
+    assert result.exit_code == 2
+    assert "line 3" in result.output and "zz:" in result.output
+
+
+def test_signature_explain_prints_the_compiled_query():
+    result = runner.invoke(app, ["signature", "explain", "Fan"])
+    assert result.exit_code == 0 and "suppliesFluidTo+" in result.output
+    assert runner.invoke(app, ["signature", "explain", "Fann"]).exit_code == 2
+
+
+def test_add_effect_records_triples_that_reassembly_picks_up(tmp_path):
+    output = tmp_path / "with_effect.ttl"
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "ValveLeakage",
+                                 "--target", EX + "heating_valve", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    text = output.read_text()
+    assert text.startswith(CASE_STUDY.read_text().rstrip("\n")) and "hasEffect" in text
+    store = GraphStore.embedded(None)
+    store.load_model("v2", output)
+    model = assemble(store, "v2")
+    assert any(c.signature.id == "ValveLeakage" for c in model.components.values())
+
+
+def test_add_effect_refuses_an_effect_that_does_not_apply(tmp_path):
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "FanMotorHeat",
+                                 "--target", EX + "heating_valve", "-o", str(tmp_path / "x.ttl")])
+    assert result.exit_code == 2 and "does not apply" in result.output
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "Nope", "--target", EX + "x",
+                                 "-o", str(tmp_path / "x.ttl")])
+    assert result.exit_code == 2 and "FanMotorHeat" in result.output
+
+
+def test_example_generate_writes_the_columns_the_model_needs(tmp_path):
+    output = tmp_path / "data.csv"
+    result = runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "SensorOffset",
+                                 "--days", "1", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    header = output.read_text().splitlines()[0].split(",")
+    assert header[0] == "time" and "coil_outlet_air_temperature" in header and len(header) == 11
+    assert len(output.read_text().splitlines()) == 1 + 144
+    bad = runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "Nope", "-o", str(output)])
+    assert bad.exit_code == 2 and "CoilThermalMass" in bad.output

@@ -1,0 +1,108 @@
+"""The ensemble simulator: order, the one-step delay that breaks a loop, boundary series, sub-steps."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from service.assembled_model import AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef
+from service.component import ComponentModel, Parameter, Port
+from service.signature import signature_from_dict
+from service.simulator import Simulator, component_order
+
+
+class Gain(ComponentModel):
+    """y = k·x."""
+
+    inputs = (Port("x", "1"),)
+    outputs = (Port("y", "1"),)
+    parameters = (Parameter("k", "1", 1.0, 0.0, 10.0),)
+
+    def step(self, params, inputs, state, dt_s):
+        return {"y": params["k"] * inputs["x"]}
+
+
+class Summer(ComponentModel):
+    """y = a + b, with b a feedback input."""
+
+    inputs = (Port("a", "1"), Port("b", "1", feedback=True))
+    outputs = (Port("y", "1"),)
+
+    def step(self, params, inputs, state, dt_s):
+        return {"y": inputs["a"] + inputs["b"]}
+
+
+class Plain(Summer):
+    inputs = (Port("a", "1"), Port("b", "1"))
+
+
+def _instance(iri, cls, measured=False):
+    signature = signature_from_dict({"id": iri.split(":")[-1].capitalize(), "modeled_nodes": ["n"], "nodes": {"n": {"classes": ["urn:C"]}},
+                                     "model": f"{cls.__module__}:{cls.__name__}"})
+    return ComponentInstance(iri, signature, {"n": iri}, (iri,), {}, MeasurementLink(iri, None, None) if measured else None)
+
+
+def _loop_model(summer=Summer):
+    """source (boundary) → sum → gain → back into sum.b: y_k = u_k + k·y_{k−1}."""
+    import sys
+    module = sys.modules[__name__]
+    module.Summer, module.Plain = Summer, Plain
+    components = {
+        "urn:source": _instance("urn:source", __import__("service.measuring_device", fromlist=["x"]).MeasuringDevice, True),
+        "urn:sum": _instance("urn:sum", summer),
+        "urn:gain": _instance("urn:gain", Gain),
+    }
+    connections = (
+        Connection("urn:source", "measured_value", "urn:sum", "a"),
+        Connection("urn:sum", "y", "urn:gain", "x"),
+        Connection("urn:gain", "y", "urn:sum", "b"),
+    )
+    return AssembledModel(components, connections, ("urn:source",), (), (), (ParameterRef("urn:gain", Gain.parameters[0]),))
+
+
+def test_feedback_port_closes_the_loop_one_step_late():
+    model = _loop_model()
+    order, delayed, notes = component_order(model)
+    assert order.index("urn:sum") < order.index("urn:gain") and not notes
+    assert [c.target_port for c in delayed] == ["b"]
+    u = np.array([1.0, 0.0, 0.0, 0.0, 0.0])
+    y = Simulator(model, 60.0).run({"urn:source": u}, np.array([[0.5], [2.0]]), record=[("urn:sum", "y")]).outputs[("urn:sum", "y")]
+    # y_0 = u_0 + 0 (no measured value for the gain at t = 0), then y_k = u_k + k·y_{k−1}
+    assert y[0] == pytest.approx([1.0, 0.5, 0.25, 0.125, 0.0625])
+    assert y[1] == pytest.approx([1.0, 2.0, 4.0, 8.0, 16.0])
+
+
+def test_a_cycle_without_feedback_port_is_broken_with_a_warning():
+    model = _loop_model(Plain)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        Simulator(model, 60.0)
+    assert any("cycle without a feedback port" in str(w.message) for w in caught)
+
+
+def test_ensemble_is_member_by_member_and_boundary_gaps_are_held():
+    model = _loop_model()
+    u = np.array([1.0, np.nan, np.nan, 2.0])
+    sim = Simulator(model, 60.0)
+    theta = np.array([[0.1], [0.7]])
+    together = sim.run({"urn:source": u}, theta).outputs[("urn:sum", "y")]
+    for i in range(2):
+        alone = sim.run({"urn:source": u}, theta[i:i + 1]).outputs[("urn:sum", "y")][0]
+        assert together[i] == pytest.approx(alone)
+    assert np.isfinite(together).all()
+
+
+def test_missing_boundary_series_and_bad_theta_are_named():
+    sim = Simulator(_loop_model(), 60.0)
+    with pytest.raises(ValueError, match="urn:source"):
+        sim.run({}, np.array([[1.0]]))
+    with pytest.raises(ValueError, match="columns"):
+        sim.run({"urn:source": np.zeros(3)}, np.array([[1.0, 2.0]]))
+
+
+def test_substeps_report_at_data_steps():
+    model = _loop_model()
+    coarse = Simulator(model, 60.0, substeps=1).run({"urn:source": np.ones(4)}, np.array([[0.0]]))
+    fine = Simulator(model, 60.0, substeps=3).run({"urn:source": np.ones(4)}, np.array([[0.0]]))
+    assert fine.outputs[("urn:sum", "y")].shape == (1, 4)
+    assert fine.outputs[("urn:sum", "y")] == pytest.approx(coarse.outputs[("urn:sum", "y")])

@@ -1,0 +1,90 @@
+"""The store: named-graph layout, atomic loads with clear parse errors, value binding."""
+
+import pyoxigraph as ox
+import pytest
+
+from service.store import GraphStore, ModelLoadError, bind_values
+
+from case_study import CASE_STUDY, EX
+
+BROKEN = b"""@prefix ex: <https://example.org/x#> .
+ex:a ex:b ex:c .
+ex:d zz:e ex:f .
+"""
+
+
+def _snapshot(store: GraphStore) -> set:
+    return set(store.backend.store.quads_for_pattern(None, None, None, None))
+
+
+def test_models_ontology_and_inferences_live_in_separate_graphs(case_store):
+    graphs = {g.value.rsplit("/graph/", 1)[1] for g in case_store.backend.graphs()}
+    assert {"model/case", "inferred/case", "ontology/core"} <= graphs
+    case_store.load_model("other", CASE_STUDY)
+    case_store.drop_model("other")
+    assert case_store.models() == ["case"]
+    assert case_store.backend.triple_count(case_store.model_graph("case")) > 100
+
+
+def test_a_parse_error_names_file_line_and_column_and_changes_nothing(case_store, tmp_path):
+    before = _snapshot(case_store)
+    path = tmp_path / "broken.ttl"
+    path.write_bytes(BROKEN)
+    with pytest.raises(ModelLoadError) as info:
+        case_store.load_model("case", path)
+    assert info.value.line == 3 and info.value.column is not None
+    assert str(path) in str(info.value) and "zz:" in str(info.value)
+    assert _snapshot(case_store) == before
+
+
+def test_unknown_format_and_empty_model_are_refused(case_store, tmp_path):
+    bad = tmp_path / "model.xlsx"
+    bad.write_bytes(b"x")
+    with pytest.raises(ValueError, match="unsupported RDF format"):
+        case_store.load_model("x", bad)
+    with pytest.raises(ModelLoadError, match="empty"):
+        case_store.load_model("x", b"# nothing\n", "ttl")
+    with pytest.raises(ValueError, match="model name"):
+        case_store.load_model("bad name", CASE_STUDY)
+
+
+def test_json_ld_and_n_triples_load_the_same_triples(tmp_path):
+    store = GraphStore.embedded(None)
+    store.load_model("ttl", CASE_STUDY)
+    for fmt, suffix in ((ox.RdfFormat.N_TRIPLES, "nt"), (ox.RdfFormat.JSON_LD, "jsonld"), (ox.RdfFormat.RDF_XML, "rdf")):
+        data = store.backend.dump(store.model_graph("ttl"), fmt)
+        path = tmp_path / f"model.{suffix}"
+        path.write_bytes(data)
+        store.load_model(suffix, path)
+        assert store.backend.triple_count(store.model_graph(suffix)) == store.backend.triple_count(store.model_graph("ttl"))
+
+
+def test_replacing_a_model_swaps_it_whole(case_store):
+    case_store.load_model("case", b"<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
+    assert case_store.backend.triple_count(case_store.model_graph("case")) == 1
+
+
+def test_on_disk_store_keeps_models_across_reopen(tmp_path):
+    store = GraphStore.embedded(tmp_path / "data")
+    store.load_model("case", CASE_STUDY)
+    count = store.backend.triple_count(store.model_graph("case"))
+    del store
+    reopened = GraphStore.embedded(tmp_path / "data")
+    assert reopened.models() == ["case"]
+    assert reopened.backend.triple_count(reopened.model_graph("case")) == count
+
+
+def test_named_query_binds_values_safely(case_store):
+    rows = case_store.run_named_query("measurement-link", dataset="case", device=EX + "fan_power_meter")
+    assert [r["series_id"].value for r in rows] == ["supply_fan_power"]
+    hostile = 'x" } ; DROP ALL ; SELECT * WHERE { "'
+    rows = case_store.run_named_query("measurement-link", dataset="case", device=hostile)
+    assert all(not row for row in rows)  # bound as a literal: no device, nothing injected
+    assert case_store.backend.triple_count(case_store.model_graph("case")) > 100
+    text = bind_values("SELECT ?a WHERE { ?a ?b ?c }", {"c": ox.Literal('say "hi"\n')})
+    assert 'VALUES (?c) { ("say \\"hi\\"\\n") }' in text
+
+
+def test_sparql_syntax_error_is_a_value_error(case_store):
+    with pytest.raises(ValueError, match="SPARQL syntax error"):
+        case_store.query("SELEC ?x WHERE { ?x ?y ?z }")
