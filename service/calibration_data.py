@@ -9,7 +9,7 @@ the sensors' building-node IRIs, the names users see in every report.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -96,33 +96,40 @@ class ModelData:
         return np.array([r.spec.lower for r in refs]), np.array([r.spec.upper for r in refs])
 
     def problem(
-        self, window: slice, *, default: np.ndarray | None = None, fixed: Mapping[str, float] | None = None,
-        target_scales: Mapping[str, float] | None = None, gp_time_column: bool = True,
-        warmup_s: float = 3600.0,
+        self, window: slice | Sequence[slice], *, default: np.ndarray | None = None,
+        fixed: Mapping[str, float] | None = None, target_scales: Mapping[str, float] | None = None,
+        gp_time_column: bool = True, warmup_s: float = 3600.0,
     ) -> CalibrationProblem:
-        """The calibration problem of ``window``: θ = the model's estimated parameters.
+        """The calibration problem of ``window`` (or of several windows, concatenated; each is
+        simulated on its own): θ = the model's estimated parameters.
 
         :param default: a plausible θ screened with the start candidates (the components'
             defaults when None).
         :param target_scales: residual scales per target node (e.g. the training window's, so a
             test window weighs alike).
-        :param warmup_s: the first ``warmup_s`` seconds of the window are simulated but not compared:
-            the model starts in steady state with the first inputs, the building did not.
+        :param warmup_s: the first ``warmup_s`` seconds of each window are simulated but not
+            compared: the model starts in steady state with the first inputs, the building did not.
         """
+        windows = [window] if isinstance(window, slice) else list(window)
         lower, upper = self.bounds()
         start = self.default_theta() if default is None else np.clip(np.asarray(default, float), lower, upper)
-        steps = np.arange(window.stop - window.start if window.stop is not None else self.data.n_steps, dtype=float)
         warmup = int(round(warmup_s / self.data.step_s))
-        observed = {}
-        for node, values in self.observed(window).items():
-            values = values.copy()
-            values[:warmup] = np.nan
-            observed[node] = values
+        observed: dict[str, list[np.ndarray]] = {}
+        for part in windows:
+            for node, values in self.observed(part).items():
+                values = values.copy()
+                values[:warmup] = np.nan
+                observed.setdefault(node, []).append(values)
+        hours = np.concatenate([np.arange(w.start, w.stop) for w in windows]) * self.data.step_s / 3600.0
+
+        def simulate(theta: np.ndarray) -> dict[str, np.ndarray]:
+            runs = [self.simulate_targets(part, theta, fixed) for part in windows]
+            return {node: np.concatenate([run[node] for run in runs], axis=1) for node in runs[0]}
+
         return CalibrationProblem(
             parameter_names=tuple(ref.key for ref in self.model.estimated_parameters),
-            lower=lower, upper=upper,
-            simulate=lambda theta: self.simulate_targets(window, theta, fixed),
-            observed=observed, units=self.units, default=start,
-            target_scales=dict(target_scales or {}),
-            gp_inputs=(window.start + steps) * self.data.step_s / 3600.0 if gp_time_column else None,
+            lower=lower, upper=upper, simulate=simulate,
+            observed={node: np.concatenate(parts) for node, parts in observed.items()}, units=self.units,
+            default=start, target_scales=dict(target_scales or {}),
+            gp_inputs=hours if gp_time_column else None,
         )

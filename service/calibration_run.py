@@ -32,14 +32,11 @@ from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
 from .metrics import TargetMetrics, target_metrics
 from .point_calibration import PointCalibrator
+from .simulator import loop_substeps
 from .store import GraphStore
 
 __all__ = ["Window", "parse_window", "CalibrationOutcome", "calibrate", "model_version", "fit_point",
-           "DEFAULT_SUBSTEPS", "continuation", "store_run"]
-
-#: Simulation sub-steps per data step: a 10-minute data step runs the loop at 2 minutes, where the
-#: closed heating loop is free of the sampling limit cycle over the whole prior (tests/components).
-DEFAULT_SUBSTEPS = 5
+           "continuation", "predict_test", "store_run"]
 
 Window = tuple[str | None, str | None]
 
@@ -67,6 +64,23 @@ def model_version(store: GraphStore, model_name: str) -> str:
 def continuation(train: slice, test: slice) -> slice | None:
     """The window from the training start to the test end when the test follows the training."""
     return slice(train.start, test.stop) if test.start >= train.start else None
+
+
+def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray, warmup_s: float = 3600.0) -> dict[str, np.ndarray]:
+    """Target node → prediction on ``test`` for one θ: the continuation of the training run when the
+    test follows the training start, else a run of its own whose first ``warmup_s`` are NaN (the
+    model starts in steady state, the building did not)."""
+    joined = continuation(train, test)
+    if joined is not None:
+        offset = test.start - joined.start
+        return {k: v[0][offset:] for k, v in md.simulate_targets(joined, theta[None, :]).items()}
+    warmup = int(round(warmup_s / md.data.step_s))
+    out = {}
+    for node, values in md.simulate_targets(test, theta[None, :]).items():
+        values = values[0].copy()
+        values[:warmup] = np.nan
+        out[node] = values
+    return out
 
 
 def fit_point(md: ModelData, train: slice, *, seed: int, default: np.ndarray | None = None,
@@ -115,7 +129,7 @@ def calibrate(
     test: Window | None = None,
     method: str = "point",
     seed: int = 0,
-    substeps: int = DEFAULT_SUBSTEPS,
+    substeps: int | None = None,
     bayes_settings: dict | None = None,
     progress: bool = False,
     on_progress: Callable[[dict], None] | None = None,
@@ -131,6 +145,7 @@ def calibrate(
     started = datetime.now(timezone.utc)
     model = assemble(store, model_name)
     data = read_model_data(model, data_path)
+    substeps = substeps or loop_substeps(model, data.step_s)
     md = ModelData(model, data, substeps)
     train_slice = data.window(*train)
     test_slice = data.window(*test) if test is not None else None
@@ -177,10 +192,10 @@ def calibrate(
             intervals["test"] = {node: {level: tuple(b[offset:] for b in predictive.interval(node, level))
                                         for level in (0.5, 0.68, 0.9, 0.95, 0.99)} for node in median}
         else:
-            full = md.simulate_targets(joined or test_slice, theta[None, :])
-            median = {k: v[0][offset:] for k, v in full.items()}
+            median = predict_test(md, train_slice, test_slice, theta)
         predictions["test"] = median
-        observed_test = md.observed(test_slice)
+        observed_test = {node: np.where(np.isfinite(median[node]), values, np.nan)
+                         for node, values in md.observed(test_slice).items()}
         metrics["test"] = {
             node: target_metrics(observed_test[node], median[node], n_parameters=n_par,
                                  intervals=intervals.get("test", {}).get(node), unit=md.units[node], target=node)

@@ -1,7 +1,7 @@
 """The diagnosis loop: where the calibrated model fails and which physical effect is missing.
 
 ``diagnose`` calibrates the base model on the training window (point fit), evaluates it on the test
-window (simulated as the continuation of training) and answers, per the README's loop:
+window (the continuation of training when it follows it, else a run of its own) and answers, per the README's loop:
 
 1. **compare**: RMSE, MAE, CV(RMSE), NMBE per target on the test window;
 2. **where**: a sensor *fails* when its test RMSE exceeds ``failure_ratio`` × its noise level (the
@@ -10,8 +10,11 @@ window (simulated as the continuation of training) and answers, per the README's
    (:mod:`service.flow_path_localization`), in operating regimes (:mod:`service.operating_regimes`:
    per-regime RMSE, the worst named) and in time (:mod:`service.failure_episodes`);
 3. **what is missing**: every (effect, node) pair of the catalog that applies to the model gets a
-   score test at the null, a refit from the base estimate, ΔBIC and the test-window error after
-   (:mod:`service.effect_ranking`); ranked, the best explained in one sentence;
+   score test at the null, a refit from the base estimate, ΔBIC and the error after, all on a split
+   of the data (:func:`_split_windows`): fitted on the training window plus the first half of the
+   test window (the effect must be seen to be fitted: a fault may only be in the test data), judged
+   on the second half (data not used to fit it), against the base model refitted on the same fit
+   windows (:mod:`service.effect_ranking`); ranked, the best explained in one sentence;
 4. when nothing significant is found: "nothing significant is missing" and, if sensors still fail,
    what their residual depends on (:mod:`service.residual_dependence`).
 
@@ -32,7 +35,7 @@ import pyoxigraph as ox
 from .assembly import EffectRequest, assemble
 from .calibration_data import ModelData
 from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR
-from .calibration_run import DEFAULT_SUBSTEPS, Window, calibrate, continuation
+from .calibration_run import Window, calibrate
 from .effect_ranking import (
     EffectEvidence, delta_bic, effective_sample_fraction, rank_evidence, score_test, weighted_test_error,
 )
@@ -131,16 +134,36 @@ class _CandidateJob:
     model: object
     data: object
     substeps: int
-    train: slice
-    test: slice
+    fit_windows: list[slice]
+    run_window: slice
+    evaluation: slice
     base_theta: dict[str, float]
     base_rss: float
     sample_fraction: float
     target_scales: dict[str, float]
-    base_test_prediction: dict[str, np.ndarray]
-    base_train_residual: dict[str, np.ndarray]
+    base_evaluation_prediction: dict[str, np.ndarray]
     seed: int
     refit_max_nfev: int
+
+
+def _split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]:
+    """(fit windows, simulated window, evaluation window) of the effect comparison.
+
+    The effect must be fitted on data that shows it and judged on data it was not fitted on: the
+    fit uses the training window and the first half of the test window, the judgement the second
+    half. The evaluation half is predicted as the continuation of the run from the training start
+    when the test follows the training, else of a run over the whole test window.
+    """
+    middle = test.start + (test.stop - test.start) // 2
+    evaluation = slice(middle, test.stop)
+    if test.start >= train.start:
+        return [slice(train.start, middle)], slice(train.start, test.stop), evaluation
+    return [train, slice(test.start, middle)], test, evaluation
+
+
+def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice, theta: np.ndarray) -> dict[str, np.ndarray]:
+    offset = evaluation.start - run_window.start
+    return {k: v[0][offset:] for k, v in md.simulate_targets(run_window, theta[None, :]).items()}
 
 
 #: Shares of an effect parameter's prior width probed before the refit (0 is its lower bound).
@@ -173,9 +196,10 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     theta0 = np.array([
         job.base_theta.get(r.key, r.spec.null if r.spec.null is not None else r.spec.default) for r in refs
     ])
-    problem = md.problem(job.train, default=theta0, target_scales=job.target_scales)
+    problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
     score = score_test(problem, theta0, effect_columns, sample_fraction=job.sample_fraction)
-    problem = md.problem(job.train, default=_probe_start(problem, theta0, effect_columns), target_scales=job.target_scales)
+    problem = md.problem(job.fit_windows, default=_probe_start(problem, theta0, effect_columns),
+                         target_scales=job.target_scales)
     calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev)
     calibrator.fit(problem)
     rss = 2.0 * calibrator.cost_
@@ -187,20 +211,19 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         estimates={refs[j].name: float(calibrator.theta_[j]) for j in effect_columns},
         standard_errors={refs[j].name: float(calibrator.standard_errors_[j]) for j in effect_columns},
     )
-    joined = continuation(job.train, job.test)
-    offset = job.test.start - joined.start
-    after = {k: v[0][offset:] for k, v in md.simulate_targets(joined, calibrator.theta_[None, :]).items()}
-    observed = md.observed(job.test)
-    before_error = weighted_test_error(observed, job.base_test_prediction, job.target_scales)
+    after = _predict_evaluation(md, job.run_window, job.evaluation, calibrator.theta_)
+    before = job.base_evaluation_prediction
+    observed = md.observed(job.evaluation)
+    before_error = weighted_test_error(observed, before, job.target_scales)
     after_error = weighted_test_error(observed, after, job.target_scales)
     evidence.test_improvement = 1.0 - after_error / before_error if before_error > 0 else 0.0
     for node, values in observed.items():
         mask = np.isfinite(values)
-        evidence.rmse_before[node] = float(np.sqrt(np.mean((values[mask] - job.base_test_prediction[node][mask]) ** 2)))
+        evidence.rmse_before[node] = float(np.sqrt(np.mean((values[mask] - before[node][mask]) ** 2)))
         evidence.rmse_after[node] = float(np.sqrt(np.mean((values[mask] - after[node][mask]) ** 2)))
     best = max(observed, key=lambda k: (evidence.rmse_before[k] ** 2 - evidence.rmse_after[k] ** 2) / job.target_scales[k] ** 2)
-    change = after[best] - job.base_test_prediction[best]
-    residual = observed[best] - job.base_test_prediction[best]
+    change = after[best] - before[best]
+    residual = observed[best] - before[best]
     mask = np.isfinite(residual) & np.isfinite(change)
     rho = float(np.corrcoef(residual[mask], change[mask])[0, 1]) if np.std(change[mask]) > 0 else 0.0
     evidence.residual_correlation = (best, rho)
@@ -224,7 +247,7 @@ def diagnose(
     train: Window,
     test: Window,
     seed: int = 0,
-    substeps: int = DEFAULT_SUBSTEPS,
+    substeps: int | None = None,
     library: dict[str, Signature] | None = None,
     failure_ratio: float = 2.0,
     refit_max_nfev: int = 30,
@@ -237,12 +260,14 @@ def diagnose(
     say("calibrating the base model")
     base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps)
     md, model = base.model_data, base.model
+    substeps = md.substeps
     data = md.data
     train_slice, test_slice = base.train, base.test
-    if test_slice is None or continuation(train_slice, test_slice) is None:
-        raise ValueError("diagnose needs a test window after the start of the training window")
-    observed = md.observed(test_slice)
+    if test_slice is None:
+        raise ValueError("diagnose needs a test window")
     predicted = base.predictions["test"]
+    observed = {node: np.where(np.isfinite(predicted[node]), values, np.nan)
+                for node, values in md.observed(test_slice).items()}
     sensors: dict[str, dict] = {}
     matches: dict[str, bool] = {md.node_of[c]: True for c in model.boundary_inputs}
     for node, metrics in base.record.metrics["test"].items():
@@ -290,15 +315,18 @@ def diagnose(
 
     say("testing the effect catalog")
     candidates, skipped = effect_candidates(store, model_name, library)
-    base_problem = md.problem(train_slice)
-    base_outputs = base_problem.run(base.theta[None, :])
-    base_residuals = base_problem.weighted_residuals(base_outputs)[0]
+    fit_windows, run_window, evaluation = _split_windows(train_slice, test_slice)
+    scales = dict(md.problem(train_slice).target_scales)
+    say("refitting the base model on the comparison's fit windows")
+    refit = PointCalibrator(n_starts=1, n_candidates=8, random_state=seed, max_nfev=refit_max_nfev).fit(
+        md.problem(fit_windows, default=base.theta, target_scales=scales))
+    base_residuals = np.concatenate([r[np.isfinite(r)] for r in refit.residuals_.values()])
     fraction = effective_sample_fraction(base_residuals)
-    base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, base.theta)}
+    base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, refit.theta_)}
+    base_evaluation = _predict_evaluation(md, run_window, evaluation, refit.theta_)
     jobs = [
-        _CandidateJob(signature, node, cand_model, data, substeps, train_slice, test_slice, base_theta,
-                      float(np.dot(base_residuals, base_residuals)), fraction, dict(base_problem.target_scales),
-                      predicted, {}, seed, refit_max_nfev)
+        _CandidateJob(signature, node, cand_model, data, substeps, fit_windows, run_window, evaluation, base_theta,
+                      2.0 * refit.cost_, fraction, scales, base_evaluation, seed, refit_max_nfev)
         for signature, node, cand_model in candidates
     ]
     workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
@@ -312,8 +340,9 @@ def diagnose(
     dependence: dict[str, dict] = {}
     failing = [n for n, s in sensors.items() if s["fails"]]
     if not any(e.significant for e in ranked) and failing:
-        everything = md.simulate_all(slice(train_slice.start, test_slice.stop), base.theta)
-        offset = test_slice.start - train_slice.start
+        window = slice(train_slice.start, test_slice.stop) if test_slice.start >= train_slice.start else test_slice
+        everything = md.simulate_all(window, base.theta)
+        offset = test_slice.start - window.start
         candidates_signals = {f"measured {_short(n)}": data.series[n][test_slice] for n in data.series}
         for (component, port), values in everything.outputs.items():
             candidates_signals[f"model {_short(component)}.{port}"] = values[0][offset:]

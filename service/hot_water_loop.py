@@ -13,7 +13,8 @@ coil in series (1/K_v,loop² = 1/K_v,check² + 1/K_v,fixed²): the paper's four 
 enter only through these two groups, so graphtwin estimates the groups (four would leave two flat
 directions that no measurement can resolve).
 
-**Heat transfer**: counter-flow ε-NTU with C = ṁ·c_p, NTU = UA/C_min, C_r = C_min/C_max::
+**Heat transfer** (:mod:`service.heat_exchanger`): counter-flow ε-NTU with C = ṁ·c_p,
+NTU = UA/C_min, C_r = C_min/C_max::
 
     ε = (1 − e^{−NTU(1−C_r)}) / (1 − C_r·e^{−NTU(1−C_r)})     (ε = NTU/(1+NTU) at C_r = 1)
     Q_static = ε · C_min · (T_w,in − T_a,in)                                    [W]
@@ -25,12 +26,19 @@ with UA varying with both flows (film conductances ∝ ṁ^0.8, Dittus–Boelter
 hA_w and hA_a are the water- and air-side conductances at the reference flows. (A UA_nom with two
 nominal flows, three parameters, has one flat direction; the two conductances have none.)
 
-**Dynamics** (exact first-order lags, output including the current step's input):
+**Dynamics.** The static ε-NTU solution is the coil's steady state for the present flows and inlet
+temperatures; exact first-order lags stand for the storage a static model lacks:
 * the coil inlet water temperature follows the supply water temperature with the supply-pipe time
   constant, stretched when the flow is small (transport: τ_pipe·ṁ_w,ref/max(ṁ_w, 0.05 kg/s));
 * the heat rate follows Q_static with the metal time constant (the coil's fins and tubes);
 * the outlet air and water temperatures, T_a,in + Q/C_a and T_w,in − Q/C_w (bounded by the two
-  inlet temperatures), follow with the air-side and water-side time constants.
+  inlet temperatures), follow with the air-side and water-side time constants (the fluid volumes).
+Lags in series along one path (pipe → metal → outlet) approximate the coil's distributed, S-shaped
+step response with four parameters; they are not a conserving thermal network (outlet temperatures
+and Q agree only in steady state, so the steady-state energy balance is the checked invariant).
+Each lag is advanced with the present input before it is reported (output x_{k+1}, not x_k as the
+contract's default): the loop answers the valve position of the same step, so the controller's
+one-step feedback delay is the only sampling delay in the closed loop.
 With the valve shut there is no flow and no heat; the stagnant water side drifts to the air
 temperature through the water-side lag.
 
@@ -52,23 +60,16 @@ from .component import (
     AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_DENSITY_KG_PER_M3, WATER_SPECIFIC_HEAT_J_PER_KG_K, ComponentModel,
     Parameter, Port, first_order_lag_factor,
 )
+from .heat_exchanger import coil_heat_rate_w, series_film_ua_w_per_k
 
-__all__ = ["HotWaterLoop", "counterflow_effectiveness", "loop_water_flow_m3_per_h"]
+__all__ = ["HotWaterLoop", "loop_water_flow_m3_per_h", "REFERENCE_WATER_MASS_FLOW", "REFERENCE_AIR_MASS_FLOW"]
 
 _TINY = 1e-9
 #: Floor of ṁ_a·c_p when air heats up from the coil's heat: 0.1 kg/s of air (fan off, stack draught).
-_MINIMUM_AIR_CAPACITY_W_PER_K = 0.1 * 1006.0
+_MINIMUM_AIR_CAPACITY_W_PER_K = 0.1 * AIR_SPECIFIC_HEAT_J_PER_KG_K
 #: Reference flows of the film conductances hA_w and hA_a, kg/s.
 REFERENCE_WATER_MASS_FLOW = 0.5
 REFERENCE_AIR_MASS_FLOW = 2.0
-
-
-def counterflow_effectiveness(ntu: np.ndarray, capacity_ratio: np.ndarray) -> np.ndarray:
-    """ε of a counter-flow heat exchanger [1] (Incropera, Table 11.3); C_r is capped at 1 − 10⁻⁷,
-    where the formula meets the balanced limit NTU/(1 + NTU) within 10⁻⁶."""
-    ratio = np.minimum(capacity_ratio, 1.0 - 1e-7)
-    decay = np.exp(-ntu * (1.0 - ratio))
-    return (1.0 - decay) / (1.0 - ratio * decay)
 
 
 def loop_water_flow_m3_per_h(position, kv_valve, kv_loop, pressure_bar) -> np.ndarray:
@@ -116,16 +117,14 @@ class HotWaterLoop(ComponentModel):
         return WATER_DENSITY_KG_PER_M3 * flow_m3_per_h / 3600.0
 
     def _static_heat(self, params, air_in, air_flow, water_flow, water_in):
-        """Q_static [W], C_w and C_a [W/K] (module docstring)."""
+        """Q_static [W], C_w and C_a [W/K], the capacity rates floored at 10⁻⁹ W/K (module docstring)."""
+        ua = series_film_ua_w_per_k(
+            params["water_side_conductance"], water_flow / REFERENCE_WATER_MASS_FLOW,
+            params["air_side_conductance"], air_flow / REFERENCE_AIR_MASS_FLOW,
+        )
         c_water = np.maximum(water_flow * WATER_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
         c_air = np.maximum(air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
-        ua = 1.0 / (
-            1.0 / (params["water_side_conductance"] * np.maximum(water_flow / REFERENCE_WATER_MASS_FLOW, _TINY) ** 0.8)
-            + 1.0 / (params["air_side_conductance"] * np.maximum(air_flow / REFERENCE_AIR_MASS_FLOW, _TINY) ** 0.8)
-        )
-        c_min, c_max = np.minimum(c_water, c_air), np.maximum(c_water, c_air)
-        effectiveness = counterflow_effectiveness(ua / c_min, c_min / c_max)
-        heat = effectiveness * c_min * (water_in - air_in) * (water_flow > 0.0)
+        heat = coil_heat_rate_w(ua, c_water, c_air, water_in, air_in) * (water_flow > 0.0)
         return heat, c_water, c_air
 
     def _pipe_factor(self, params, water_flow, dt_s):

@@ -5,7 +5,8 @@
 ``m/d/yy h:mm`` (the LBNL FLEXLAB export). Every other column is a series; a column is matched to a
 measuring device of the model by the device's full IRI, its local name, or the literal it gives as
 ``gt:timeSeriesId`` (header whitespace stripped). Empty cells, ``NaN``, ``NA`` and ``null`` are
-missing values. Values are converted from the device's QUDT unit to the unit of the model port that
+missing values, and so are spreadsheet error cells (``#VALUE!``, ``#N/A``, ``#DIV/0!`` …, counted
+in the warnings: exports of real BMS trends contain them). Values are converted from the device's QUDT unit to the unit of the model port that
 consumes them (:mod:`service.units`).
 
 **Checks**, all reported at once in one :class:`MeasurementError` naming the column and the line:
@@ -31,7 +32,8 @@ import numpy as np
 
 from .units import UnitError, convert
 
-__all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "write_csv"]
+__all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "write_csv",
+           "write_comparison_csv"]
 
 _MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
 _BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S")
@@ -65,8 +67,10 @@ class SeriesSpec:
 
 @dataclass(frozen=True)
 class MeasuredData:
-    """Regular series on one time grid: ``series[node]`` in the port unit ``units[node]``, NaN
-    where not measured (gaps longer than the limit)."""
+    """Regular series on one time grid: ``series[node]`` (``ndarray[n_steps]``) in the port unit
+    ``units[node]``, read from the CSV column ``columns[node]`` recorded in the QUDT unit
+    ``source_units[node]``; NaN where not measured (gaps longer than the limit), and :attr:`valid`
+    masks the steps where every series is measured."""
 
     timestamps: np.ndarray  # datetime64[s], UTC or naive local as in the file
     step_s: float
@@ -75,10 +79,19 @@ class MeasuredData:
     source: str = "<data>"
     columns: dict[str, str] = field(default_factory=dict)  # node → CSV column
     warnings: tuple[str, ...] = ()
+    source_units: dict[str, str] = field(default_factory=dict)  # node → the QUDT unit of its column
 
     @property
     def n_steps(self) -> int:
         return int(self.timestamps.size)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """``ndarray[n_steps]`` of bool: steps where every series is measured (no long gap)."""
+        mask = np.ones(self.n_steps, dtype=bool)
+        for values in self.series.values():
+            mask &= np.isfinite(values)
+        return mask
 
     def window(self, start: datetime | str | None, end: datetime | str | None) -> slice:
         """Index slice of the steps with ``start ≤ t ≤ end`` (None: the data's first / last).
@@ -98,7 +111,9 @@ class MeasuredData:
             raise ValueError(f"window {lo} – {hi} holds fewer than 2 steps of {self.source}")
         return slice(i, j)
 
-    def select(self, window: slice) -> MeasuredData:
+    def select(self, start: datetime | str | None, end: datetime | str | None) -> MeasuredData:
+        """The data with ``start ≤ t ≤ end`` (errors as :meth:`window`)."""
+        window = self.window(start, end)
         return replace(self, timestamps=self.timestamps[window],
                        series={k: v[window] for k, v in self.series.items()})
 
@@ -190,6 +205,7 @@ def read_measurements(
 
     times: list[datetime] = []
     values = {node: np.full(len(rows), np.nan) for node in claimed}
+    error_cells: dict[str, int] = {}
     for line, row in enumerate(rows, start=2):
         if not row or all(not c.strip() for c in row):
             problems.append(f"line {line}: empty row")
@@ -203,12 +219,16 @@ def read_measurements(
             cell = row[column].strip() if column < len(row) else ""
             if cell.lower() in _MISSING:
                 continue
+            if cell.startswith("#"):
+                error_cells[header[column]] = error_cells.get(header[column], 0) + 1
+                continue
             try:
                 values[node][line - 2] = float(cell)
             except ValueError:
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a number")
     if len(times) < 2:
         problems.append("fewer than two data rows")
+    warnings += [f"column {name!r}: {count} spreadsheet error cell(s) read as missing" for name, count in error_cells.items()]
     stamps = np.array(times, dtype="datetime64[s]")
     if len(times) >= 2:
         steps = np.diff(stamps).astype(np.int64)
@@ -263,6 +283,7 @@ def read_measurements(
         timestamps=stamps, step_s=step_s, series=converted,
         units={n: specs[n].port_unit for n in converted}, source=source,
         columns={n: header[c] for n, c in claimed.items()}, warnings=tuple(warnings),
+        source_units={n: specs[n].unit for n in converted},
     )
 
 
@@ -276,3 +297,28 @@ def write_csv(path: Path, timestamps: np.ndarray, columns: Mapping[str, np.ndarr
             cells = [str(np.datetime64(stamp, "s")).replace("T", " ")]
             cells += ["" if not np.isfinite(a[i]) else f"{a[i]:.{decimals}f}" for a in arrays]
             writer.writerow(cells)
+
+
+def write_comparison_csv(path: Path, data: MeasuredData, simulated: Mapping[str, np.ndarray], *, decimals: int = 4) -> None:
+    """Write every measured series beside its simulation: for each node of ``data``, its column
+    (the file's header, the file's unit) and, when ``simulated`` has the node, ``<header> (simulated)``
+    in the same unit. The result reads back with :func:`read_measurements` and the same model (the
+    simulated columns are then unclaimed columns).
+
+    :param simulated: node IRI → ``ndarray[n_steps]`` in the port unit ``data.units[node]``.
+    :raises ValueError: a simulated node without a series in ``data``, or a series of another length.
+    """
+    unknown = sorted(set(simulated) - set(data.series))
+    if unknown:
+        raise ValueError(f"simulated series for node(s) the data {data.source} does not hold: {', '.join(unknown)}")
+    columns: dict[str, np.ndarray] = {}
+    for node, measured in data.series.items():
+        header = data.columns.get(node, node)
+        unit = data.source_units.get(node, data.units[node])
+        columns[header] = convert(measured, data.units[node], unit, where=f"column {header!r}")
+        if node in simulated:
+            values = np.asarray(simulated[node], dtype=float)
+            if values.shape != (data.n_steps,):
+                raise ValueError(f"simulated series for {node} has shape {values.shape}, the data {data.n_steps} steps")
+            columns[f"{header} (simulated)"] = convert(values, data.units[node], unit, where=f"column {header!r}")
+    write_csv(path, data.timestamps, columns, decimals=decimals)

@@ -1,22 +1,40 @@
-"""Operating regimes: clusters of operating states with rules an engineer can read (RWTH method).
+"""Operating regimes: clusters of operating states with rules an engineer can read.
 
-Features are the boundary inputs and commands plus their smoothed first derivatives (a centred
-moving average over ``smoothing_steps``, then the difference per hour), so ramps separate from steady
-states. Each feature is robustly standardised (median, 1.4826·MAD; the standard deviation where the
-MAD is 0) before clustering with scikit-learn's :class:`~sklearn.cluster.MiniBatchKMeans`.
+Method (RWTH Aachen): cluster the operating states with mini-batch k-means, describe each cluster by
+the paths of a shallow decision tree, then evaluate (and calibrate, and run Morris) per regime; a
+regime where the model is much worse than elsewhere points at missing model detail.
 
-The number of regimes, unless given, maximises the silhouette score (on a seeded subsample of at
-most 2,000 steps) over k = 2 … ``max_regimes``. A shallow :class:`~sklearn.tree.DecisionTreeClassifier`
-(depth ≤ ``tree_depth``) trained on the *unscaled* features reproduces the clusters; its 5-fold
-cross-validated accuracy is ``rule_accuracy_`` and its paths, merged per regime, are ``rules_``
-("supply air flow > 1.1 m³/s and outdoor air temperature ≤ 6.2 °C"). New data is mapped to regimes
-by the tree (:meth:`OperatingRegimes.predict`): the rule a user reads is the rule that is applied.
+Features. The caller passes the boundary inputs and commands, ``x[t, j]`` (``ndarray[n_t, n_f]``,
+engineering units). :meth:`OperatingRegimes.fit` appends their smoothed first derivatives
+(:func:`smoothed_rate`): a centred moving average over ``smoothing_steps`` steps, then the central
+difference, per hour when the step length is given (``rate = Δx̄ / Δt · 3600 s/h``), so ramps
+separate from steady states. Steps where any feature or rate is not finite (or ``valid`` is False)
+are left out and labelled ``-1``.
+
+Scaling. Every column is robustly standardised before clustering, ``z = (x − median) / s`` with
+``s = 1.4826 · MAD`` (the standard deviation of a normal variable), the standard deviation where the
+MAD is 0 (a command that is mostly at one value) and 1 for a constant column; so a few switching
+transients do not set the scale of the steady states.
+
+Number of regimes. Unless ``n_regimes`` is given, k = 2 … ``max_regimes`` are clustered and the k
+with the highest mean silhouette (on a seeded subsample of at most 2,000 steps) is kept; the scores
+are ``selection_scores_``. Regimes are numbered by decreasing share of time (regime 0 is the most
+common).
+
+Rules. A :class:`~sklearn.tree.DecisionTreeClassifier` of depth ≤ ``tree_depth`` is trained on the
+*unscaled* features to reproduce the cluster labels; its 5-fold stratified cross-validated accuracy
+is ``rule_accuracy_``. Sibling leaves of the same regime are merged, the conditions of each path are
+reduced to one interval per feature, and the paths of one regime are joined with "or"
+(``rules_``; the conditions themselves are ``rule_conditions_``). Thresholds are rounded to about
+1 % of the feature's 5–95 % range. :meth:`OperatingRegimes.predict` maps new data by the *tree*, not
+by the nearest cluster centre: the rule a user reads is the rule that is applied.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
+import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -24,147 +42,314 @@ from sklearn.cluster import MiniBatchKMeans
 from sklearn.metrics import silhouette_score
 from sklearn.model_selection import cross_val_score
 from sklearn.tree import DecisionTreeClassifier
+from sklearn.utils import check_random_state
 
-__all__ = ["OperatingRegimes", "derivative_features", "per_regime_metrics"]
+__all__ = [
+    "OperatingRegimes", "RuleCondition", "smoothed_rate", "per_regime_metrics", "worst_regime",
+    "SILHOUETTE_SUBSAMPLE",
+]
+
+#: Largest number of steps the silhouette criterion is evaluated on (a seeded subsample).
+SILHOUETTE_SUBSAMPLE = 2000
+#: Robust z-scores are clipped to ±Z_CLIP before clustering.
+import os
+Z_CLIP = float(os.environ.get('ZC','1e9'))
+SCALE=os.environ.get('SC','q')
+#: Units written as their difference unit in a rate ("K/h", not "°C/h").
+_RATE_UNITS = {"°C": "K", "degC": "K"}
 
 
-def derivative_features(values: np.ndarray, step_s: float, smoothing_steps: int) -> np.ndarray:
-    """Centred moving average over ``smoothing_steps``, then its gradient per hour, per column."""
+def smoothed_rate(values: np.ndarray, smoothing_steps: int, step_s: float | None = None) -> np.ndarray:
+    """Smoothed first derivative of every column of ``values`` (``ndarray[n_t, n_f]``).
+
+    ``x̄`` is the centred moving average over ``smoothing_steps`` (odd) steps, shrinking at the ends
+    of the series; a window touching a NaN gives NaN. The rate is ``numpy.gradient(x̄)`` (central
+    difference, one-sided at the ends) per step, or per hour when ``step_s`` (seconds) is given.
+    """
     values = np.asarray(values, dtype=float)
-    kernel = np.ones(max(int(smoothing_steps), 1)) / max(int(smoothing_steps), 1)
-    out = np.empty_like(values)
+    if values.ndim != 2:
+        raise ValueError(f"values have shape {values.shape}, expected (n_steps, n_features)")
+    if smoothing_steps < 1 or smoothing_steps % 2 == 0:
+        raise ValueError(f"smoothing_steps must be an odd positive integer, got {smoothing_steps}")
+    kernel = np.ones(smoothing_steps)
+    finite = np.isfinite(values)
+    rates = np.empty_like(values)
     for j in range(values.shape[1]):
-        padded = np.pad(values[:, j], (kernel.size // 2, kernel.size - 1 - kernel.size // 2), mode="edge")
-        smooth = np.convolve(padded, kernel, mode="valid")
-        out[:, j] = np.gradient(smooth) * 3600.0 / step_s
-    return out
+        total = np.convolve(np.where(finite[:, j], values[:, j], 0.0), kernel, mode="same")
+        count = np.convolve(np.ones(len(values)), kernel, mode="same")
+        gaps = np.convolve((~finite[:, j]).astype(float), kernel, mode="same")
+        smooth = np.where(gaps > 0, np.nan, total / count)
+        rates[:, j] = np.gradient(smooth) if len(values) > 1 else 0.0
+    return rates * (3600.0 / step_s) if step_s is not None else rates
 
 
 def _robust_scale(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     center = np.median(features, axis=0)
-    spread = 1.4826 * np.median(np.abs(features - center), axis=0)
-    fallback = features.std(axis=0)
-    spread = np.where(spread > 0, spread, np.where(fallback > 0, fallback, 1.0))
-    return center, spread
+    low, high = np.percentile(features, [5, 95], axis=0)
+    spread = (high - low) / 3.29 if SCALE=="q" else 1.4826 * np.median(np.abs(features - center), axis=0)
+    std = features.std(axis=0)
+    return center, np.where(spread > 0, spread, np.where(std > 0, std, 1.0))
 
 
-def _format(value: float) -> str:
-    magnitude = abs(value)
-    digits = 3 if magnitude < 1 else 2 if magnitude < 10 else 1 if magnitude < 100 else 0
-    return f"{value:.{digits}f}"
+def _decimals(spread: float) -> int:
+    """Decimals that resolve about 1 % of ``spread`` (negative: round to tens, hundreds …)."""
+    return -math.floor(math.log10(spread / 100.0)) if spread > 0 else 2
+
+
+def _number(value: float, decimals: int) -> str:
+    rounded = round(value, decimals) + 0.0  # + 0.0 turns -0.0 into 0.0
+    return f"{rounded:.{max(decimals, 0)}f}"
+
+
+@dataclass(frozen=True)
+class RuleCondition:
+    """``lower < feature ≤ upper`` (either bound may be None) on one feature of the rule tree.
+
+    ``signal`` is the input's name; ``is_rate`` marks its smoothed derivative (``unit`` is then the
+    rate's unit, e.g. ``"K/h"``); ``decimals`` is the rounding of the thresholds in the text.
+    """
+
+    feature: int
+    signal: str
+    unit: str
+    is_rate: bool
+    lower: float | None
+    upper: float | None
+    decimals: int
+
+    def _with_unit(self, value: float) -> str:
+        text = _number(abs(value) if self.is_rate else value, self.decimals)
+        if not self.unit or self.unit == "1":
+            return text
+        return f"{text}{self.unit}" if self.unit == "%" else f"{text} {self.unit}"
+
+    def describe(self) -> str:
+        """The condition in words: "supply fan speed > 0.31", "outdoor air temperature rising faster
+        than 0.5 K/h"."""
+        low, high = self.lower, self.upper
+        if not self.is_rate:
+            if low is not None and high is not None:
+                return f"{self.signal} between {self._with_unit(low)} and {self._with_unit(high)}"
+            return f"{self.signal} > {self._with_unit(low)}" if low is not None else f"{self.signal} ≤ {self._with_unit(high)}"
+        zero = 0.5 * 10.0 ** -self.decimals
+        if low is not None and high is not None:
+            return (f"{self.signal} changing between {_number(low, self.decimals)} and "
+                    f"{_number(high, self.decimals)} {self.unit}".rstrip())
+        if low is not None:
+            if abs(low) < zero:
+                return f"{self.signal} rising"
+            return (f"{self.signal} rising faster than {self._with_unit(low)}" if low > 0
+                    else f"{self.signal} not falling faster than {self._with_unit(low)}")
+        if abs(high) < zero:
+            return f"{self.signal} steady or falling"
+        return (f"{self.signal} falling faster than {self._with_unit(high)}" if high < 0
+                else f"{self.signal} not rising faster than {self._with_unit(high)}")
 
 
 class OperatingRegimes(BaseEstimator):
-    """Mini-batch k-means regimes with decision-tree rules (module docstring).
+    """Mini-batch k-means operating regimes with decision-tree rules (see the module docstring).
 
-    :param max_regimes: largest k tried by the silhouette criterion.
-    :param n_regimes: fixed k (skips the criterion).
-    :param smoothing_steps: moving-average window of the derivative features.
-    :param tree_depth: depth of the rule tree.
-    :param random_state: seed.
+    :param max_regimes: largest k tried by the silhouette criterion (k ≥ 2).
+    :param n_regimes: fixed number of regimes (skips the criterion).
+    :param smoothing_steps: odd moving-average window of the rate features, in steps.
+    :param tree_depth: maximum depth of the rule tree.
+    :param random_state: seed (int), ``numpy.random.RandomState`` or None.
 
-    After :meth:`fit`: ``labels_``, ``n_regimes_``, ``selection_scores_`` (k → silhouette),
-    ``centers_`` (``ndarray[k, n_features]``, engineering units), ``feature_names_``, ``rules_``
-    (regime → text), ``rule_accuracy_``, ``tree_``.
+    Fitted attributes: ``labels_`` (``ndarray[n_t]``, −1 for left-out steps), ``n_regimes_``,
+    ``selection_scores_`` (k → mean silhouette), ``centers_`` (``ndarray[n_regimes, 2·n_f]``: the
+    inputs, then their rates, in engineering units), ``feature_names_`` and ``feature_units_`` (of
+    those 2·n_f columns), ``rules_`` (``list[str]``, one per regime), ``rule_conditions_`` (per
+    regime, per tree leaf, the :class:`RuleCondition` list), ``rule_accuracy_``, ``tree_``,
+    ``step_s_``.
     """
 
-    def __init__(self, max_regimes: int = 6, n_regimes: int | None = None, smoothing_steps: int = 6,
-                 tree_depth: int = 3, random_state: int | None = 0):
+    def __init__(self, max_regimes: int = 8, n_regimes: int | None = None, smoothing_steps: int = 5,
+                 tree_depth: int = 3, random_state: int | np.random.RandomState | None = None):
         self.max_regimes = max_regimes
         self.n_regimes = n_regimes
         self.smoothing_steps = smoothing_steps
         self.tree_depth = tree_depth
         self.random_state = random_state
 
-    def features(self, signals: np.ndarray, names: Sequence[str], units: Sequence[str], step_s: float):
-        """Signals plus derivatives: ``(ndarray[n_t, 2·n_signals], names, units)``."""
-        signals = np.asarray(signals, dtype=float)
-        derivatives = derivative_features(signals, step_s, self.smoothing_steps)
-        return (
-            np.hstack([signals, derivatives]),
-            list(names) + [f"change of {n}" for n in names],
-            list(units) + [f"{u}/h" for u in units],
-        )
-
-    def fit(self, features: np.ndarray, feature_names: Sequence[str], feature_units: Sequence[str] | None = None):
-        """Cluster ``features`` (``ndarray[n_t, n_f]``, NaN-free) and derive the rules."""
+    def _augment(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(inputs and their rates ``ndarray[n_t, 2·n_f]``, mask of steps where all are finite)."""
         features = np.asarray(features, dtype=float)
-        if features.ndim != 2 or features.shape[1] != len(feature_names):
-            raise ValueError(f"features have shape {features.shape}, expected (n_steps, {len(feature_names)})")
-        if not np.isfinite(features).all():
-            raise ValueError("features contain NaN or infinite values: fill or drop those steps first")
-        self.feature_names_ = list(feature_names)
-        self.feature_units_ = list(feature_units) if feature_units is not None else [""] * len(feature_names)
-        center, spread = _robust_scale(features)
-        scaled = (features - center) / spread
-        rng = np.random.default_rng(self.random_state)
-        sample = rng.choice(len(scaled), size=min(2000, len(scaled)), replace=False)
+        if features.ndim != 2 or features.shape[1] != len(self.signal_names_):
+            raise ValueError(
+                f"features have shape {features.shape}, expected (n_steps, {len(self.signal_names_)}) "
+                f"with columns {self.signal_names_}")
+        augmented = np.hstack([features, smoothed_rate(features, self.smoothing_steps, self.step_s_)])
+        return augmented, np.isfinite(augmented).all(axis=1)
+
+    def fit(self, features: np.ndarray, feature_names: Sequence[str], valid: np.ndarray | None = None, *,
+            feature_units: Sequence[str] | None = None, step_s: float | None = None) -> OperatingRegimes:
+        """Cluster the operating states and derive the rules.
+
+        :param features: boundary inputs and commands, ``ndarray[n_t, n_f]`` in engineering units,
+            equally spaced in time (NaN allowed: those steps are left out).
+        :param feature_names: one readable name per column ("supply fan speed").
+        :param valid: ``ndarray[n_t]`` of bool, steps to use (default all).
+        :param feature_units: one unit label per column for the rules ("°C", "m³/s", "1" or "").
+        :param step_s: step length in seconds: rates per hour when given, else per step.
+        """
+        if isinstance(feature_names, str) or (valid is not None and np.asarray(valid).dtype.kind not in "b"):
+            raise TypeError("feature_names must be a list of names and valid a boolean array "
+                            "(units go in the keyword feature_units)")
+        self.signal_names_ = list(feature_names)
+        units = list(feature_units) if feature_units is not None else [""] * len(self.signal_names_)
+        if len(units) != len(self.signal_names_):
+            raise ValueError(f"{len(units)} feature_units for {len(self.signal_names_)} feature_names")
+        if self.max_regimes < 2 or (self.n_regimes is not None and self.n_regimes < 1):
+            raise ValueError(f"max_regimes must be ≥ 2 and n_regimes ≥ 1, got {self.max_regimes}, {self.n_regimes}")
+        self.step_s_ = step_s
+        augmented, usable = self._augment(features)
+        if valid is not None:
+            valid = np.asarray(valid, dtype=bool)
+            if valid.shape != usable.shape:
+                raise ValueError(f"valid has shape {valid.shape}, expected ({len(usable)},)")
+            usable &= valid
+        rate_units = [(f"{_RATE_UNITS.get(u, u)}/h" if step_s is not None else f"{u}/step") if u and u != "1"
+                      else ("1/h" if step_s is not None else "1/step") for u in units]
+        self.feature_names_ = self.signal_names_ + [f"rate of {n}" for n in self.signal_names_]
+        self.feature_units_ = units + rate_units
+        data = augmented[usable]
+        k_max = min(self.max_regimes, len(data) - 1)
+        if (self.n_regimes or 2) > len(data) - 1 or k_max < 2 and self.n_regimes is None:
+            raise ValueError(f"only {len(data)} usable steps: too few to find operating regimes")
+
+        rng = check_random_state(self.random_state)
+        seed = int(rng.randint(np.iinfo(np.int32).max))
+        center, spread = _robust_scale(data)
+        scaled = np.clip((data - center) / spread, -Z_CLIP, Z_CLIP)
+        sample = rng.choice(len(scaled), size=min(SILHOUETTE_SUBSAMPLE, len(scaled)), replace=False)
+        candidates = [self.n_regimes] if self.n_regimes is not None else range(2, k_max + 1)
         self.selection_scores_: dict[int, float] = {}
-        candidates = [self.n_regimes] if self.n_regimes else range(2, max(self.max_regimes, 2) + 1)
-        best = None
+        best: tuple[float, MiniBatchKMeans] | None = None
         for k in candidates:
-            km = MiniBatchKMeans(n_clusters=k, random_state=self.random_state, n_init=3, batch_size=1024).fit(scaled)
-            labels = km.labels_
-            if len(np.unique(labels[sample])) < 2:
-                score = -1.0
-            else:
-                score = float(silhouette_score(scaled[sample], labels[sample]))
+            kmeans = MiniBatchKMeans(n_clusters=k, random_state=seed, n_init=3, batch_size=1024).fit(scaled)
+            labelled = kmeans.labels_[sample]
+            score = float(silhouette_score(scaled[sample], labelled)) if len(np.unique(labelled)) > 1 else -1.0
             self.selection_scores_[k] = score
             if best is None or score > best[0]:
-                best = (score, k, km)
-        _, self.n_regimes_, kmeans = best
-        order = np.argsort(-np.bincount(kmeans.labels_, minlength=self.n_regimes_))
-        relabel = np.empty_like(order)
-        relabel[order] = np.arange(order.size)
-        self.labels_ = relabel[kmeans.labels_]
+                best = (score, kmeans)
+        kmeans = best[1]
+        self.n_regimes_ = kmeans.n_clusters
+        order = np.argsort(-np.bincount(kmeans.labels_, minlength=self.n_regimes_), kind="stable")
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        self.labels_ = np.full(len(usable), -1, dtype=int)
+        self.labels_[usable] = rank[kmeans.labels_]
         self.centers_ = (kmeans.cluster_centers_ * spread + center)[order]
-        self.tree_ = DecisionTreeClassifier(max_depth=self.tree_depth, random_state=self.random_state)
-        self.tree_.fit(features, self.labels_)
-        folds = min(5, int(np.bincount(self.labels_).min())) if self.n_regimes_ > 1 else 0
-        self.rule_accuracy_ = (float(cross_val_score(
-            DecisionTreeClassifier(max_depth=self.tree_depth, random_state=self.random_state),
-            features, self.labels_, cv=folds).mean()) if folds >= 2 else float("nan"))
-        self.rules_ = self._rules()
+
+        regime_labels = self.labels_[usable]
+        self.tree_ = DecisionTreeClassifier(max_depth=self.tree_depth, random_state=seed).fit(data, regime_labels)
+        smallest = int(np.bincount(regime_labels).min())
+        folds = min(5, smallest)
+        self.rule_accuracy_ = float(cross_val_score(
+            DecisionTreeClassifier(max_depth=self.tree_depth, random_state=seed), data, regime_labels, cv=folds,
+        ).mean()) if folds >= 2 else float("nan")
+        low, high = np.percentile(data, [5, 95], axis=0)
+        self._decimals = [_decimals(h - lo) for lo, h in zip(low, high)]
+        self.rule_conditions_ = self._leaf_conditions()
+        self.rules_ = [self._rule_text(leaves) for leaves in self.rule_conditions_]
         return self
 
     def predict(self, features: np.ndarray) -> np.ndarray:
-        """Regime of each step of new data, by the rule tree."""
-        return self.tree_.predict(np.asarray(features, dtype=float))
+        """Regime of each step of new data (``ndarray[n_t, n_f]``, same columns as in :meth:`fit`) by
+        the rule tree; −1 where an input or its rate is not finite. The rates are computed on the
+        new series itself, so pass a contiguous window."""
+        augmented, usable = self._augment(features)
+        labels = np.full(len(usable), -1, dtype=int)
+        if usable.any():
+            labels[usable] = self.tree_.predict(augmented[usable])
+        return labels
 
-    def _rules(self) -> dict[int, str]:
+    def _leaf_conditions(self) -> list[list[list[RuleCondition]]]:
         tree = self.tree_.tree_
-        paths: dict[int, list[str]] = defaultdict(list)
+        classes = self.tree_.classes_
 
-        def walk(node: int, conditions: list[str]) -> None:
+        def pure_regime(node: int) -> int | None:
+            """The regime every leaf under ``node`` predicts, or None if they differ."""
             if tree.children_left[node] == tree.children_right[node]:
-                regime = int(self.tree_.classes_[np.argmax(tree.value[node][0])])
-                paths[regime].append(" and ".join(conditions) or "always")
-                return
-            name = self.feature_names_[tree.feature[node]]
-            unit = self.feature_units_[tree.feature[node]]
-            threshold = _format(tree.threshold[node]) + (f" {unit}" if unit and unit != "1" else "")
-            walk(tree.children_left[node], conditions + [f"{name} ≤ {threshold}"])
-            walk(tree.children_right[node], conditions + [f"{name} > {threshold}"])
+                return int(classes[np.argmax(tree.value[node][0])])
+            left, right = pure_regime(tree.children_left[node]), pure_regime(tree.children_right[node])
+            return left if left is not None and left == right else None
 
-        walk(0, [])
-        return {r: " or ".join(f"({p})" if len(paths[r]) > 1 else p for p in paths[r]) if r in paths
-                else "(no leaf of the rule tree: a minority regime the rules merge into others)"
-                for r in range(self.n_regimes_)}
+        leaves: list[list[list[RuleCondition]]] = [[] for _ in range(self.n_regimes_)]
+
+        def walk(node: int, bounds: dict[int, tuple[float | None, float | None]]) -> None:
+            regime = pure_regime(node)
+            if regime is not None:
+                leaves[regime].append([self._condition(f, lo, hi) for f, (lo, hi) in sorted(bounds.items())])
+                return
+            feature, threshold = int(tree.feature[node]), float(tree.threshold[node])
+            lo, hi = bounds.get(feature, (None, None))
+            walk(tree.children_left[node], bounds | {feature: (lo, threshold if hi is None else min(hi, threshold))})
+            walk(tree.children_right[node], bounds | {feature: (threshold if lo is None else max(lo, threshold), hi)})
+
+        walk(0, {})
+        return leaves
+
+    def _condition(self, feature: int, lower: float | None, upper: float | None) -> RuleCondition:
+        n_signals = len(self.signal_names_)
+        return RuleCondition(
+            feature=feature, signal=self.signal_names_[feature % n_signals], unit=self.feature_units_[feature],
+            is_rate=feature >= n_signals, lower=lower, upper=upper, decimals=self._decimals[feature],
+        )
+
+    @staticmethod
+    def _rule_text(leaves: list[list[RuleCondition]]) -> str:
+        if not leaves:
+            return "no leaf of the rule tree: a minority regime the rules merge into others"
+        paths = [" and ".join(c.describe() for c in leaf) or "always" for leaf in leaves]
+        return " or ".join(f"({p})" if len(leaves) > 1 and " and " in p else p for p in paths)
 
 
 def per_regime_metrics(
     labels: np.ndarray,
-    observed: Mapping[str, np.ndarray],
-    predicted: Mapping[str, np.ndarray],
-    metric: Callable[[np.ndarray, np.ndarray], float],
+    observed: np.ndarray,
+    predicted: np.ndarray,
+    metric_fns: Mapping[str, Callable[[np.ndarray, np.ndarray], float]],
+    *,
+    n_regimes: int | None = None,
 ) -> list[dict]:
-    """For every regime: its share of the steps and ``metric(y, ŷ)`` per target (measured steps only)."""
-    results = []
-    for regime in np.unique(labels):
-        mask = labels == regime
-        row = {"regime": int(regime), "share": float(mask.mean()), "metric": {}}
-        for key, values in observed.items():
-            finite = mask & np.isfinite(values)
-            row["metric"][key] = float(metric(values[finite], predicted[key][finite])) if finite.sum() else float("nan")
-        results.append(row)
-    return results
+    """Every metric per regime, with the regime's share of time.
+
+    :param labels: ``ndarray[n_t]`` regime per step (−1: not labelled, left out of the shares).
+    :param observed: ``ndarray[n_t]`` measured (NaN: no measurement).
+    :param predicted: ``ndarray[n_t]`` model prediction.
+    :param metric_fns: name → ``fn(y, ŷ) -> float``, called on the regime's steps where both are finite.
+    :param n_regimes: report regimes 0 … n_regimes − 1 even if absent from ``labels`` (default: the
+        regimes present).
+    :returns: one dict per regime, ``{"regime", "share", "n_steps", "n_measured", <metric>: value}``;
+        a metric is NaN where the regime has no measured step.
+    """
+    labels = np.asarray(labels)
+    observed = np.asarray(observed, dtype=float)
+    predicted = np.asarray(predicted, dtype=float)
+    if not labels.shape == observed.shape == predicted.shape or labels.ndim != 1:
+        raise ValueError(f"labels {labels.shape}, observed {observed.shape} and predicted {predicted.shape} "
+                         "must be 1-D of the same length")
+    labelled = labels >= 0
+    regimes = range(n_regimes) if n_regimes is not None else np.unique(labels[labelled])
+    both = np.isfinite(observed) & np.isfinite(predicted)
+    rows = []
+    for regime in regimes:
+        in_regime = labels == regime
+        measured = in_regime & both
+        row = {"regime": int(regime), "share": float(in_regime.sum() / max(labelled.sum(), 1)),
+               "n_steps": int(in_regime.sum()), "n_measured": int(measured.sum())}
+        for name, fn in metric_fns.items():
+            row[name] = float(fn(observed[measured], predicted[measured])) if measured.any() else float("nan")
+        rows.append(row)
+    return rows
+
+
+def worst_regime(rows: Sequence[dict], metric: str, *, higher_is_worse: bool = True, min_share: float = 0.0) -> dict:
+    """The row of :func:`per_regime_metrics` with the worst ``metric`` among regimes holding at least
+    ``min_share`` of the time (NaN metrics ignored)."""
+    eligible = [r for r in rows if r["share"] >= min_share and np.isfinite(r[metric])]
+    if not eligible:
+        raise ValueError(f"no regime with a finite {metric!r} and a share of time ≥ {min_share}")
+    key = (lambda r: r[metric]) if higher_is_worse else (lambda r: -r[metric])
+    return max(eligible, key=key)

@@ -2,7 +2,7 @@
 
 Nearness (the paper's "follow the predicate until an instance of the class is found"), exactly:
 ``s P+ o`` such that some path from ``s`` to ``o`` along ``P`` has no intermediate node that is an
-instance of either end's allowed classes. It is checked with a breadth-first search from ``s`` over
+instance of the searched-for end's allowed classes (see :mod:`service.sparql_compiler`). It is checked with a breadth-first search from ``s`` over
 the predicate's edges that does not expand through blocking nodes; the edges and the blocking nodes
 are read once per (predicate, classes) and each search result is cached per start node, so the cost
 is linear in the part of the graph the matches touch. Searches never expand a node twice, so loops

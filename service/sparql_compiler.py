@@ -8,7 +8,8 @@
   through nodes that appear *only* in optional triples form ONE block, with those nodes' class
   restrictions inside, so a chain value node → value → unit binds all together or not at all.
 * A ``traverse`` triple becomes the property path ``?s P+ ?o``: reachability. The *nearest*
-  condition — no intermediate node on the path is an instance of either end's allowed classes — is
+  condition — no intermediate node on the path is an instance of the searched-for end's allowed
+  classes (the end the signature does not model; both ends' when both or neither are modelled) — is
   not expressible on property paths: written as ``FILTER NOT EXISTS`` or ``MINUS`` over two paths it
   is either explosive (> 600 s at 100k triples) or wrong on recirculation loops (every candidate on
   a loop lies "behind" another). :mod:`service.signature_matcher` checks it exactly on the rows the
@@ -180,5 +181,12 @@ def compile_signature(signature: Signature) -> CompiledQuery:
 
 
 def _traversal(signature: Signature, triple: PatternTriple, block: tuple[str, ...]) -> Traversal:
-    classes = signature.nodes[triple.subject].classes + signature.nodes[triple.object].classes
+    """The searched-for end is the one the signature does not model (a fan looks for its nearest
+    upstream sensor, a coil for its nearest downstream fan, even past another coil); when both or
+    neither end is modelled, both ends' classes block."""
+    ends = [triple.subject, triple.object]
+    searched = [n for n in ends if n not in signature.modeled_nodes] or ends
+    if len(searched) == 2:
+        searched = ends
+    classes = tuple(c for n in searched for c in signature.nodes[n].classes)
     return Traversal(triple.subject, triple.predicate, triple.object, tuple(dict.fromkeys(classes)), block)

@@ -22,7 +22,7 @@ from .assembly import EffectRequest, assemble
 from .calibration_data import _device_unit
 from .measurements import write_csv
 from .signature import Signature
-from .simulator import Simulator
+from .simulator import Simulator, loop_substeps
 from .store import GraphStore
 from .units import convert
 from .synthetic_operation import case_study_operation
@@ -88,7 +88,7 @@ def generate_synthetic_data(
     seed: int = 0,
     n_days: float = 7.0,
     step_s: float = 600.0,
-    substeps: int = 5,
+    substeps: int | None = None,
 ) -> SyntheticTruth:
     """Write a measurement CSV for ``model_name`` (columns named by the devices' time-series ids).
 
@@ -123,7 +123,7 @@ def generate_synthetic_data(
         if link.series_id not in operation.series:
             raise ValueError(f"the synthetic operation has no series for {link.node} ({link.series_id})")
         boundary[component] = operation.series[link.series_id]
-    result = Simulator(model, step_s, substeps).run(boundary, theta[None, :])
+    result = Simulator(model, step_s, substeps or loop_substeps(model, step_s)).run(boundary, theta[None, :])
     boundary = {c: v[warmup:] for c, v in boundary.items()}
     columns = {}
     for component in model.boundary_inputs + model.targets:

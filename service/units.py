@@ -5,6 +5,10 @@ declares the unit it works in (``"degC"``, ``"kg/s"``, ``"1"`` …). Conversion 
 ``value_port = (value · m_from + o_from − o_to) / m_to`` with QUDT's conversion multiplier ``m`` and
 offset ``o`` to the SI base unit of the dimension (K for temperatures, so °F → °C is
 ``(F · 5/9 + 255.372…) − 273.15``). Percent becomes the 0–1 fraction the models use.
+
+**Temperature differences.** The port unit ``"K"`` is a temperature *difference* (a sensor bias, a
+temperature rise); between a difference and any temperature unit the offsets cancel and only the
+multipliers apply (1 °F of bias is 5/9 K). The QUDT IRI ``unit:K`` stays an absolute temperature.
 """
 
 from __future__ import annotations
@@ -25,12 +29,14 @@ class UnitError(ValueError):
 
 @dataclass(frozen=True)
 class UnitSpec:
-    """``si = value · multiplier + offset`` in the SI unit of ``dimension``."""
+    """``si = value · multiplier + offset`` in the SI unit of ``dimension``; ``difference``: a
+    difference of that quantity (offsets do not apply)."""
 
     dimension: str
     multiplier: float
     offset: float = 0.0
     label: str = ""
+    difference: bool = False
 
 
 _F_OFFSET = 459.67 * 5.0 / 9.0
@@ -64,11 +70,13 @@ QUDT_UNITS: dict[str, UnitSpec] = {
     "HR": UnitSpec("time", 3600.0, 0.0, "h"),
     "W-PER-K": UnitSpec("conductance", 1.0, 0.0, "W/K"),
     "KiloW-PER-K": UnitSpec("conductance", 1e3, 0.0, "kW/K"),
+    "PER-K": UnitSpec("inverse_temperature", 1.0, 0.0, "1/K"),
 }
 
 #: Simulator port unit → spec. ``"K"`` on a port means a temperature *difference* (no offset).
 PORT_UNITS: dict[str, UnitSpec] = {
     "degC": QUDT_UNITS["DEG_C"], "degF": QUDT_UNITS["DEG_F"],
+    "K": UnitSpec("temperature", 1.0, 0.0, "K", difference=True), "1/K": QUDT_UNITS["PER-K"],
     "W": QUDT_UNITS["W"], "kW": QUDT_UNITS["KiloW"],
     "m3/s": QUDT_UNITS["M3-PER-SEC"], "m3/h": QUDT_UNITS["M3-PER-HR"], "L/s": QUDT_UNITS["L-PER-SEC"],
     "kg/s": QUDT_UNITS["KiloGM-PER-SEC"], "1": QUDT_UNITS["UNITLESS"], "%": QUDT_UNITS["PERCENT"],
@@ -77,10 +85,11 @@ PORT_UNITS: dict[str, UnitSpec] = {
 }
 
 
-def unit_spec(unit: str) -> UnitSpec:
+def unit_spec(unit: str, *, where: str = "") -> UnitSpec:
     """A QUDT unit IRI (or its local name) or a port unit → its spec.
 
-    :raises UnitError: naming the unit and listing the known ones.
+    :param where: what carries the unit (a port, a column), for the error message.
+    :raises UnitError: naming the unit (and ``where``) and listing the known ones.
     """
     if unit in PORT_UNITS:
         return PORT_UNITS[unit]
@@ -88,7 +97,7 @@ def unit_spec(unit: str) -> UnitSpec:
     if local in QUDT_UNITS:
         return QUDT_UNITS[local]
     raise UnitError(
-        f"unknown unit {unit!r}: graphtwin knows the QUDT units {', '.join(sorted(QUDT_UNITS))} "
+        f"unknown unit {unit!r}{f' for {where}' if where else ''}: graphtwin knows the QUDT units {', '.join(sorted(QUDT_UNITS))} "
         f"(as {QUDT_UNIT_NAMESPACE}<name>) and the port units {', '.join(sorted(PORT_UNITS))}"
     )
 
@@ -102,16 +111,18 @@ def unit_label(unit: str) -> str:
 
 
 def convert(values: Sequence[float] | np.ndarray, from_unit: str, to_unit: str, *, where: str = "") -> np.ndarray:
-    """Convert ``values`` from ``from_unit`` (QUDT IRI or port unit) to port unit ``to_unit``.
+    """Convert ``values`` from ``from_unit`` to ``to_unit`` (each a QUDT IRI or a port unit).
 
     :param where: what is converted (a port, a column), for the error message.
     :raises UnitError: unknown unit, or different dimensions (°F into a kg/s port).
     """
-    source, target = unit_spec(from_unit), unit_spec(to_unit)
+    source, target = unit_spec(from_unit, where=where), unit_spec(to_unit, where=where)
     if source.dimension != target.dimension:
         context = f" for {where}" if where else ""
         raise UnitError(
             f"cannot convert {from_unit} ({source.dimension}) to {to_unit} ({target.dimension}){context}"
         )
     array = np.asarray(values, dtype=float)
+    if source.difference or target.difference:
+        return array * (source.multiplier / target.multiplier)
     return (array * source.multiplier + source.offset - target.offset) / target.multiplier

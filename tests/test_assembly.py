@@ -18,7 +18,7 @@ def _nodes(model, components):
 def test_case_study_assembles_like_the_paper(case_store):
     model = assemble(case_store, "case")
     assert _nodes(model, model.boundary_inputs) == [
-        "fan_inlet_air_temperature_sensor", "plant_room_air_temperature_sensor", "setpoint_schedule",
+        "fan_inlet_air_temperature_sensor", "setpoint_schedule",
         "supply_air_flow_meter", "supply_water_temperature_sensor"]
     assert _nodes(model, model.targets) == [
         "coil_inlet_water_temperature_sensor", "coil_outlet_air_temperature_sensor",

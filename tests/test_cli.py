@@ -16,7 +16,7 @@ def test_assemble_prints_the_model_as_json():
     result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--memory", "--json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
-    assert len(data["targets"]) == 5 and len(data["boundary_inputs"]) == 5
+    assert len(data["targets"]) == 5 and len(data["boundary_inputs"]) == 4
     assert len(data["parameters"]["estimated"]) == 14
 
 
@@ -62,7 +62,7 @@ def test_example_generate_writes_the_columns_the_model_needs(tmp_path):
                                  "--days", "1", "-o", str(output)])
     assert result.exit_code == 0, result.output
     header = output.read_text().splitlines()[0].split(",")
-    assert header[0] == "time" and "coil_outlet_air_temperature" in header and len(header) == 11
+    assert header[0] == "time" and "coil_outlet_air_temperature" in header and len(header) == 10
     assert len(output.read_text().splitlines()) == 1 + 144
     bad = runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "Nope", "-o", str(output)])
     assert bad.exit_code == 2 and "CoilThermalMass" in bad.output

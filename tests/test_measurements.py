@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from service.measurements import MeasurementError, SeriesSpec, parse_timestamp, read_measurements
-from service.units import UnitError, convert
 
 SPECS = {
     "https://example.org/x#sat": SeriesSpec("https://example.org/x#sat", "SAT ", "http://qudt.org/vocab/unit/DEG_F", "degC"),
@@ -16,16 +15,6 @@ def _write(tmp_path, text):
     path = tmp_path / "data.csv"
     path.write_text(text)
     return path
-
-
-def test_units_convert_affinely_and_refuse_other_dimensions():
-    assert convert([32.0, 212.0], "http://qudt.org/vocab/unit/DEG_F", "degC") == pytest.approx([0.0, 100.0])
-    assert convert([3600.0], "http://qudt.org/vocab/unit/M3-PER-HR", "m3/s") == pytest.approx([1.0])
-    assert convert([2118.88], "http://qudt.org/vocab/unit/FT3-PER-MIN", "m3/s") == pytest.approx([1.0], rel=1e-4)
-    with pytest.raises(UnitError, match="DEG_F.*kg/s"):
-        convert([1.0], "http://qudt.org/vocab/unit/DEG_F", "kg/s")
-    with pytest.raises(UnitError, match="unknown unit"):
-        convert([1.0], "http://qudt.org/vocab/unit/FURLONG", "m3/s")
 
 
 def test_bms_time_format_columns_by_series_id_and_local_name(tmp_path):

@@ -1,19 +1,27 @@
 """Simulator throughput: the case study over one week of 10-minute data, vectorised over the ensemble,
 against a plain per-member loop over the same components (the baseline, measured in the same run).
 
+Then the FMU component (``service.fmu_component``; the test FMU ``FanLag`` compiled from
+``tests/data/fmu_src`` when ``gcc`` exists): flow sensor → FMU fan → power meter over one day of
+1-minute steps, with one FMU instance per member kept alive through the run (the module's choice)
+against re-running the model member by member (what reset-and-re-run costs: the fresh instance of
+each run costs what ``fmi2Reset`` + initialisation would).
+
     python tests/bench/bench_simulator.py
 """
 
 from __future__ import annotations
 
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from service.assembly import assemble
-from service.calibration_run import DEFAULT_SUBSTEPS
 from service.resources import examples_dir
-from service.simulator import Simulator
+from service.simulator import Simulator, loop_substeps
 from service.store import GraphStore
 from service.synthetic_operation import case_study_operation
 
@@ -24,15 +32,16 @@ def main() -> None:
     model = assemble(store, "case")
     operation = case_study_operation(n_days=7, step_s=600.0, seed=0)
     boundary = {c: operation.series[model.measurement(c).series_id] for c in model.boundary_inputs}
-    simulator = Simulator(model, 600.0, DEFAULT_SUBSTEPS)
+    substeps = loop_substeps(model, 600.0)
+    simulator = Simulator(model, 600.0, substeps)
     rng = np.random.default_rng(0)
     lower = np.array([r.spec.lower for r in model.estimated_parameters])
     upper = np.array([r.spec.upper for r in model.estimated_parameters])
-    n_internal = (len(operation.timestamps) - 1) * DEFAULT_SUBSTEPS + 1
+    n_internal = (len(operation.timestamps) - 1) * substeps + 1
     n_components = len(model.components)
     record = [(c, "measured_value") for c in model.targets]
     print(f"case study: {n_components} components, {n_internal} internal steps (1 week, 10-min data, "
-          f"{DEFAULT_SUBSTEPS} sub-steps)")
+          f"{substeps} sub-steps)")
     baseline = None
     for n_ensemble in (1, 64, 256, 1024):
         theta = lower + rng.random((n_ensemble, lower.size)) * (upper - lower)
@@ -47,5 +56,38 @@ def main() -> None:
               f"{per_member_loop / vectorised:7.1f}x a per-member loop ({per_member_loop:.2f} s)")
 
 
+def fmu_section() -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from fan_lag_fmu import build_fan_lag_fmu, fan_lag_model
+
+    with tempfile.TemporaryDirectory() as folder:
+        try:
+            fmu = build_fan_lag_fmu(Path(folder))
+        except FileNotFoundError as exc:
+            print(f"FMU component: skipped ({exc})")
+            return
+        model = fan_lag_model(fmu)
+        simulator = Simulator(model, 60.0)
+        flow = 1.5 * (0.5 + 0.4 * np.sin(np.arange(1440) * 2 * np.pi / 1440))
+        boundary = {"urn:flow": flow}
+        print(f"FMU fan (flow sensor → FMU → meter), {flow.size} steps (1 day, 1-min):")
+        rng = np.random.default_rng(1)
+        for n_ensemble in (1, 64, 256):
+            theta = np.column_stack([rng.uniform(500, 5000, n_ensemble), rng.uniform(10, 300, n_ensemble)])
+            start = time.perf_counter()
+            simulator.run(boundary, theta)
+            kept_alive = time.perf_counter() - start
+            line = (f"ensemble {n_ensemble:5d}: instances kept alive {kept_alive:6.3f} s "
+                    f"({kept_alive / (n_ensemble * flow.size) * 1e6:5.2f} µs per member-step)")
+            if n_ensemble == 64:
+                start = time.perf_counter()
+                for member in theta:
+                    simulator.run(boundary, member[None, :])
+                rerun = time.perf_counter() - start
+                line += f"; member by member {rerun:6.3f} s ({rerun / kept_alive:.1f}x slower)"
+            print(line)
+
+
 if __name__ == "__main__":
     main()
+    fmu_section()

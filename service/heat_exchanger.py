@@ -1,0 +1,69 @@
+"""ε-NTU relations shared by the water-to-air coils: counter-flow effectiveness, flow-dependent UA.
+
+Heat capacity rates C = ṁ·c_p [W/K], NTU = UA/C_min, C_r = C_min/C_max; the heat rate from the
+water to the air is (Incropera & DeWitt, *Fundamentals of Heat and Mass Transfer*, Sec. 11.4)::
+
+    Q = ε(NTU, C_r) · C_min · (T_w,in − T_a,in)                                      [W]
+
+A finned water-to-air coil with several tube rows in counter-flow arrangement is modelled as a pure
+counter-flow exchanger (ASHRAE Handbook – HVAC Systems and Equipment, Ch. 23). Its UA is the series
+of the water-side and air-side film conductances, each ∝ ṁ^0.8 (Dittus–Boelter, turbulent flow);
+the tube wall's resistance is neglected::
+
+    1/UA = 1/(hA_w · (ṁ_w/ṁ_w,ref)^0.8) + 1/(hA_a · (ṁ_a/ṁ_a,ref)^0.8)            [K/W]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["FILM_EXPONENT", "counterflow_effectiveness", "series_film_ua_w_per_k", "coil_heat_rate_w"]
+
+#: Exponent of the film conductance's dependence on the mass flow (Dittus–Boelter, Re^0.8).
+FILM_EXPONENT = 0.8
+#: Floor of flow ratios and capacity rates: a stagnant side conducts (almost) nothing.
+_TINY = 1e-9
+
+
+def counterflow_effectiveness(ntu: np.ndarray, capacity_ratio: np.ndarray) -> np.ndarray:
+    """ε of a counter-flow heat exchanger [1] (Incropera & DeWitt, Table 11.3)::
+
+        ε = (1 − e^{−NTU(1−C_r)}) / (1 − C_r·e^{−NTU(1−C_r)})
+
+    C_r is capped at 1 − 10⁻⁷, where the formula meets the balanced limit NTU/(1 + NTU) within
+    10⁻⁶; C_r = 0 gives 1 − e^{−NTU}.
+    """
+    ratio = np.minimum(capacity_ratio, 1.0 - 1e-7)
+    decay = np.exp(-ntu * (1.0 - ratio))
+    return (1.0 - decay) / (1.0 - ratio * decay)
+
+
+def series_film_ua_w_per_k(
+    water_conductance_w_per_k: np.ndarray, water_flow_ratio: np.ndarray,
+    air_conductance_w_per_k: np.ndarray, air_flow_ratio: np.ndarray,
+) -> np.ndarray:
+    """UA [W/K] of the two film conductances in series (module docstring).
+
+    ``*_conductance_w_per_k`` are hA at the reference flows, ``*_flow_ratio`` = ṁ/ṁ_ref [1]; a
+    ratio of 0 (no flow on that side) gives UA ≈ 0.
+    """
+    water = water_conductance_w_per_k * np.maximum(water_flow_ratio, _TINY) ** FILM_EXPONENT
+    air = air_conductance_w_per_k * np.maximum(air_flow_ratio, _TINY) ** FILM_EXPONENT
+    return water * air / (water + air)
+
+
+def coil_heat_rate_w(
+    ua_w_per_k: np.ndarray, water_capacity_w_per_k: np.ndarray, air_capacity_w_per_k: np.ndarray,
+    water_inlet_temperature: np.ndarray, air_inlet_temperature: np.ndarray,
+) -> np.ndarray:
+    """Q = ε·C_min·(T_w,in − T_a,in) [W], positive when the water heats the air.
+
+    Capacity rates of 0 are floored at 10⁻⁹ W/K, so a side without flow transfers no heat instead
+    of dividing by zero.
+    """
+    c_water = np.maximum(water_capacity_w_per_k, _TINY)
+    c_air = np.maximum(air_capacity_w_per_k, _TINY)
+    c_min = np.minimum(c_water, c_air)
+    c_max = np.maximum(c_water, c_air)
+    effectiveness = counterflow_effectiveness(ua_w_per_k / c_min, c_min / c_max)
+    return effectiveness * c_min * (water_inlet_temperature - air_inlet_temperature)

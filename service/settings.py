@@ -1,0 +1,73 @@
+"""Configuration of the HTTP service, from keyword arguments or ``GRAPHTWIN_*`` environment variables.
+
+==============================  ==================================================================
+``GRAPHTWIN_DATA_DIR``          folder for job records (``jobs/``) and uploaded measurements
+                                (``measurements/``); default ``./graphtwin-service``
+``GRAPHTWIN_STORE_DIR``         the embedded Oxigraph store; default ``<data dir>/store``
+``GRAPHTWIN_SPARQL_ENDPOINT``   use an external SPARQL 1.1 endpoint (Oxigraph server layout)
+                                instead of the embedded store
+``GRAPHTWIN_ENDPOINT_TOKEN``    bearer token the service sends to that endpoint
+``GRAPHTWIN_TOKEN``             bearer token clients must send for writes (model and measurement
+                                uploads, jobs, SPARQL Update); unset: every write is refused
+``GRAPHTWIN_OPEN_READS``        ``true``: reads need no token; ``false``: they need it too
+``GRAPHTWIN_MAX_UPLOAD_BYTES``  largest accepted upload (413 above)
+``GRAPHTWIN_QUERY_TIMEOUT_S``   SPARQL query time limit, s (503 above)
+``GRAPHTWIN_MAX_RESULT_ROWS``   most rows (or triples) a query may return (422 above)
+``GRAPHTWIN_JOB_WORKERS``       jobs running at once (1 or 2: they share the store and the CPU)
+==============================  ==================================================================
+
+Secrets are :class:`~pydantic.SecretStr`: ``repr``, logs and tracebacks show ``**********``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = ["Settings"]
+
+
+class Settings(BaseSettings):
+    """Everything :func:`service.api.create_app` needs; see the module docstring for the variables."""
+
+    model_config = SettingsConfigDict(env_prefix="GRAPHTWIN_", extra="forbid")
+
+    data_dir: Path = Path("graphtwin-service")
+    store_dir: Path | None = None
+    sparql_endpoint: str | None = None
+    endpoint_token: SecretStr | None = None
+    token: SecretStr | None = None
+    open_reads: bool = True
+    max_upload_bytes: int = Field(default=50 * 1024 * 1024, gt=0)
+    query_timeout_s: float = Field(default=30.0, gt=0)
+    max_result_rows: int = Field(default=100_000, gt=0)
+    job_workers: int = Field(default=1, ge=1, le=2)
+
+    @field_validator("token", "endpoint_token")
+    @classmethod
+    def _no_blank_token(cls, value: SecretStr | None) -> SecretStr | None:
+        if value is not None and len(value.get_secret_value().strip()) < 8:
+            raise ValueError("a token needs at least 8 non-blank characters (unset it to refuse every write)")
+        return value
+
+    @field_validator("sparql_endpoint")
+    @classmethod
+    def _http_url(cls, value: str | None) -> str | None:
+        if value is not None and not value.startswith(("http://", "https://")):
+            raise ValueError(f"sparql_endpoint {value!r}: give an http(s):// URL")
+        return value
+
+    @property
+    def store_path(self) -> Path:
+        """The embedded store's folder."""
+        return self.store_dir if self.store_dir is not None else self.data_dir / "store"
+
+    @property
+    def jobs_dir(self) -> Path:
+        return self.data_dir / "jobs"
+
+    @property
+    def measurements_dir(self) -> Path:
+        return self.data_dir / "measurements"
