@@ -50,7 +50,11 @@ USER_ERRORS = (ModelLoadError, AssemblyError, SignatureError, MeasurementError, 
 
 
 def open_store(store: Path, memory: bool) -> GraphStore:
-    return GraphStore.embedded(None if memory else store)
+    """The embedded store with the ontology subsets and the signature library loaded."""
+    graph_store = GraphStore.embedded(None if memory else store)
+    graph_store.ensure_ontologies()
+    graph_store.ensure_signature_library()
+    return graph_store
 
 
 def model_name_for(path: Path, name: str | None) -> str:
@@ -414,3 +418,36 @@ def demo_command(
     console.rule("[bold]4. Where to look")
     console.print(f"plots: {figure}, {history}")
     console.print(f"calibrated parameters by SPARQL: graphtwin query calibrated-parameters --model {version} --store {store}")
+
+
+@app.command("serve")
+def serve_command(
+    store: Annotated[Path | None, typer.Option("--store", help="Embedded store folder (default ./graphtwin-data, "
+                                                               "or GRAPHTWIN_STORE_DIR).")] = None,
+    sparql_endpoint: Annotated[str | None, typer.Option("--sparql-endpoint", help="Use this SPARQL 1.1 endpoint "
+                                                        "(Oxigraph server layout) instead of an embedded store.")] = None,
+    data_dir: Annotated[Path | None, typer.Option("--data-dir", help="Job records and measurement uploads "
+                                                  "(default ./graphtwin-service, or GRAPHTWIN_DATA_DIR).")] = None,
+    host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
+) -> None:
+    """Run the HTTP service (OpenAPI at /docs). Writes need the bearer token in GRAPHTWIN_TOKEN; the
+    other settings come from GRAPHTWIN_* variables (service/settings.py)."""
+    import uvicorn
+    from pydantic import ValidationError
+
+    from .api import create_app
+    from .settings import Settings
+
+    if store is not None and sparql_endpoint is not None:
+        raise fail("give --store or --sparql-endpoint, not both")
+    overrides = {"store_dir": store, "sparql_endpoint": sparql_endpoint, "data_dir": data_dir}
+    try:
+        settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
+    except ValidationError as exc:
+        raise fail(str(exc)) from None
+    if settings.store_dir is None and settings.sparql_endpoint is None:
+        settings = settings.model_copy(update={"store_dir": Path("graphtwin-data")})
+    if settings.token is None:
+        error_console.print("[yellow]GRAPHTWIN_TOKEN is not set: every write will be refused.[/yellow]")
+    uvicorn.run(create_app(settings), host=host, port=port)

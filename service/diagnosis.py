@@ -44,7 +44,7 @@ from .flow_path_localization import FlowTopology, localize_failures
 from .namespaces import GT, PROV, RDF, RDFS, XSD
 from .operating_regimes import OperatingRegimes, per_regime_metrics
 from .point_calibration import PointCalibrator
-from .residual_dependence import joint_r2, residual_dependence
+from .residual_dependence import residual_dependence
 from .signature import Signature, load_signature_library
 from .resources import signatures_dir
 from .signature_matcher import match_signature
@@ -287,29 +287,29 @@ def diagnose(
 
     signal_nodes = [md.node_of[c] for c in model.boundary_inputs]
     signals = np.column_stack([data.series[n] for n in signal_nodes])
-    finite_rows = np.isfinite(signals).all(axis=1)
-    regimes_model = OperatingRegimes(random_state=seed)
-    features, names, units = regimes_model.features(
-        np.where(np.isfinite(signals), signals, np.nanmean(signals, axis=0)),
-        [_short(n).replace("_", " ") for n in signal_nodes], [unit_label(md.units.get(n, data.units[n])) for n in signal_nodes],
-        data.step_s,
+    regimes_model = OperatingRegimes(random_state=seed).fit(
+        signals, [_short(n).replace("_", " ") for n in signal_nodes],
+        feature_units=[unit_label(data.units[n]) for n in signal_nodes], step_s=data.step_s,
     )
-    regimes_model.fit(features[finite_rows], names, units)
-    labels = regimes_model.predict(features[test_slice])
-    rmse = lambda y, yhat: float(np.sqrt(np.mean((y - yhat) ** 2))) if y.size else float("nan")  # noqa: E731
-    regimes = per_regime_metrics(labels, observed, predicted, rmse)
-    for row in regimes:
-        row["rule"] = regimes_model.rules_[row["regime"]]
-        row["rmse"] = row.pop("metric")
-        row["worst"] = False
-    if regimes:
-        scaled = [np.nanmean([row["rmse"][k] / sensors[k]["noise"] for k in row["rmse"]]) for row in regimes]
+    labels = regimes_model.predict(signals[test_slice])
+    rmse = lambda y, yhat: float(np.sqrt(np.mean((y - yhat) ** 2)))  # noqa: E731
+    regimes = []
+    for regime in range(regimes_model.n_regimes_):
+        regimes.append({"regime": regime, "rule": regimes_model.rules_[regime], "rmse": {}, "worst": False,
+                        "share": float(np.mean(labels[labels >= 0] == regime)) if (labels >= 0).any() else 0.0})
+    for node in observed:
+        for row in per_regime_metrics(labels, observed[node], predicted[node], {"rmse": rmse},
+                                      n_regimes=regimes_model.n_regimes_):
+            regimes[row["regime"]]["rmse"][node] = row["rmse"]
+    scaled = [np.nanmean([r["rmse"][k] / sensors[k]["noise"] for k in r["rmse"]]) if r["share"] > 0 else np.nan
+              for r in regimes]
+    if np.isfinite(scaled).any():
         regimes[int(np.nanargmax(scaled))]["worst"] = True
 
     episodes = {}
     for node in observed:
-        found = find_episodes(data.timestamps[test_slice], observed[node], predicted[node],
-                              floor=failure_ratio * sensors[node]["noise"], unit=unit_label(md.units[node]))
+        found = find_episodes(data.timestamps[test_slice], observed[node], residual=observed[node] - predicted[node],
+                              min_deviation=failure_ratio * sensors[node]["noise"], unit=unit_label(md.units[node]))
         if found:
             episodes[node] = [e.to_dict() for e in found]
 
@@ -348,11 +348,10 @@ def diagnose(
             candidates_signals[f"model {_short(component)}.{port}"] = values[0][offset:]
         for node in failing:
             residual = observed[node] - predicted[node]
-            ranked_signals, _ = residual_dependence(
+            ranked_signals = residual_dependence(
                 residual, {k: v for k, v in candidates_signals.items() if _short(node) not in k})
-            top = ranked_signals[:3]
-            dependence[node] = {"signals": [d.to_dict() | {"text": d.describe(data.step_s)} for d in top],
-                                "joint_r2": joint_r2(residual, candidates_signals, top)}
+            dependence[node] = {"signals": [d.to_dict() | {"text": d.describe(data.step_s)}
+                                            for d in ranked_signals[:3] if d.skipped_reason is None]}
 
     report = DiagnosisReport(
         model_name=model_name, run_id=base.record.run_id, sensors=sensors, localization=localization,

@@ -20,7 +20,7 @@ class Fan(ComponentModel):
     ṁ = ρ_air · V̇ [kg/s] with ρ_air = 1.204 kg/m³; the air leaves at its inlet temperature (motor
     heat in the air stream is the FanMotorHeat effect, not part of this base model). Defaults: the
     ASHRAE 90.1 Appendix G variable-speed fan curve (c1..c4 = 0.0013, 0.1470, 0.9506, −0.0998,
-    sum 0.9981 at f = 1); bounds wide enough for inlet-vane, variable-pitch and EC fans.
+    sum 0.9991 at f = 1); bounds wide enough for inlet-vane, variable-pitch and EC fans.
     """
 
     inputs = (

@@ -17,10 +17,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FILM_EXPONENT", "counterflow_effectiveness", "series_film_ua_w_per_k", "coil_heat_rate_w"]
+__all__ = [
+    "FILM_EXPONENT", "REFERENCE_AIR_MASS_FLOW", "counterflow_effectiveness", "series_film_ua_w_per_k",
+    "coil_heat_rate_w",
+]
 
 #: Exponent of the film conductance's dependence on the mass flow (Dittus–Boelter, Re^0.8).
 FILM_EXPONENT = 0.8
+#: Reference air flow at which the coils' air-side film conductance hA_a is quoted, kg/s (the
+#: nominal flow of a 1.7 m³/s air handling unit; a convention, so priors read alike across coils).
+REFERENCE_AIR_MASS_FLOW = 2.0
 #: Floor of flow ratios and capacity rates: a stagnant side conducts (almost) nothing.
 _TINY = 1e-9
 

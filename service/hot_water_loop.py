@@ -60,16 +60,15 @@ from .component import (
     AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_DENSITY_KG_PER_M3, WATER_SPECIFIC_HEAT_J_PER_KG_K, ComponentModel,
     Parameter, Port, first_order_lag_factor,
 )
-from .heat_exchanger import coil_heat_rate_w, series_film_ua_w_per_k
+from .heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
 
-__all__ = ["HotWaterLoop", "loop_water_flow_m3_per_h", "REFERENCE_WATER_MASS_FLOW", "REFERENCE_AIR_MASS_FLOW"]
+__all__ = ["HotWaterLoop", "loop_water_flow_m3_per_h", "REFERENCE_WATER_MASS_FLOW"]
 
 _TINY = 1e-9
 #: Floor of ṁ_a·c_p when air heats up from the coil's heat: 0.1 kg/s of air (fan off, stack draught).
 _MINIMUM_AIR_CAPACITY_W_PER_K = 0.1 * AIR_SPECIFIC_HEAT_J_PER_KG_K
-#: Reference flows of the film conductances hA_w and hA_a, kg/s.
+#: Reference water flow of the water-side film conductance hA_w, kg/s (hA_a: REFERENCE_AIR_MASS_FLOW).
 REFERENCE_WATER_MASS_FLOW = 0.5
-REFERENCE_AIR_MASS_FLOW = 2.0
 
 
 def loop_water_flow_m3_per_h(position, kv_valve, kv_loop, pressure_bar) -> np.ndarray:

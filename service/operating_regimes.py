@@ -11,23 +11,32 @@ difference, per hour when the step length is given (``rate = Δx̄ / Δt · 3600
 separate from steady states. Steps where any feature or rate is not finite (or ``valid`` is False)
 are left out and labelled ``-1``.
 
-Scaling. Every column is robustly standardised before clustering, ``z = (x − median) / s`` with
-``s = 1.4826 · MAD`` (the standard deviation of a normal variable), the standard deviation where the
-MAD is 0 (a command that is mostly at one value) and 1 for a constant column; so a few switching
-transients do not set the scale of the steady states.
+Scaling. Each input is robustly standardised, ``z = (x − median) / s`` with the robust spread
+``s = (q95 − q5) / 3.29`` (:func:`robust_spread`: the standard deviation for a normal variable; the
+standard deviation where that range is 0, 1 for a constant input). Its rate is put on the same
+scale as the change over the smoothing window, ``z_rate = rate · T_w / s`` with ``T_w`` =
+``smoothing_steps`` steps (zero stays zero: steady means 0): a ramp that crosses the input's
+operating range within the window weighs like a jump across that range, while the rate of noise
+stays small. All coordinates are clipped to ``±Z_CLIP`` = ±5. The 5–95 % range rather than the MAD,
+because a command that sits at one value most of the time (a valve shut 70 % of the day) has a MAD
+of its noise only, which would blow up its steps; rates are not standardised by their own spread
+because most of the time they are noise, so their own spread is the noise's and every fluctuation
+would weigh like a change of state.
 
 Number of regimes. Unless ``n_regimes`` is given, k = 2 … ``max_regimes`` are clustered and the k
 with the highest mean silhouette (on a seeded subsample of at most 2,000 steps) is kept; the scores
 are ``selection_scores_``. Regimes are numbered by decreasing share of time (regime 0 is the most
-common).
+common). The clustering runs single-threaded (a few thousand steps: OpenMP start-up costs more than
+it saves, and the machine is shared with the simulator's workers).
 
 Rules. A :class:`~sklearn.tree.DecisionTreeClassifier` of depth ≤ ``tree_depth`` is trained on the
 *unscaled* features to reproduce the cluster labels; its 5-fold stratified cross-validated accuracy
 is ``rule_accuracy_``. Sibling leaves of the same regime are merged, the conditions of each path are
 reduced to one interval per feature, and the paths of one regime are joined with "or"
-(``rules_``; the conditions themselves are ``rule_conditions_``). Thresholds are rounded to about
-1 % of the feature's 5–95 % range. :meth:`OperatingRegimes.predict` maps new data by the *tree*, not
-by the nearest cluster centre: the rule a user reads is the rule that is applied.
+(``rules_``; the conditions themselves are ``rule_conditions_``). Thresholds are rounded to the
+power of ten at or below 2 % of the feature's 5–95 % range, and to at most 3 significant digits.
+:meth:`OperatingRegimes.predict` maps new data by the *tree*, not by the nearest cluster centre:
+the rule a user reads is the rule that is applied.
 """
 
 from __future__ import annotations
@@ -43,18 +52,20 @@ from sklearn.metrics import silhouette_score
 from sklearn.model_selection import cross_val_score
 from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils import check_random_state
+from sklearn.utils.validation import check_is_fitted
+from threadpoolctl import threadpool_limits
 
 __all__ = [
     "OperatingRegimes", "RuleCondition", "smoothed_rate", "per_regime_metrics", "worst_regime",
-    "SILHOUETTE_SUBSAMPLE",
+    "robust_spread", "SILHOUETTE_SUBSAMPLE", "Z_CLIP", "NORMAL_5_95_RANGE",
 ]
 
 #: Largest number of steps the silhouette criterion is evaluated on (a seeded subsample).
 SILHOUETTE_SUBSAMPLE = 2000
 #: Robust z-scores are clipped to ±Z_CLIP before clustering.
-import os
-Z_CLIP = float(os.environ.get('ZC','1e9'))
-SCALE=os.environ.get('SC','q')
+Z_CLIP = 5.0
+#: Width of the 5–95 % range of a normal variable in standard deviations (2 · 1.645).
+NORMAL_5_95_RANGE = 3.29
 #: Units written as their difference unit in a rate ("K/h", not "°C/h").
 _RATE_UNITS = {"°C": "K", "degC": "K"}
 
@@ -62,43 +73,52 @@ _RATE_UNITS = {"°C": "K", "degC": "K"}
 def smoothed_rate(values: np.ndarray, smoothing_steps: int, step_s: float | None = None) -> np.ndarray:
     """Smoothed first derivative of every column of ``values`` (``ndarray[n_t, n_f]``).
 
-    ``x̄`` is the centred moving average over ``smoothing_steps`` (odd) steps, shrinking at the ends
-    of the series; a window touching a NaN gives NaN. The rate is ``numpy.gradient(x̄)`` (central
-    difference, one-sided at the ends) per step, or per hour when ``step_s`` (seconds) is given.
+    ``x̄(t)`` is the centred moving average over ``smoothing_steps`` (odd) steps; near the ends of
+    the series the window shrinks symmetrically (to ``2·min(t, n − 1 − t) + 1`` steps), so a linear
+    ramp stays exact; a window touching a NaN gives NaN (and so the rate one step further). The
+    rate is ``numpy.gradient(x̄)`` (central difference, one-sided at the ends) per step, or per hour
+    when ``step_s`` (seconds) is given.
     """
     values = np.asarray(values, dtype=float)
     if values.ndim != 2:
         raise ValueError(f"values have shape {values.shape}, expected (n_steps, n_features)")
     if smoothing_steps < 1 or smoothing_steps % 2 == 0:
         raise ValueError(f"smoothing_steps must be an odd positive integer, got {smoothing_steps}")
-    kernel = np.ones(smoothing_steps)
+    n = len(values)
+    if n < 2:
+        return np.zeros_like(values)
+    t = np.arange(n)
+    half = np.minimum(smoothing_steps // 2, np.minimum(t, n - 1 - t))
     finite = np.isfinite(values)
-    rates = np.empty_like(values)
-    for j in range(values.shape[1]):
-        total = np.convolve(np.where(finite[:, j], values[:, j], 0.0), kernel, mode="same")
-        count = np.convolve(np.ones(len(values)), kernel, mode="same")
-        gaps = np.convolve((~finite[:, j]).astype(float), kernel, mode="same")
-        smooth = np.where(gaps > 0, np.nan, total / count)
-        rates[:, j] = np.gradient(smooth) if len(values) > 1 else 0.0
+    zero = np.zeros((1, values.shape[1]))
+    total = np.vstack([zero, np.cumsum(np.where(finite, values, 0.0), axis=0)])
+    gaps = np.vstack([zero, np.cumsum(~finite, axis=0)])
+    upper, lower = t + half + 1, t - half
+    smooth = (total[upper] - total[lower]) / (2 * half + 1)[:, None]
+    smooth[(gaps[upper] - gaps[lower]) > 0] = np.nan
+    rates = np.gradient(smooth, axis=0)
     return rates * (3600.0 / step_s) if step_s is not None else rates
 
 
-def _robust_scale(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    center = np.median(features, axis=0)
-    low, high = np.percentile(features, [5, 95], axis=0)
-    spread = (high - low) / 3.29 if SCALE=="q" else 1.4826 * np.median(np.abs(features - center), axis=0)
-    std = features.std(axis=0)
-    return center, np.where(spread > 0, spread, np.where(std > 0, std, 1.0))
+def robust_spread(values: np.ndarray) -> np.ndarray:
+    """Per column ``s = (q95 − q5) / 3.29``; the standard deviation where that is 0; 1 if constant."""
+    low, high = np.percentile(values, [5, 95], axis=0)
+    std = values.std(axis=0)
+    return np.where(high > low, (high - low) / NORMAL_5_95_RANGE, np.where(std > 0, std, 1.0))
 
 
-def _decimals(spread: float) -> int:
-    """Decimals that resolve about 1 % of ``spread`` (negative: round to tens, hundreds …)."""
-    return -math.floor(math.log10(spread / 100.0)) if spread > 0 else 2
+def _range_decimals(spread: float) -> int:
+    """Decimals of the power of ten at or below 2 % of ``spread`` (negative: tens, hundreds …)."""
+    return -math.floor(math.log10(spread / 50.0)) if spread > 0 else 2
 
 
-def _number(value: float, decimals: int) -> str:
-    rounded = round(value, decimals) + 0.0  # + 0.0 turns -0.0 into 0.0
-    return f"{rounded:.{max(decimals, 0)}f}"
+def _number(value: float, range_decimals: int) -> str:
+    """``value`` rounded to its feature's resolution and to at most 3 significant digits, without
+    trailing zeros."""
+    significant = 2 - math.floor(math.log10(abs(value))) if value != 0 else range_decimals
+    decimals = min(range_decimals, significant)
+    text = f"{round(value, decimals) + 0.0:.{max(decimals, 0)}f}"  # + 0.0 turns -0.0 into 0.0
+    return text.rstrip("0").rstrip(".") if "." in text else text
 
 
 @dataclass(frozen=True)
@@ -106,7 +126,8 @@ class RuleCondition:
     """``lower < feature ≤ upper`` (either bound may be None) on one feature of the rule tree.
 
     ``signal`` is the input's name; ``is_rate`` marks its smoothed derivative (``unit`` is then the
-    rate's unit, e.g. ``"K/h"``); ``decimals`` is the rounding of the thresholds in the text.
+    rate's unit, e.g. ``"K/h"``); ``range_decimals`` is the feature's resolution in the text (the
+    power of ten at or below 2 % of its 5–95 % range; at most 3 significant digits in any case).
     """
 
     feature: int
@@ -115,35 +136,45 @@ class RuleCondition:
     is_rate: bool
     lower: float | None
     upper: float | None
-    decimals: int
+    range_decimals: int
 
-    def _with_unit(self, value: float) -> str:
-        text = _number(abs(value) if self.is_rate else value, self.decimals)
+    def _quantity(self, value: float) -> str:
+        text = _number(value, self.range_decimals)
         if not self.unit or self.unit == "1":
             return text
-        return f"{text}{self.unit}" if self.unit == "%" else f"{text} {self.unit}"
+        return f"{text}{self.unit}" if self.unit in ("%", "/h", "/step") else f"{text} {self.unit}"
 
     def describe(self) -> str:
         """The condition in words: "supply fan speed > 0.31", "outdoor air temperature rising faster
-        than 0.5 K/h"."""
+        than 0.5 K/h", "heating valve position between 0.2 and 0.8"."""
         low, high = self.lower, self.upper
         if not self.is_rate:
             if low is not None and high is not None:
-                return f"{self.signal} between {self._with_unit(low)} and {self._with_unit(high)}"
-            return f"{self.signal} > {self._with_unit(low)}" if low is not None else f"{self.signal} ≤ {self._with_unit(high)}"
-        zero = 0.5 * 10.0 ** -self.decimals
+                return f"{self.signal} between {_number(low, self.range_decimals)} and {self._quantity(high)}"
+            if low is not None:
+                return f"{self.signal} > {self._quantity(low)}"
+            return f"{self.signal} ≤ {self._quantity(high)}"
         if low is not None and high is not None:
-            return (f"{self.signal} changing between {_number(low, self.decimals)} and "
-                    f"{_number(high, self.decimals)} {self.unit}".rstrip())
+            return (f"{self.signal} changing at a rate between {_number(low, self.range_decimals)} and "
+                    f"{self._quantity(high)}")
+        zero = 0.5 * 10.0 ** -self.range_decimals
         if low is not None:
             if abs(low) < zero:
                 return f"{self.signal} rising"
-            return (f"{self.signal} rising faster than {self._with_unit(low)}" if low > 0
-                    else f"{self.signal} not falling faster than {self._with_unit(low)}")
+            return (f"{self.signal} rising faster than {self._quantity(low)}" if low > 0
+                    else f"{self.signal} not falling faster than {self._quantity(-low)}")
         if abs(high) < zero:
             return f"{self.signal} steady or falling"
-        return (f"{self.signal} falling faster than {self._with_unit(high)}" if high < 0
-                else f"{self.signal} not rising faster than {self._with_unit(high)}")
+        return (f"{self.signal} falling faster than {self._quantity(-high)}" if high < 0
+                else f"{self.signal} not rising faster than {self._quantity(high)}")
+
+
+def _rate_unit(unit: str, per_hour: bool) -> str:
+    """Unit of a signal's rate: "°C" → "K/h", "m³/s" → "m³/s/h", "1" or "" → "/h" (or "/step")."""
+    per = "/h" if per_hour else "/step"
+    if not unit or unit == "1":
+        return per
+    return _RATE_UNITS.get(unit, unit) + per
 
 
 class OperatingRegimes(BaseEstimator):
@@ -157,10 +188,10 @@ class OperatingRegimes(BaseEstimator):
 
     Fitted attributes: ``labels_`` (``ndarray[n_t]``, −1 for left-out steps), ``n_regimes_``,
     ``selection_scores_`` (k → mean silhouette), ``centers_`` (``ndarray[n_regimes, 2·n_f]``: the
-    inputs, then their rates, in engineering units), ``feature_names_`` and ``feature_units_`` (of
-    those 2·n_f columns), ``rules_`` (``list[str]``, one per regime), ``rule_conditions_`` (per
-    regime, per tree leaf, the :class:`RuleCondition` list), ``rule_accuracy_``, ``tree_``,
-    ``step_s_``.
+    mean of each regime's steps, inputs then rates, in engineering units), ``signal_names_`` (the
+    n_f inputs), ``feature_names_`` and ``feature_units_`` (of the 2·n_f columns), ``rules_``
+    (``list[str]``, one per regime), ``rule_conditions_`` (per regime, per tree leaf, the
+    :class:`RuleCondition` list), ``rule_accuracy_``, ``tree_``, ``step_s_``.
     """
 
     def __init__(self, max_regimes: int = 8, n_regimes: int | None = None, smoothing_steps: int = 5,
@@ -200,7 +231,8 @@ class OperatingRegimes(BaseEstimator):
         if len(units) != len(self.signal_names_):
             raise ValueError(f"{len(units)} feature_units for {len(self.signal_names_)} feature_names")
         if self.max_regimes < 2 or (self.n_regimes is not None and self.n_regimes < 1):
-            raise ValueError(f"max_regimes must be ≥ 2 and n_regimes ≥ 1, got {self.max_regimes}, {self.n_regimes}")
+            raise ValueError(
+                f"max_regimes must be ≥ 2 and n_regimes ≥ 1, got {self.max_regimes}, {self.n_regimes}")
         self.step_s_ = step_s
         augmented, usable = self._augment(features)
         if valid is not None:
@@ -208,25 +240,25 @@ class OperatingRegimes(BaseEstimator):
             if valid.shape != usable.shape:
                 raise ValueError(f"valid has shape {valid.shape}, expected ({len(usable)},)")
             usable &= valid
-        rate_units = [(f"{_RATE_UNITS.get(u, u)}/h" if step_s is not None else f"{u}/step") if u and u != "1"
-                      else ("1/h" if step_s is not None else "1/step") for u in units]
         self.feature_names_ = self.signal_names_ + [f"rate of {n}" for n in self.signal_names_]
-        self.feature_units_ = units + rate_units
+        self.feature_units_ = units + [_rate_unit(u, step_s is not None) for u in units]
         data = augmented[usable]
+        fewest = self.n_regimes if self.n_regimes is not None else 2
+        if len(data) <= fewest:
+            raise ValueError(f"only {len(data)} usable steps (finite inputs and rates, valid): "
+                             f"too few to find {fewest} operating regimes")
         k_max = min(self.max_regimes, len(data) - 1)
-        if (self.n_regimes or 2) > len(data) - 1 or k_max < 2 and self.n_regimes is None:
-            raise ValueError(f"only {len(data)} usable steps: too few to find operating regimes")
 
         rng = check_random_state(self.random_state)
         seed = int(rng.randint(np.iinfo(np.int32).max))
-        center, spread = _robust_scale(data)
-        scaled = np.clip((data - center) / spread, -Z_CLIP, Z_CLIP)
+        scaled = self._standardise(data)
         sample = rng.choice(len(scaled), size=min(SILHOUETTE_SUBSAMPLE, len(scaled)), replace=False)
         candidates = [self.n_regimes] if self.n_regimes is not None else range(2, k_max + 1)
         self.selection_scores_: dict[int, float] = {}
         best: tuple[float, MiniBatchKMeans] | None = None
         for k in candidates:
-            kmeans = MiniBatchKMeans(n_clusters=k, random_state=seed, n_init=3, batch_size=1024).fit(scaled)
+            with threadpool_limits(limits=1, user_api="openmp"):
+                kmeans = MiniBatchKMeans(n_clusters=k, random_state=seed, n_init=3, batch_size=1024).fit(scaled)
             labelled = kmeans.labels_[sample]
             score = float(silhouette_score(scaled[sample], labelled)) if len(np.unique(labelled)) > 1 else -1.0
             self.selection_scores_[k] = score
@@ -239,7 +271,7 @@ class OperatingRegimes(BaseEstimator):
         rank[order] = np.arange(order.size)
         self.labels_ = np.full(len(usable), -1, dtype=int)
         self.labels_[usable] = rank[kmeans.labels_]
-        self.centers_ = (kmeans.cluster_centers_ * spread + center)[order]
+        self.centers_ = np.array([data[rank[kmeans.labels_] == r].mean(axis=0) for r in range(self.n_regimes_)])
 
         regime_labels = self.labels_[usable]
         self.tree_ = DecisionTreeClassifier(max_depth=self.tree_depth, random_state=seed).fit(data, regime_labels)
@@ -249,15 +281,25 @@ class OperatingRegimes(BaseEstimator):
             DecisionTreeClassifier(max_depth=self.tree_depth, random_state=seed), data, regime_labels, cv=folds,
         ).mean()) if folds >= 2 else float("nan")
         low, high = np.percentile(data, [5, 95], axis=0)
-        self._decimals = [_decimals(h - lo) for lo, h in zip(low, high)]
+        self._range_decimals = [_range_decimals(h - lo) for lo, h in zip(low, high)]
         self.rule_conditions_ = self._leaf_conditions()
         self.rules_ = [self._rule_text(leaves) for leaves in self.rule_conditions_]
         return self
+
+    def _standardise(self, data: np.ndarray) -> np.ndarray:
+        """Clustering coordinates of ``[inputs, rates]`` (module docstring, Scaling)."""
+        n_signals = len(self.signal_names_)
+        levels, rates = data[:, :n_signals], data[:, n_signals:]
+        spread = robust_spread(levels)
+        window = self.smoothing_steps * (self.step_s_ / 3600.0 if self.step_s_ is not None else 1.0)
+        scaled = np.hstack([(levels - np.median(levels, axis=0)) / spread, rates * window / spread])
+        return np.clip(scaled, -Z_CLIP, Z_CLIP)
 
     def predict(self, features: np.ndarray) -> np.ndarray:
         """Regime of each step of new data (``ndarray[n_t, n_f]``, same columns as in :meth:`fit`) by
         the rule tree; −1 where an input or its rate is not finite. The rates are computed on the
         new series itself, so pass a contiguous window."""
+        check_is_fitted(self, "tree_")
         augmented, usable = self._augment(features)
         labels = np.full(len(usable), -1, dtype=int)
         if usable.any():
@@ -294,7 +336,7 @@ class OperatingRegimes(BaseEstimator):
         n_signals = len(self.signal_names_)
         return RuleCondition(
             feature=feature, signal=self.signal_names_[feature % n_signals], unit=self.feature_units_[feature],
-            is_rate=feature >= n_signals, lower=lower, upper=upper, decimals=self._decimals[feature],
+            is_rate=feature >= n_signals, lower=lower, upper=upper, range_decimals=self._range_decimals[feature],
         )
 
     @staticmethod

@@ -1,38 +1,85 @@
 """What a residual depends on, when no effect in the catalog explains it: a pointer for the engineer.
 
-For every candidate signal x (measured series and model outputs near the failing sensor) the
-Pearson correlation of the residual e(t) with x(t − ℓ) is computed for lags ℓ = 0 … ``max_lag_steps``
-on the steps where both are finite; the strongest |ρ| and its lag rank the signals. A multiple
-regression of e on the top signals at their lags gives the share of the residual's variance they
-explain together (R²). Constant signals are skipped with the reason.
+For every candidate signal x (measured series, model outputs near the failing sensor) the Pearson
+correlation of the residual ``e(t)`` with ``x(t − ℓ)`` is computed for the lags
+``ℓ = 0 … max_lag_steps`` on the steps where both are finite (and ``valid``); the lag with the
+largest ``|ρ|`` is the signal's best lag and the signals are ranked by that ``|ρ|``.
+
+Correlations overlap (two signals that follow each other both correlate with the residual), so the
+ranking is followed by a multiple-regression view over the top ``n_joint`` signals at their best
+lags: for the k-th ranked signal, ``partial_correlation`` is the correlation of the residual with
+that signal once both are cleared of the k − 1 signals ranked above (least squares with an
+intercept), and ``cumulative_r2`` is the R² of the residual regressed on the k top signals
+together. A signal with a sizeable ρ but a partial correlation near 0 only repeats a signal above it.
+
+Signals that are constant over the valid steps, or have fewer than ``min_steps`` finite valid
+steps, are not ranked: they are returned at the end of the list with ``skipped_reason`` set.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Dependence", "residual_dependence", "joint_r2"]
+__all__ = ["Dependence", "residual_dependence", "COLLINEAR_SHARE"]
+
+#: A signal whose variance left after regressing on the signals above is below this share of its
+#: own is a linear combination of them: its partial correlation is reported as 0.
+COLLINEAR_SHARE = 1e-10
 
 
 @dataclass(frozen=True)
 class Dependence:
+    """How the residual follows one signal: ``e(t)`` vs ``signal(t − lag_steps)``.
+
+    ``correlation`` is Pearson's ρ over ``n_steps`` steps; ``rank`` is 1 for the strongest;
+    ``partial_correlation`` and ``cumulative_r2`` are set for the top ``n_joint`` signals (module
+    docstring; the partial correlation is 0 for a signal that is a linear combination of those
+    above), else None;
+    ``skipped_reason`` is set (and the numbers NaN) for a signal that could not be ranked.
+    """
+
     signal: str
-    correlation: float
     lag_steps: int
-    n: int
+    correlation: float
+    n_steps: int
+    partial_correlation: float | None = None
+    cumulative_r2: float | None = None
+    rank: int | None = None
+    skipped_reason: str | None = None
 
     def describe(self, step_s: float | None = None) -> str:
-        lag = f"{self.lag_steps} steps" if step_s is None else f"{self.lag_steps * step_s / 60:.0f} min"
-        return f"residual correlates {self.correlation:+.2f} with {self.signal} (lag {lag}, {self.n} steps)"
+        """One sentence: "the residual follows outdoor air temperature 30 min earlier (ρ = +0.81 over
+        1200 steps); alone it explains 66 % of the residual's variance"."""
+        if self.skipped_reason is not None:
+            return f"{self.signal}: not ranked, {self.skipped_reason}"
+        if self.lag_steps == 0:
+            when = "at the same step"
+        elif step_s is None:
+            when = f"{self.lag_steps} steps earlier"
+        else:
+            minutes = self.lag_steps * step_s / 60.0
+            when = f"{minutes:.0f} min earlier" if minutes < 120 else f"{minutes / 60:.1f} h earlier"
+        text = f"the residual follows {self.signal} {when} (ρ = {self.correlation:+.2f} over {self.n_steps} steps)"
+        if self.cumulative_r2 is None:
+            return text
+        if self.rank == 1:
+            return text + f"; alone it explains {100 * self.cumulative_r2:.0f} % of the residual's variance"
+        above = "signal" if self.rank == 2 else "signals"
+        return text + (f"; given the {self.rank - 1} {above} ranked above, partial ρ = "
+                       f"{self.partial_correlation:+.2f}, together they explain {100 * self.cumulative_r2:.0f} % "
+                       "of the residual's variance")
 
     def to_dict(self) -> dict:
-        return {"signal": self.signal, "correlation": self.correlation, "lag_steps": self.lag_steps, "n": self.n}
+        return {"signal": self.signal, "lag_steps": self.lag_steps, "correlation": self.correlation,
+                "n_steps": self.n_steps, "partial_correlation": self.partial_correlation,
+                "cumulative_r2": self.cumulative_r2, "rank": self.rank, "skipped_reason": self.skipped_reason}
 
 
 def _lagged(x: np.ndarray, lag: int) -> np.ndarray:
+    """``x(t − lag)``: shifted later by ``lag`` steps, NaN where unknown."""
     if lag == 0:
         return x
     out = np.full_like(x, np.nan)
@@ -40,44 +87,90 @@ def _lagged(x: np.ndarray, lag: int) -> np.ndarray:
     return out
 
 
+def _residual_of(y: np.ndarray, design: np.ndarray) -> np.ndarray:
+    """Least-squares residual of ``y`` on ``design`` (which holds the intercept column)."""
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    return y - design @ coef
+
+
+def _correlation(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a - a.mean(), b - b.mean()
+    denominator = np.sqrt((a @ a) * (b @ b))
+    return float(a @ b / denominator) if denominator > 0 else float("nan")
+
+
 def residual_dependence(
-    residual: np.ndarray, signals: Mapping[str, np.ndarray], *, max_lag_steps: int = 12, min_steps: int = 20,
-) -> tuple[list[Dependence], list[str]]:
-    """Signals ranked by the strongest |correlation| with ``residual`` over lags; and skip reasons."""
+    residual: np.ndarray,
+    candidate_signals: Mapping[str, np.ndarray],
+    *,
+    max_lag_steps: int = 12,
+    valid: np.ndarray | None = None,
+    min_steps: int = 20,
+    n_joint: int = 3,
+) -> list[Dependence]:
+    """Candidate signals ranked by their strongest |correlation| with ``residual`` over lags 0 …
+    ``max_lag_steps``; the top ``n_joint`` with the regression view; skipped signals last.
+
+    :param residual: ``ndarray[n_t]`` measured − predicted (NaN: not measured).
+    :param candidate_signals: name → ``ndarray[n_t]`` on the same time steps.
+    :param valid: ``ndarray[n_t]`` of bool, steps of the residual to use (default all).
+    """
     residual = np.asarray(residual, dtype=float)
+    if residual.ndim != 1:
+        raise ValueError(f"residual has shape {residual.shape}, expected (n_steps,)")
+    if max_lag_steps < 0:
+        raise ValueError(f"max_lag_steps must be ≥ 0, got {max_lag_steps}")
+    use = np.isfinite(residual)
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != residual.shape:
+            raise ValueError(f"valid has shape {valid.shape}, residual {residual.shape}: they must agree")
+        use &= valid
+    if not use.any() or np.ptp(residual[use]) == 0:
+        raise ValueError("the residual is constant (or has no valid step): there is nothing to explain")
+
+    signals: dict[str, np.ndarray] = {}
     ranked: list[Dependence] = []
-    skipped: list[str] = []
-    for name, values in signals.items():
+    skipped: list[Dependence] = []
+    for name, values in candidate_signals.items():
         values = np.asarray(values, dtype=float)
-        finite = values[np.isfinite(values)]
-        if finite.size < min_steps or np.ptp(finite) == 0.0:
-            skipped.append(f"{name}: constant or too few values")
-            continue
-        best = None
-        for lag in range(max_lag_steps + 1):
+        if values.shape != residual.shape:
+            raise ValueError(f"signal {name!r} has shape {values.shape}, residual {residual.shape}: they must agree")
+        signals[name] = values
+        seen = values[use & np.isfinite(values)]
+        reason = (f"only {seen.size} finite valid steps (fewer than {min_steps})" if seen.size < min_steps
+                  else "constant over the valid steps" if np.ptp(seen) == 0 else None)
+        best: Dependence | None = None
+        for lag in range(max_lag_steps + 1) if reason is None else ():
             x = _lagged(values, lag)
-            both = np.isfinite(x) & np.isfinite(residual)
-            if both.sum() < min_steps or np.std(x[both]) == 0 or np.std(residual[both]) == 0:
+            both = use & np.isfinite(x)
+            if both.sum() < min_steps:
                 continue
-            rho = float(np.corrcoef(residual[both], x[both])[0, 1])
-            if best is None or abs(rho) > abs(best.correlation):
-                best = Dependence(name, rho, lag, int(both.sum()))
-        if best is not None:
+            rho = _correlation(residual[both], x[both])
+            if np.isfinite(rho) and (best is None or abs(rho) > abs(best.correlation)):
+                best = Dependence(name, lag, rho, int(both.sum()))
+        if best is None:
+            skipped.append(Dependence(name, 0, float("nan"), int(seen.size),
+                                      skipped_reason=reason or "constant or too short at every lag"))
+        else:
             ranked.append(best)
     ranked.sort(key=lambda d: -abs(d.correlation))
-    return ranked, skipped
+    ranked = [replace(d, rank=k + 1) for k, d in enumerate(ranked)]
 
-
-def joint_r2(residual: np.ndarray, signals: Mapping[str, np.ndarray], dependences: list[Dependence]) -> float:
-    """R² of ``residual`` regressed on the listed signals at their lags (with an intercept)."""
-    columns = [_lagged(np.asarray(signals[d.signal], float), d.lag_steps) for d in dependences]
-    if not columns:
-        return 0.0
-    design = np.column_stack([np.ones_like(residual)] + columns)
-    rows = np.isfinite(design).all(axis=1) & np.isfinite(residual)
-    if rows.sum() <= design.shape[1]:
-        return float("nan")
-    coef, *_ = np.linalg.lstsq(design[rows], residual[rows], rcond=None)
-    fitted = design[rows] @ coef
-    total = np.sum((residual[rows] - residual[rows].mean()) ** 2)
-    return float(1.0 - np.sum((residual[rows] - fitted) ** 2) / total) if total > 0 else float("nan")
+    columns: list[np.ndarray] = []
+    for k, dependence in enumerate(ranked[:n_joint]):
+        x = _lagged(signals[dependence.signal], dependence.lag_steps)
+        rows = use & np.isfinite(x)
+        for column in columns:
+            rows &= np.isfinite(column)
+        if rows.sum() < min_steps + k + 2:
+            break
+        e, xr = residual[rows], x[rows]
+        above = np.column_stack([np.ones(int(rows.sum()))] + [c[rows] for c in columns])
+        x_cleared = _residual_of(xr, above)
+        new = x_cleared @ x_cleared > COLLINEAR_SHARE * np.sum((xr - xr.mean()) ** 2)
+        partial = _correlation(_residual_of(e, above), x_cleared) if new else 0.0
+        r2 = 1.0 - np.sum(_residual_of(e, np.column_stack([above, xr])) ** 2) / np.sum((e - e.mean()) ** 2)
+        ranked[k] = replace(dependence, partial_correlation=partial, cumulative_r2=float(r2))
+        columns.append(x)
+    return ranked + skipped

@@ -32,7 +32,7 @@ __all__ = ["Settings"]
 class Settings(BaseSettings):
     """Everything :func:`service.api.create_app` needs; see the module docstring for the variables."""
 
-    model_config = SettingsConfigDict(env_prefix="GRAPHTWIN_", extra="forbid")
+    model_config = SettingsConfigDict(env_prefix="GRAPHTWIN_", extra="forbid", hide_input_in_errors=True)
 
     data_dir: Path = Path("graphtwin-service")
     store_dir: Path | None = None

@@ -34,6 +34,7 @@ import pyoxigraph as ox
 from .namespaces import DCTERMS, GT, RDF, RDFS, XSD
 from .resources import signatures_dir
 from .signature import Rule, Signature, load_signature_library
+from .store import SIGNATURE_GRAPH, GraphStore
 
 __all__ = ["signature_triples", "library_triples", "load_signature_library_into"]
 
@@ -152,11 +153,10 @@ def library_triples(library: Mapping[str, Signature] | None = None) -> list[ox.T
     return [t for key in sorted(library) for t in signature_triples(library[key])]
 
 
-def load_signature_library_into(store, library: Mapping[str, Signature] | None = None) -> int:
-    """Replace the signature graph of ``store`` (a :class:`service.store.GraphStore`) with the
-    library, in one transaction; returns the number of triples written."""
-    from .store import SIGNATURE_GRAPH
-
+def load_signature_library_into(store: GraphStore, library: Mapping[str, Signature] | None = None) -> int:
+    """Replace the signature graph of ``store`` with ``library`` (default: ``signatures/``) in one
+    transaction; returns the number of triples written. :meth:`GraphStore.ensure_signature_library`
+    does the same only when the graph differs."""
     triples = library_triples(library)
     store.write_graph(SIGNATURE_GRAPH, triples)
     return len(triples)

@@ -14,7 +14,10 @@ loop of components, not of physics) is broken at a connection carrying a flow (k
 commands, slow) if the cycle has one, else at the connection whose target comes first in IRI order,
 with a warning naming it. A delayed input at step ``k`` receives the producer's output of
 step ``k − 1``; at ``k = 0`` it receives the producer's measured value when the producer is a
-measuring device with a series in ``boundary`` (the sensor's first reading), else 0.
+measuring device with a series in ``boundary`` (the sensor's first reading), else 0. Not a value
+from the producer's ``initial_state``: a state is not an output, and the producer's output at
+``t_0`` depends on the loop that is being broken; the measured reading is what the real controller
+saw.
 
 **Sub-steps.** ``substeps = S`` runs the components at ``step_s / S`` (a PI loop sampled every few
 minutes would oscillate where the real controller, sampled every second, does not) with the
@@ -206,8 +209,8 @@ class Simulator:
         self,
         boundary: Mapping[str, np.ndarray],
         theta: np.ndarray,
-        *,
         fixed: Mapping[str, float] | None = None,
+        *,
         record: Iterable[tuple[str, str]] | None = None,
     ) -> SimulationResult:
         """Simulate every ensemble member over the boundary series.

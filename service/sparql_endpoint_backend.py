@@ -10,7 +10,8 @@ Protocols (W3C SPARQL 1.1 Protocol and Graph Store HTTP Protocol), with the Oxig
                     ``Content-Type`` says which came back. ``default_graph`` becomes one
                     ``default-graph-uri`` URL parameter per graph.
 ``update``          ``POST update_url``, body ``application/sparql-update``.
-``replace_graph``   one update request ``DROP SILENT GRAPH <g> ; INSERT DATA { GRAPH <g> {…} }``
+``replace_graph``   ``POST store_url?graph=<staging>`` (N-Triples) into a fresh staging graph, then
+                    one update ``MOVE SILENT GRAPH <staging> TO GRAPH <g>``
 ``load_graph``      parse locally with pyoxigraph, then as ``replace_graph``
 ``drop_graph``      ``DELETE store_url?graph=<g>`` (a 404 for an absent graph is success)
 ``dump``            ``GET store_url?graph=<g>`` with ``Accept`` = the format's media type
@@ -18,14 +19,21 @@ Protocols (W3C SPARQL 1.1 Protocol and Graph Store HTTP Protocol), with the Oxig
 ``triple_count``    ``SELECT (COUNT(*) AS ?n) WHERE { GRAPH <g> { ?s ?p ?o } }``
 ==================  ==========================================================================
 
-Without a ``store_url`` (an endpoint without the graph store protocol) ``drop_graph`` sends
-``DROP SILENT GRAPH <g>`` and ``dump`` a ``CONSTRUCT`` that pyoxigraph serialises locally.
+Without a ``store_url`` (an endpoint without the graph store protocol) ``replace_graph`` sends one
+update ``DROP SILENT GRAPH <g> ; INSERT DATA { GRAPH <g> { … } }``
+(:func:`service.store.insert_data_update`), ``drop_graph`` sends ``DROP SILENT GRAPH <g>`` and
+``dump`` a ``CONSTRUCT`` that pyoxigraph serialises locally.
 
-Atomicity. ``replace_graph`` is *not* a graph store ``PUT``: the Oxigraph server handles a PUT as
-``clear_graph`` followed by a load, two transactions, so a reader can see the graph empty or half
-loaded. One SPARQL update request is one transaction in Oxigraph (the server runs it through
+Atomicity. One SPARQL update request is one transaction in Oxigraph (the server runs it through
 ``Store::update``, "applied in a transactional manner: either the full operation succeeds or
-nothing is written"), so a reader sees the old graph or the new one, never a mix.
+nothing is written"), so after either ``MOVE`` or ``DROP … ; INSERT DATA`` a reader sees the old
+graph or the new one, never a mix. ``replace_graph`` is *not* a graph store ``PUT``: the Oxigraph
+server handles a PUT as ``clear_graph`` followed by a load, two transactions, between which a reader
+can see the graph empty. The staging upload exists because the Oxigraph server refuses SPARQL
+request bodies over 1 MiB (``MAX_SPARQL_BODY_SIZE``), while a graph store upload has no such limit;
+the staging graph (``urn:graphtwin:staging:<uuid4>``) is visible in :meth:`graphs` only until the
+``MOVE``, and is dropped if the ``MOVE`` fails. Without a ``store_url`` a graph is thus limited to
+what the endpoint accepts in one update body.
 
 Values (``substitutions``) are bound as in the embedded store (:func:`service.store.bind_values`):
 a ``VALUES (?v …) { (…) }`` block inserted right after the opening brace of the query's outermost
@@ -45,6 +53,7 @@ RDF that does not parse raises :class:`service.store.ModelLoadError` before anyt
 from __future__ import annotations
 
 import re
+import uuid
 from collections.abc import Iterable, Mapping, Sequence
 
 import httpx
@@ -52,13 +61,15 @@ import pyoxigraph as ox
 
 from .store import bind_values, insert_data_update, parse_rdf
 
-__all__ = ["SparqlEndpointBackend", "SparqlEndpointError", "SparqlRequestError"]
+__all__ = ["SparqlEndpointBackend", "SparqlEndpointError", "SparqlRequestError", "STAGING_PREFIX"]
 
 Term = ox.NamedNode | ox.BlankNode | ox.Literal
 _RESULTS_JSON = "application/sparql-results+json"
 _N_TRIPLES = "application/n-triples"
 _GRAPH_KEYWORD = re.compile(r"\bGRAPH\b", re.IGNORECASE)
 _MAX_SERVER_TEXT = 2000
+#: Graphs named with this prefix hold an upload until it is moved into place.
+STAGING_PREFIX = "urn:graphtwin:staging:"
 
 
 class SparqlEndpointError(OSError):
@@ -193,12 +204,23 @@ class SparqlEndpointBackend:
                    headers={"Content-Type": "application/sparql-update"})
 
     def replace_graph(self, graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> None:
-        """Replace ``graph`` by ``triples`` in one update request (atomic for readers); empty drops it."""
+        """Replace ``graph`` by ``triples``, atomically for readers (see the module doc); empty drops it."""
         triples = list(triples)
         if not triples:
             self.drop_graph(graph)
             return
-        self.update(insert_data_update(graph, triples))
+        if self.store_url is None:
+            self.update(insert_data_update(graph, triples))
+            return
+        staging = ox.NamedNode(f"{STAGING_PREFIX}{uuid.uuid4().hex}")
+        self._send("POST", self.store_url, "graph upload", params={"graph": staging.value},
+                   content=ox.serialize(triples, format=ox.RdfFormat.N_TRIPLES),
+                   headers={"Content-Type": _N_TRIPLES})
+        try:
+            self.update(f"MOVE SILENT GRAPH {staging} TO GRAPH {graph}")
+        except (SparqlEndpointError, SparqlRequestError):
+            self._send("DELETE", self.store_url, "staging graph deletion", params={"graph": staging.value}, ok_missing=True)
+            raise
 
     def load_graph(self, graph: ox.NamedNode, data: bytes, format: ox.RdfFormat, *,
                    base_iri: str | None = None, source_name: str = "<data>") -> int:

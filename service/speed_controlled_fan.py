@@ -1,20 +1,24 @@
-"""Supply fan driven by a speed command (VFD): air flow from speed, power from the part-load curve."""
+"""Fan with a variable-speed drive, driven by a logged speed command: flow from speed, power from the
+part-load curve of :class:`service.fan.Fan`."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .component import AIR_DENSITY_KG_PER_M3, ComponentModel, Parameter, Port
+from .component import AIR_DENSITY_KG_PER_M3, ComponentModel, Port
 from .fan import Fan, part_load_power_fraction
 
 __all__ = ["SpeedControlledFan"]
 
 
 class SpeedControlledFan(ComponentModel):
-    """V̇ = s·V̇_nom (fan laws at constant system curve), ṁ = ρ·V̇, P = P_nom·(c1 + c2·s + c3·s² + c4·s³)
+    """V̇ = s·V̇_nom [m³/s],  ṁ = ρ_air·V̇ [kg/s],  P = P_nom·(c1 + c2·s + c3·s² + c4·s³) [W]
 
-    s the speed command (0–1, clipped); the air leaves at its inlet temperature (motor heat is the
-    FanMotorHeat effect). Parameters and bounds as :class:`service.fan.Fan`.
+    s the speed command (0–1, clipped; a VFD's logged output frequency over its nominal one). The
+    flow is proportional to the speed (fan affinity law at a fixed system curve, i.e. fixed damper
+    positions), so the flow fraction of the part-load curve is s itself. The air leaves at its inlet
+    temperature (motor heat in the air stream is the FanMotorHeat effect). Parameters, defaults and
+    bounds are :class:`service.fan.Fan`'s.
     """
 
     inputs = (
@@ -26,7 +30,10 @@ class SpeedControlledFan(ComponentModel):
 
     def step(self, params, inputs, state, dt_s):
         speed = np.minimum(np.maximum(inputs["speed"], 0.0), 1.0)
-        flow = speed * params["nominal_air_flow"]
-        power = params["nominal_power"] * part_load_power_fraction(speed, params["c1"], params["c2"], params["c3"], params["c4"])
-        return {"outlet_air_temperature": inputs["inlet_air_temperature"],
-                "outlet_air_mass_flow": AIR_DENSITY_KG_PER_M3 * flow, "electric_power": power}
+        power = params["nominal_power"] * part_load_power_fraction(
+            speed, params["c1"], params["c2"], params["c3"], params["c4"])
+        return {
+            "outlet_air_temperature": inputs["inlet_air_temperature"],
+            "outlet_air_mass_flow": AIR_DENSITY_KG_PER_M3 * params["nominal_air_flow"] * speed,
+            "electric_power": power,
+        }

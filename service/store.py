@@ -16,9 +16,15 @@ Two backends implement :class:`SparqlBackend`: :class:`EmbeddedBackend` (pyoxigr
 memory for tests) and :class:`service.sparql_endpoint_backend.SparqlEndpointBackend` (any SPARQL 1.1
 endpoint with the graph store protocol). Contracts, as pyoxigraph's:
 
-* every write is one transaction: a reader sees a graph before or after, never half of it;
+* every write is one transaction: a reader sees a graph before or after, never half of it; a model
+  and what alignment infers from it are written together (:meth:`GraphStore.write_graphs`);
 * a load parses everything first and raises :class:`ModelLoadError` (file, line, column) before
   anything is written: a failed load leaves the store as it was;
+* a model's blank nodes are skolemised on load (RDF 1.1 Concepts §3.5, :func:`skolemize`): each
+  becomes an IRI ``gtr:model/<name>/genid/<n>``, numbered in order of appearance, so it keeps its
+  identity across graphs (inferred triples about it), across update requests (SPARQL ``INSERT DATA``
+  renames blank nodes) and across backends, can be bound in a query, and reloading the same file
+  gives the same triples;
 * values reach queries through ``substitutions``: serialised by pyoxigraph (validated, escaped) into a
   ``VALUES`` block at the start of the outer WHERE group (:func:`bind_values`), the same way on
   every backend, never by splicing user text;
@@ -36,12 +42,14 @@ from typing import Protocol, runtime_checkable
 
 import pyoxigraph as ox
 
-from .namespaces import PREFIXES, graph_iri
+from .alignment import inferred_triples
+from .namespaces import GTR, graph_iri
 from .resources import ontologies_dir, queries_dir
+from .signature import Signature
 
 __all__ = [
-    "ModelLoadError", "SparqlBackend", "bind_values", "insert_data_update", "EmbeddedBackend", "GraphStore", "rdf_format", "parse_rdf",
-    "ONTOLOGY_GRAPH", "SIGNATURE_GRAPH",
+    "ModelLoadError", "SparqlBackend", "bind_values", "insert_data_update", "EmbeddedBackend", "GraphStore",
+    "rdf_format", "parse_rdf", "skolemize", "ONTOLOGY_GRAPH", "SIGNATURE_GRAPH",
 ]
 
 Term = ox.NamedNode | ox.BlankNode | ox.Literal
@@ -104,10 +112,36 @@ def parse_rdf(data: bytes, fmt: ox.RdfFormat, source_name: str, base_iri: str | 
     return [ox.Triple(q.subject, q.predicate, q.object) for q in quads]
 
 
+def skolemize(triples: Iterable[ox.Triple], prefix: str) -> list[ox.Triple]:
+    """Replace every blank node by the IRI ``prefix + n`` (n = 0, 1, … in order of first appearance).
+
+    The order of a parse is deterministic, so the same document always gives the same IRIs.
+    """
+    names: dict[ox.BlankNode, ox.NamedNode] = {}
+
+    def iri(term):
+        if isinstance(term, ox.BlankNode):
+            if term not in names:
+                names[term] = ox.NamedNode(f"{prefix}{len(names)}")
+            return names[term]
+        return term
+
+    return [ox.Triple(iri(t.subject), t.predicate, iri(t.object)) for t in triples]
+
+
 @runtime_checkable
 class SparqlBackend(Protocol):
     """What graphtwin needs from a quad store. Implemented by :class:`EmbeddedBackend` and
-    :class:`service.sparql_endpoint_backend.SparqlEndpointBackend`."""
+    :class:`service.sparql_endpoint_backend.SparqlEndpointBackend` (HTTP SPARQL 1.1 protocol and
+    graph store protocol).
+
+    ``query`` returns, fully consumed: for SELECT ``list[dict[str, term]]`` (unbound variables
+    absent), for ASK ``bool``, for CONSTRUCT ``list[Triple]``; ``substitutions`` bind variables
+    (:func:`bind_values`); ``default_graph`` lists the named graphs whose union is the default graph.
+    ``update`` runs a SPARQL update request as one transaction. ``replace_graph`` and ``load_graph``
+    replace one named graph atomically; ``load_graph`` parses completely first and raises
+    :class:`ModelLoadError`, leaving the store untouched.
+    """
 
     def query(self, sparql: str, *, substitutions: Mapping[str, Term] | None = None,
               default_graph: Sequence[ox.NamedNode] | None = None): ...
@@ -225,16 +259,22 @@ def _named_query_text(path: Path) -> str:
     return path.read_text(encoding="utf-8")
 
 
-def _term(value) -> Term:
+def _term(name: str, value) -> Term:
+    """A query parameter as a term: str starting with http(s):// or urn: → IRI, other str, bool,
+    int and float → literal (xsd:string, boolean, integer, double), pyoxigraph terms as they are."""
     if isinstance(value, (ox.NamedNode, ox.BlankNode, ox.Literal)):
         return value
     if isinstance(value, str) and value.startswith(("http://", "https://", "urn:")):
-        return ox.NamedNode(value)
-    if isinstance(value, bool):
-        return ox.Literal("true" if value else "false", datatype=ox.NamedNode("http://www.w3.org/2001/XMLSchema#boolean"))
-    if isinstance(value, (int, float, str)):
+        try:
+            return ox.NamedNode(value)
+        except ValueError as exc:
+            raise ValueError(f"query parameter {name}: {value!r} is not a valid IRI ({exc})") from None
+    if isinstance(value, (bool, int, float, str)):
         return ox.Literal(value)
-    raise TypeError(f"cannot bind {value!r} in a query: give a str, number or pyoxigraph term")
+    raise TypeError(f"query parameter {name}: cannot bind {value!r}; give a str, number or pyoxigraph term")
+
+
+_GRAPH_TRIPLES = "CONSTRUCT { ?s ?p ?o } WHERE { GRAPH ?graph { ?s ?p ?o } }"
 
 
 class GraphStore:
@@ -242,7 +282,7 @@ class GraphStore:
 
     def __init__(self, backend: SparqlBackend):
         self.backend = backend
-        self._ontologies_loaded = False
+        self._ontology_triples: list[ox.Triple] | None = None
 
     @classmethod
     def embedded(cls, path: Path | None = None) -> GraphStore:
@@ -259,6 +299,10 @@ class GraphStore:
     # ------------------------------------------------------------------ graph names
     @staticmethod
     def check_name(name: str) -> str:
+        """``name`` if it can name a model or run (it becomes part of graph IRIs).
+
+        :raises ValueError: naming the rule.
+        """
         if not _NAME.match(name or ""):
             raise ValueError(
                 f"model name {name!r}: use letters, digits, '_', '-', '.', '+' (starting with a letter or digit)"
@@ -288,36 +332,57 @@ class GraphStore:
     def has_model(self, name: str) -> bool:
         return self.model_graph(name) in self.backend.graphs()
 
+    def graph_triples(self, graph: ox.NamedNode) -> list[ox.Triple]:
+        """Every triple of ``graph`` (empty when it does not exist)."""
+        return self.backend.query(_GRAPH_TRIPLES, substitutions={"graph": graph})
+
     # ------------------------------------------------------------------ loading
-    def ensure_ontologies(self) -> None:
-        """Load ``ontologies/*.ttl`` into the ontology graph once (idempotent)."""
-        if self._ontologies_loaded:
-            return
+    def ensure_ontologies(self) -> bool:
+        """Make the ontology graph hold ``ontologies/*.ttl``; checked once per :class:`GraphStore`.
+
+        When the files differ from what the store holds (a new graphtwin version opening an old
+        store) the graph is replaced and every model's inferences are derived again.
+        :returns: whether the graph was (re)written.
+        """
+        if self._ontology_triples is not None:
+            return False
         triples: list[ox.Triple] = []
         for path in sorted(ontologies_dir().glob("*.ttl")):
             triples += parse_rdf(path.read_bytes(), ox.RdfFormat.TURTLE, str(path))
-        current = self.backend.triple_count(ONTOLOGY_GRAPH)
-        if current != len(set(triples)):
-            self.backend.replace_graph(ONTOLOGY_GRAPH, triples)
-        self._ontologies_loaded = True
+        triples = skolemize(triples, f"{GTR}ontology/genid/")
+        self._ontology_triples = triples
+        if set(triples) == set(self.graph_triples(ONTOLOGY_GRAPH)):
+            return False
+        self.backend.replace_graph(ONTOLOGY_GRAPH, triples)
+        for name in self.models():
+            self.realign(name)
+        return True
 
-    def ensure_signature_library(self, library=None) -> None:
-        """Write the signature library as triples (``gtr:graph/signatures/library``)."""
+    def ensure_signature_library(self, library: Mapping[str, Signature] | None = None) -> bool:
+        """Make the signature graph describe ``library`` (default: ``signatures/``), see
+        :mod:`service.signature_triples`; writes only when it differs. :returns: whether it wrote."""
         from .signature_triples import library_triples
 
-        self.backend.replace_graph(SIGNATURE_GRAPH, library_triples(library))
+        triples = library_triples(library)
+        if set(triples) == set(self.graph_triples(SIGNATURE_GRAPH)):
+            return False
+        self.write_graph(SIGNATURE_GRAPH, triples)
+        return True
 
     def load_model(self, name: str, source: Path | bytes | str, format: str | None = None, *,
                    source_name: str | None = None) -> int:
-        """Load (or replace) building model ``name`` and refresh what alignment infers from it.
+        """Load (or replace) building model ``name`` with what alignment infers from it, in one
+        transaction; blank nodes are skolemised (module docstring).
 
         :param source: a file path, or the RDF as bytes.
-        :param format: ``ttl``, ``nt``, ``rdf``, ``jsonld`` or a media type; from the suffix when None.
+        :param format: ``ttl``, ``nt``, ``rdf``, ``jsonld`` or a media type; from the suffix when None
+            (Turtle for bytes).
         :returns: the number of triples loaded.
-        :raises ModelLoadError: the source does not parse; the store is unchanged.
+        :raises ModelLoadError: the source does not parse or is empty; the store is unchanged.
+        :raises FileNotFoundError: no file at ``source``.
         """
         self.check_name(name)
-        if isinstance(source, (str, Path)) and not isinstance(source, bytes):
+        if isinstance(source, (str, Path)):
             path = Path(source)
             if not path.is_file():
                 raise FileNotFoundError(f"{path}: no such file")
@@ -331,30 +396,52 @@ class GraphStore:
         triples = parse_rdf(data, fmt, source_name)
         if not triples:
             raise ModelLoadError(source_name, "the model is empty: no triples")
+        triples = skolemize(triples, f"{GTR}model/{name}/genid/")
         self.ensure_ontologies()
-        self.backend.replace_graph(self.model_graph(name), triples)
-        from .alignment import align_model
-
-        align_model(self, name)
+        self.write_graphs({
+            self.model_graph(name): triples,
+            self.inferred_graph(name): inferred_triples(triples, self._ontology_triples),
+        })
         return len(triples)
 
+    def realign(self, name: str) -> int:
+        """Derive model ``name``'s inferences again (after the ontologies or the rules changed);
+        returns the number of inferred triples."""
+        self.ensure_ontologies()
+        inferred = inferred_triples(self.graph_triples(self.model_graph(name)), self._ontology_triples)
+        self.write_graph(self.inferred_graph(name), inferred)
+        return len(inferred)
+
     def drop_model(self, name: str) -> None:
-        for graph in (self.model_graph(name), self.inferred_graph(name), self.assembly_graph(name)):
-            self.backend.drop_graph(graph)
+        """Remove model ``name``, its inferences and its assembly (one transaction); runs stay."""
+        graphs = (self.model_graph(name), self.inferred_graph(name), self.assembly_graph(name))
+        self.backend.update(" ;\n".join(f"DROP SILENT GRAPH {g}" for g in graphs))
 
     # ------------------------------------------------------------------ queries
     def query(self, sparql: str, *, substitutions: Mapping[str, object] | None = None,
               model: str | None = None, default_graph: Sequence[ox.NamedNode] | None = None):
-        """Run a SPARQL query; ``model=`` sets the default graph to :meth:`matching_dataset`."""
+        """Run a SPARQL query (results as :class:`SparqlBackend` ``query``).
+
+        :param substitutions: variable name → value, converted as :meth:`run_named_query` says.
+        :param model: match over this model: the default graph is :meth:`matching_dataset`.
+        :param default_graph: the named graphs whose union is the default graph (not with ``model``).
+        :raises ValueError: a SPARQL syntax error, or both ``model`` and ``default_graph``.
+        """
         if model is not None:
+            if default_graph is not None:
+                raise ValueError("give model= or default_graph=, not both")
             default_graph = self.matching_dataset(model)
-        bound = {k: _term(v) for k, v in (substitutions or {}).items()}
+        bound = {k: _term(k, v) for k, v in (substitutions or {}).items()}
         try:
             return self.backend.query(sparql, substitutions=bound or None, default_graph=default_graph)
         except SyntaxError as exc:
             raise ValueError(f"SPARQL syntax error: {exc}") from None
 
     def named_query_text(self, name: str) -> str:
+        """The text of ``queries/<name>.rq`` (read once).
+
+        :raises KeyError: no such query, listing the known ones.
+        """
         path = queries_dir() / f"{name}.rq"
         if not path.is_file():
             known = ", ".join(sorted(p.stem for p in queries_dir().glob("*.rq")))
@@ -363,14 +450,19 @@ class GraphStore:
 
     def run_named_query(self, query_name: str, /, *, dataset: str | None = None, **params):
         """Run ``queries/<query_name>.rq``; each keyword binds the variable of that name (str starting
-        with http(s):// or urn: → IRI, other str and numbers → literal, pyoxigraph terms as they are).
-        ``dataset=NAME`` matches over model NAME's :meth:`matching_dataset` (queries about a building
-        graph); without it the query sees every named graph through ``GRAPH`` (queries about results)."""
+        with http(s):// or urn: → IRI, other str, bool, int, float → literal, pyoxigraph terms as they
+        are). ``dataset=NAME`` matches over model NAME's :meth:`matching_dataset` (queries about a
+        building graph); without it the query sees the named graphs through ``GRAPH`` (queries about
+        results, the signature library). ``model`` is an ordinary parameter (``?model``, a model
+        name, in the result queries)."""
         return self.query(self.named_query_text(query_name), substitutions=params, model=dataset)
 
     def write_graph(self, graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> None:
         """Replace ``graph`` with ``triples`` in one transaction."""
         self.backend.replace_graph(graph, triples)
 
-    def prefixes_header(self) -> str:
-        return "".join(f"PREFIX {p}: <{iri}>\n" for p, iri in PREFIXES.items())
+    def write_graphs(self, graphs: Mapping[ox.NamedNode, Iterable[ox.Triple]]) -> None:
+        """Replace several graphs in one transaction (one SPARQL update request); blank nodes must
+        not be shared between them (``INSERT DATA`` renames blank nodes per block). An Oxigraph
+        server accepts update bodies up to 1 MiB, which bounds a model loaded into a remote store."""
+        self.backend.update(" ;\n".join(insert_data_update(g, triples) for g, triples in graphs.items()))

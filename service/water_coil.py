@@ -1,51 +1,91 @@
-"""A water coil driven by a logged valve command (heating or cooling), static."""
+"""Water coils driven by a logged valve command (heating and cooling): static ε-NTU.
+
+A building automation system logs the valve *command* of each coil but rarely the water side, so the
+coil's water flow follows from the command and its supply water temperature is a parameter::
+
+    ṁ_w = u · ṁ_w,max                                                              [kg/s]
+    1/UA = 1/(hA_w · u^0.8) + 1/(hA_a · (ṁ_a/ṁ_a,ref)^0.8),   ṁ_a,ref = 2 kg/s        [K/W]
+    Q = ε(NTU, C_r) · C_min · (T_w − T_a,in)      (counter-flow, :mod:`service.heat_exchanger`)
+    T_a,out = T_a,in + Q / C_a                                                        [°C]
+
+u the valve command clipped to 0–1 (a linear valve at constant differential pressure: flow ∝ u),
+C_w = ṁ_w·c_p,w, C_a = ṁ_a·c_p,a; hA_w is the water-side film conductance with the valve fully open,
+hA_a the air-side one at 2 kg/s of air. u = 0 gives no flow and no heat (T_a,out = T_a,in); with no
+air flow the stagnant air takes the water temperature (ε → 1).
+
+Static: the coil's thermal mass is the CoilThermalMass effect the diagnosis can add. A cooling coil
+gives Q < 0; condensation is ignored (sensible heat only: the air's humidity is not an input), so
+a wet coil's behaviour shows as a model error or is absorbed by the calibrated conductances.
+
+**Parameters (4)**: T_w, ṁ_w,max, hA_w, hA_a. Bounds are those of the coils of a 0.2–3 m³/s air
+handling unit. :class:`HeatingWaterCoil` (hot water, 35–90 °C) and :class:`CoolingWaterCoil`
+(chilled water, 4–18 °C) differ from :class:`WaterCoil` (whose service the graph does not state:
+2–90 °C) only in the prior of T_w.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .component import AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_SPECIFIC_HEAT_J_PER_KG_K, ComponentModel, Parameter, Port
-from .hot_water_loop import counterflow_effectiveness
+from .heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
 
-__all__ = ["WaterCoil"]
+__all__ = ["WaterCoil", "HeatingWaterCoil", "CoolingWaterCoil"]
 
 _TINY = 1e-9
 
+_FLOW_AND_CONDUCTANCES = (
+    Parameter("maximum_water_mass_flow", "kg/s", 0.4, 0.02, 3.0, "water flow with the valve fully open, ṁ_w,max"),
+    Parameter("water_side_conductance", "W/K", 2000.0, 100.0, 10000.0, "water-side hA with the valve fully open, hA_w"),
+    Parameter("air_side_conductance", "W/K", 2000.0, 100.0, 10000.0, "air-side hA at 2 kg/s of air, hA_a"),
+)
+
 
 class WaterCoil(ComponentModel):
-    """Q = ε·C_min·(T_w − T_a,in),  T_a,out = T_a,in + Q/C_a   [W, °C]
-
-    The valve command u (0–1, linear valve with constant pressure difference) sets the water flow
-    ṁ_w = u·ṁ_w,max; the supply water temperature T_w is a parameter (the logged data of a BMS rarely
-    holds it); counter-flow ε-NTU with UA scaled by the water flow, UA = UA_max·(u)^0.8 (water-side
-    film dominated). Used for heating coils (T_w above the air) and cooling coils (T_w below: Q < 0;
-    condensation is ignored, so latent cooling appears as a model error on humid days). Static: the
-    coil's thermal mass is the CoilThermalMass effect, which the diagnosis can add.
-    """
+    """Static water-to-air coil driven by its valve command (module docstring)."""
 
     inputs = (
-        Port("valve_position", "1", "valve command, u"),
-        Port("inlet_air_temperature", "degC", "air temperature entering the coil"),
-        Port("air_mass_flow", "kg/s", "air mass flow through the coil"),
+        Port("valve_position", "1", "valve command, u (0–1)"),
+        Port("inlet_air_temperature", "degC", "air temperature entering the coil, T_a,in"),
+        Port("air_mass_flow", "kg/s", "air mass flow through the coil, ṁ_a"),
     )
     outputs = (
-        Port("outlet_air_temperature", "degC", "air temperature leaving the coil"),
+        Port("outlet_air_temperature", "degC", "air temperature leaving the coil, T_a,out"),
         Port("heat_rate", "W", "heat given to the air (negative when cooling), Q"),
     )
     parameters = (
-        Parameter("supply_water_temperature", "degC", 50.0, 2.0, 90.0, "water temperature entering the coil, T_w"),
-        Parameter("maximum_water_mass_flow", "kg/s", 0.3, 0.01, 3.0, "water flow with the valve open, ṁ_w,max"),
-        Parameter("maximum_ua", "W/K", 800.0, 20.0, 10000.0, "UA with the valve open, UA_max"),
-    )
+        Parameter("supply_water_temperature", "degC", 45.0, 2.0, 90.0, "water temperature entering the coil, T_w"),
+    ) + _FLOW_AND_CONDUCTANCES
 
     def step(self, params, inputs, state, dt_s):
         position = np.minimum(np.maximum(inputs["valve_position"], 0.0), 1.0)
         air_in = inputs["inlet_air_temperature"]
-        c_air = np.maximum(inputs["air_mass_flow"], _TINY) * AIR_SPECIFIC_HEAT_J_PER_KG_K
-        c_water = np.maximum(position * params["maximum_water_mass_flow"] * WATER_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
-        ua = params["maximum_ua"] * np.maximum(position, _TINY) ** 0.8
-        c_min, c_max = np.minimum(c_air, c_water), np.maximum(c_air, c_water)
-        heat = counterflow_effectiveness(ua / c_min, c_min / c_max) * c_min * (params["supply_water_temperature"] - air_in)
-        heat = heat * (position > 0.0)
-        return {"outlet_air_temperature": air_in + heat / np.maximum(c_air, 0.1 * AIR_SPECIFIC_HEAT_J_PER_KG_K),
-                "heat_rate": heat}
+        air_flow = np.maximum(inputs["air_mass_flow"], 0.0)
+        c_air = air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K
+        c_water = position * params["maximum_water_mass_flow"] * WATER_SPECIFIC_HEAT_J_PER_KG_K
+        ua = series_film_ua_w_per_k(
+            params["water_side_conductance"], position,
+            params["air_side_conductance"], air_flow / REFERENCE_AIR_MASS_FLOW,
+        )
+        heat = coil_heat_rate_w(ua, c_water, c_air, params["supply_water_temperature"], air_in) * (position > 0.0)
+        return {"outlet_air_temperature": air_in + heat / np.maximum(c_air, _TINY), "heat_rate": heat}
+
+
+class HeatingWaterCoil(WaterCoil):
+    """A :class:`WaterCoil` fed with hot water: T_w 35–90 °C (low-temperature to conventional boiler
+    and district-heating supply), default 60 °C."""
+
+    parameters = (
+        Parameter("supply_water_temperature", "degC", 60.0, 35.0, 90.0,
+                  "hot water temperature entering the coil, T_w"),
+    ) + _FLOW_AND_CONDUCTANCES
+
+
+class CoolingWaterCoil(WaterCoil):
+    """A :class:`WaterCoil` fed with chilled water: T_w 4–18 °C (ice-storage to high-temperature
+    chilled water), default 7 °C."""
+
+    parameters = (
+        Parameter("supply_water_temperature", "degC", 7.0, 4.0, 18.0,
+                  "chilled water temperature entering the coil, T_w"),
+    ) + _FLOW_AND_CONDUCTANCES

@@ -5,7 +5,8 @@ import pyoxigraph as ox
 from case_study import EX
 
 from service.namespaces import GT, RDF
-from service.store import GraphStore
+from service.alignment import inferred_triples
+from service.store import ONTOLOGY_GRAPH, GraphStore
 
 V4 = b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
 @prefix ex: <https://example.org/a#> .
@@ -58,3 +59,21 @@ def test_the_users_graph_is_never_changed():
     store.load_model("v3", V3)
     model = store.model_graph("v3")
     assert not list(store.backend.store.quads_for_pattern(None, ox.NamedNode("https://saref.etsi.org/core/observes"), None, model))
+
+
+def test_a_v3_nominal_value_in_a_blank_node_stays_attached_to_its_value():
+    store = GraphStore.embedded(None)
+    store.load_model("bnode", b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
+<https://example.org/a#fan> a s4bldg:Fan ; s4bldg:nominalAirFlowRate [ a saref:Measurement ; saref:hasValue 1.5 ] .""")
+    rows = store.query("""PREFIX saref: <https://saref.etsi.org/core/> PREFIX s4bldg: <https://saref.etsi.org/saref4bldg/>
+        SELECT ?v WHERE { ?fan saref:hasPropertyValue ?pv . ?pv saref:isValueOfProperty s4bldg:nominalAirFlowRate ; saref:hasValue ?v }""",
+                       model="bnode")
+    assert [float(r["v"].value) for r in rows] == [1.5]
+
+
+def test_the_inferred_graph_holds_only_new_triples_and_is_a_fixpoint(case_store):
+    model = case_store.graph_triples(case_store.model_graph("case"))
+    inferred = case_store.graph_triples(case_store.inferred_graph("case"))
+    ontology = case_store.graph_triples(ONTOLOGY_GRAPH)
+    assert inferred and not set(inferred) & set(model)
+    assert inferred_triples(model + inferred, ontology) == []

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.measurements import MeasurementError, SeriesSpec, parse_timestamp, read_measurements
+from service.measurements import MeasurementError, SeriesSpec, parse_timestamp, read_measurements, write_comparison_csv
 
 SPECS = {
     "https://example.org/x#sat": SeriesSpec("https://example.org/x#sat", "SAT ", "http://qudt.org/vocab/unit/DEG_F", "degC"),
@@ -56,3 +56,54 @@ def test_windows_outside_the_data_are_refused(tmp_path):
     assert data.window("2025-01-01 00:10", None) == slice(1, 3)
     with pytest.raises(ValueError, match="outside the data"):
         data.window("2026-01-01", "2026-01-02")
+
+
+def test_valid_mask_and_select_by_time(tmp_path):
+    rows = ["time,SAT,valve"] + [f"2025-01-01 00:{m:02d},{50 + m},{m}" for m in range(0, 20)]
+    rows[3:11] = [r.split(",")[0] + ",," + r.split(",")[2] for r in rows[3:11]]  # SAT lines 4–11: an 8-step gap
+    data = read_measurements(_write(tmp_path, "\n".join(rows)), SPECS, max_gap_steps=5)
+    assert data.valid.tolist() == [True] * 2 + [False] * 8 + [True] * 10
+    part = data.select("2025-01-01 00:05", "2025-01-01 00:12:00")
+    assert part.n_steps == 8 and str(part.timestamps[0]) == "2025-01-01T00:05:00"
+    assert part.series["https://example.org/x#valve"] == pytest.approx(np.arange(5, 13) / 100)
+    assert part.valid.tolist() == [False] * 5 + [True] * 3
+    with pytest.raises(ValueError, match=r"lies outside the data .*2025-01-01T00:00:00 – 2025-01-01T00:19:00"):
+        data.select("2024-06-01", "2024-06-02")
+    with pytest.raises(ValueError, match="end is before the start"):
+        data.select("2025-01-01 00:10", "2025-01-01 00:05")
+
+
+def test_unit_problems_and_spreadsheet_errors_are_reported_by_column(tmp_path):
+    text = "time,SAT,valve\n2025-01-01 00:00,50,#VALUE!\n2025-01-01 00:10,50,10\n2025-01-01 00:20,50,20\n"
+    data = read_measurements(_write(tmp_path, text), SPECS)
+    assert "column 'valve': 1 spreadsheet error cell(s) read as missing" in data.warnings
+    assert np.isnan(data.series["https://example.org/x#valve"][0])  # a leading gap is not extrapolated
+    wrong = {**SPECS, "https://example.org/x#valve": SeriesSpec("https://example.org/x#valve", None,
+                                                                 "http://qudt.org/vocab/unit/KiloGM-PER-SEC", "1")}
+    no_unit = {**SPECS, "https://example.org/x#sat": SeriesSpec("https://example.org/x#sat", "SAT", None, "degC")}
+    with pytest.raises(MeasurementError, match=r"KiloGM-PER-SEC \(mass_flow\) to 1 \(fraction\) for column 'valve'"):
+        read_measurements(_write(tmp_path, text), wrong)
+    with pytest.raises(MeasurementError, match=r"column 'SAT': device https://example.org/x#sat declares no unit"):
+        read_measurements(_write(tmp_path, text), no_unit)
+    with pytest.raises(MeasurementError, match="columns no device of the model claims: extra"):
+        read_measurements(_write(tmp_path, "time,SAT,valve,extra\n2025-01-01 00:00,1,2,3\n2025-01-01 00:10,1,2,3\n"),
+                          SPECS, strict=True)
+
+
+def test_comparison_csv_writes_the_files_units_and_reads_back(tmp_path):
+    text = "time,SAT,valve\n2025-01-01 00:00,68,50\n2025-01-01 00:10,,60\n2025-01-01 00:20,71.6,70\n"
+    data = read_measurements(_write(tmp_path, text), SPECS)
+    out = tmp_path / "out.csv"
+    write_comparison_csv(out, data, {"https://example.org/x#sat": np.array([21.0, 22.0, 23.0])})  # °C
+    lines = out.read_text().splitlines()
+    assert lines[0] == "time,SAT,SAT (simulated),valve"
+    assert lines[1] == "2025-01-01 00:00:00,68.0000,69.8000,50.0000"  # °F and % as in the file
+    assert lines[2] == "2025-01-01 00:10:00,69.8000,71.6000,60.0000"  # the short gap as read (interpolated)
+    again = read_measurements(out, SPECS)
+    for node, values in data.series.items():
+        np.testing.assert_allclose(again.series[node], values, rtol=1e-6)
+    assert any("SAT (simulated)" in w for w in again.warnings)
+    with pytest.raises(ValueError, match="does not hold: urn:other"):
+        write_comparison_csv(out, data, {"urn:other": np.zeros(3)})
+    with pytest.raises(ValueError, match=r"shape \(2,\), the data 3 steps"):
+        write_comparison_csv(out, data, {"https://example.org/x#sat": np.zeros(2)})

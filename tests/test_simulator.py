@@ -8,7 +8,7 @@ import pytest
 from service.assembled_model import AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef
 from service.component import ComponentModel, Parameter, Port
 from service.signature import signature_from_dict
-from service.simulator import Simulator, component_order
+from service.simulator import Simulator, component_order, simulate, target_series
 
 
 class Gain(ComponentModel):
@@ -34,6 +34,16 @@ class Summer(ComponentModel):
 
 class Plain(Summer):
     inputs = (Port("a", "1"), Port("b", "1"))
+
+
+class FlowSetter(ComponentModel):
+    """m = x (a flow set by a command)."""
+
+    inputs = (Port("x", "1"),)
+    outputs = (Port("m", "kg/s"),)
+
+    def step(self, params, inputs, state, dt_s):
+        return {"m": inputs["x"]}
 
 
 def _instance(iri, cls, measured=False):
@@ -106,3 +116,53 @@ def test_substeps_report_at_data_steps():
     fine = Simulator(model, 60.0, substeps=3).run({"urn:source": np.ones(4)}, np.array([[0.0]]))
     assert fine.outputs[("urn:sum", "y")].shape == (1, 4)
     assert fine.outputs[("urn:sum", "y")] == pytest.approx(coarse.outputs[("urn:sum", "y")])
+
+
+def _sensor_loop_model():
+    """source (boundary) → sum → gain → sensor (target) → back into sum.b (feedback)."""
+    from service.measuring_device import MeasuringDevice
+
+    base = _loop_model()
+    components = {**base.components, "urn:sensor": _instance("urn:sensor", MeasuringDevice, True)}
+    connections = (
+        Connection("urn:source", "measured_value", "urn:sum", "a"),
+        Connection("urn:sum", "y", "urn:gain", "x"),
+        Connection("urn:gain", "y", "urn:sensor", "measured_value"),
+        Connection("urn:sensor", "measured_value", "urn:sum", "b"),
+    )
+    return AssembledModel(components, connections, ("urn:source",), ("urn:sensor",), (), base.estimated_parameters)
+
+
+def test_a_delayed_sensor_starts_from_its_first_reading():
+    """At t = 0 the loop-closing input gets the sensor's measured value when the run has its series,
+    else 0; afterwards the sensor's simulated value of the step before: y_k = u_k + k·y_{k−1}."""
+    model = _sensor_loop_model()
+    _, delayed, _ = component_order(model)
+    assert [(c.source, c.target_port) for c in delayed] == [("urn:sensor", "b")]
+    u = np.array([1.0, 0.0, 0.0])
+    sim = Simulator(model, 60.0)
+    theta = np.array([[0.5]])
+    seeded = sim.run({"urn:source": u, "urn:sensor": np.array([10.0, np.nan, np.nan])}, theta)
+    assert seeded.outputs[("urn:sum", "y")][0] == pytest.approx([11.0, 5.5, 2.75])
+    assert target_series(model, seeded) == {"urn:sensor": pytest.approx([5.5, 2.75, 1.375])}
+    unseeded = sim.run({"urn:source": u}, theta)
+    assert unseeded.outputs[("urn:sum", "y")][0] == pytest.approx([1.0, 0.5, 0.25])
+
+
+def test_fixed_values_override_theta_columns():
+    model = _loop_model()
+    u = np.array([1.0, 0.0, 0.0])
+    fixed = simulate(model, {"urn:source": u}, np.array([[2.0], [3.0]]), step_s=60.0, fixed={"urn:gain#k": 0.5})
+    assert fixed.outputs[("urn:sum", "y")] == pytest.approx(np.array([[1.0, 0.5, 0.25]] * 2))
+    assert fixed.step_s == 60.0
+
+
+def test_a_cycle_without_feedback_port_is_broken_at_a_flow():
+    """urn:a (FlowSetter) → urn:b.a, urn:b (Plain) → urn:a.x: IRI order alone would delay the
+    connection into urn:a; the flow rule delays the kg/s connection into urn:b instead."""
+    components = {"urn:a": _instance("urn:a", FlowSetter), "urn:b": _instance("urn:b", Plain)}
+    connections = (Connection("urn:a", "m", "urn:b", "a"), Connection("urn:b", "y", "urn:a", "x"))
+    model = AssembledModel(components, connections, (), (), (), ())
+    order, delayed, notes = component_order(model)
+    assert delayed == {connections[0]} and order == ["urn:b", "urn:a"]
+    assert notes == ["cycle without a feedback port: delayed urn:a.m → urn:b.a by one step"]

@@ -3,7 +3,7 @@
 import pyoxigraph as ox
 import pytest
 
-from service.store import GraphStore, ModelLoadError, bind_values
+from service.store import ONTOLOGY_GRAPH, GraphStore, ModelLoadError, bind_values
 
 from case_study import CASE_STUDY, EX
 
@@ -88,3 +88,44 @@ def test_named_query_binds_values_safely(case_store):
 def test_sparql_syntax_error_is_a_value_error(case_store):
     with pytest.raises(ValueError, match="SPARQL syntax error"):
         case_store.query("SELEC ?x WHERE { ?x ?y ?z }")
+
+
+def test_blank_nodes_become_the_same_iris_on_every_load():
+    data = b"""@prefix ex: <https://example.org/b#> . @prefix saref: <https://saref.etsi.org/core/> .
+ex:fan saref:hasPropertyValue [ saref:hasValue 1.5 ], [ saref:hasValue 2.5 ] ."""
+    store = GraphStore.embedded(None)
+    store.load_model("one", data)
+    first = sorted(str(t) for t in store.graph_triples(store.model_graph("one")))
+    store.load_model("one", data)
+    assert sorted(str(t) for t in store.graph_triples(store.model_graph("one"))) == first
+    values = {t.object.value for t in store.graph_triples(store.model_graph("one")) if t.predicate.value.endswith("hasPropertyValue")}
+    assert values == {"https://w3id.org/graphtwin/resource/model/one/genid/0", "https://w3id.org/graphtwin/resource/model/one/genid/1"}
+
+
+def test_an_old_on_disk_store_gets_the_current_ontologies_and_fresh_inferences(tmp_path):
+    store = GraphStore.embedded(tmp_path / "data")
+    store.load_model("case", CASE_STUDY)
+    inferred = set(store.graph_triples(store.inferred_graph("case")))
+    # what a store written by an older graphtwin holds: another ontology, no inferences
+    store.write_graph(ONTOLOGY_GRAPH, [ox.Triple(ox.NamedNode(EX + "x"), ox.NamedNode(EX + "y"), ox.Literal("old"))])
+    store.backend.drop_graph(store.inferred_graph("case"))
+    del store
+    reopened = GraphStore.embedded(tmp_path / "data")
+    assert reopened.ensure_ontologies() is True
+    assert reopened.ensure_ontologies() is False
+    assert set(reopened.graph_triples(reopened.inferred_graph("case"))) == inferred
+    assert GraphStore.embedded(None).ensure_ontologies() is True
+
+
+def test_query_argument_errors_name_the_problem(case_store):
+    with pytest.raises(ValueError, match="not both"):
+        case_store.query("ASK { ?s ?p ?o }", model="case", default_graph=[ONTOLOGY_GRAPH])
+    with pytest.raises(ValueError, match="query parameter device"):
+        case_store.run_named_query("measurement-link", dataset="case", device="https://example.org/a b")
+    with pytest.raises(TypeError, match="query parameter device"):
+        case_store.run_named_query("measurement-link", dataset="case", device=[1])
+    with pytest.raises(KeyError, match="known: .*measurement-link"):
+        case_store.run_named_query("no-such-query")
+    has_a_fan = "ASK { ?s a <https://saref.etsi.org/saref4bldg/Fan> }"
+    assert case_store.query(has_a_fan, model="case") is True
+    assert case_store.query(has_a_fan, model="nothing-loaded") is False

@@ -1,0 +1,157 @@
+"""Request and response bodies of the HTTP API (pydantic models; they make the OpenAPI document).
+
+Job requests are checked here, before a job is queued: model names (letters, digits, ``_-.+``),
+windows (``START/END``, ISO time stamps, either side may be empty), the calibration method.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, Field, field_validator
+
+from .calibration_run import parse_window
+from .store import GraphStore
+
+__all__ = [
+    "ErrorBody", "Health", "ModelSummary", "ModelList", "ModelInfo", "ModelUploaded", "MeasurementsInfo",
+    "MeasurementsList", "NamedQueryInfo", "NamedQueryList", "AssembleRequest", "CalibrateRequest",
+    "DiagnoseRequest", "AddEffectRequest", "ProgressEntry", "JobPublic", "JobList",
+]
+
+
+class ErrorBody(BaseModel):
+    """Every error: ``detail`` says what is wrong; the other fields when they apply."""
+
+    detail: str
+    problems: list[str] | None = Field(default=None, description="every problem found (measurements, assembly)")
+    line: int | None = Field(default=None, description="1-based line of a syntax error in uploaded RDF")
+    column: int | None = Field(default=None, description="1-based column of a syntax error in uploaded RDF")
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+    backend: Literal["embedded", "remote"]
+    jobs_active: int
+
+
+class ModelSummary(BaseModel):
+    name: str
+    graph: str = Field(description="IRI of the model's named graph")
+
+
+class ModelList(BaseModel):
+    data: list[ModelSummary]
+    count: int
+
+
+class ModelInfo(ModelSummary):
+    triples: int
+    inferred_triples: int = Field(description="what the alignment rules derived (the model's inferred graph)")
+    assembled: bool = Field(description="an assembly graph exists (an assemble or calibrate job ran)")
+    measurements: list[str] = Field(description="ids of the measurement uploads validated against this model")
+
+
+class ModelUploaded(ModelSummary):
+    triples: int
+    replaced: bool = Field(description="a model of this name existed and was replaced")
+
+
+class MeasurementsInfo(BaseModel):
+    """A validated measurement upload (``service.measurements``: the data contract)."""
+
+    id: str
+    model: str
+    rows: int = Field(description="time steps after resampling to the regular step")
+    start: str
+    end: str
+    step_s: float = Field(description="the regular time step, s")
+    columns: dict[str, str] = Field(description="device IRI → CSV column")
+    warnings: list[str]
+
+
+class MeasurementsList(BaseModel):
+    data: list[MeasurementsInfo]
+    count: int
+
+
+class NamedQueryInfo(BaseModel):
+    name: str
+    description: str
+    variables: list[str] = Field(description="variables a query parameter of the same name binds")
+
+
+class NamedQueryList(BaseModel):
+    data: list[NamedQueryInfo]
+    count: int
+
+
+class _ModelRequest(BaseModel):
+    model: str = Field(description="model name in the store")
+
+    @field_validator("model")
+    @classmethod
+    def _model_name(cls, value: str) -> str:
+        return GraphStore.check_name(value)
+
+
+def _check_window(value: str | None) -> str | None:
+    if value is not None:
+        parse_window(value)
+    return value
+
+
+class AssembleRequest(_ModelRequest):
+    pass
+
+
+class CalibrateRequest(_ModelRequest):
+    measurements: str = Field(description="id of a measurement upload")
+    train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
+    test: str | None = Field(default=None, description="test window START/END")
+    method: Literal["point", "bayes"] = "point"
+    seed: int = 0
+
+    _windows = field_validator("train", "test")(_check_window)
+
+
+class DiagnoseRequest(_ModelRequest):
+    measurements: str = Field(description="id of a measurement upload")
+    train: str = Field(description="training window START/END")
+    test: str = Field(description="test window START/END")
+    seed: int = 0
+
+    _windows = field_validator("train", "test")(_check_window)
+
+
+class AddEffectRequest(_ModelRequest):
+    effect: str = Field(description="effect signature id, e.g. FanMotorHeat")
+    target: str = Field(description="IRI of the building node the effect applies to")
+
+
+class ProgressEntry(BaseModel):
+    time: str
+    message: str
+
+
+class JobPublic(BaseModel):
+    """A job: ``status`` is queued, running, succeeded, failed, cancelled or interrupted."""
+
+    id: str
+    kind: str
+    params: dict
+    status: Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
+    created: str
+    started: str | None
+    finished: str | None
+    progress: list[ProgressEntry]
+    result: dict | None
+    links: dict[str, str] = Field(description="this job, and what it wrote (graph IRIs, query URLs)")
+    error: str | None
+    cancel_requested: bool
+    resubmitted_from: str | None
+
+
+class JobList(BaseModel):
+    data: list[JobPublic]
+    count: int

@@ -1,0 +1,496 @@
+"""Long-running work of the HTTP service (assemble, calibrate, diagnose, add-effect) as jobs.
+
+**Records.** A :class:`JobRecord` (kind, parameters, status, progress messages, result, links) is a
+JSON file ``<jobs dir>/<id>.json``, rewritten atomically (a temporary file, then ``os.replace``) on
+every change, so a crash leaves the previous version, never half of one. Status moves
+``queued → running → succeeded | failed | cancelled``; at start-up, :meth:`JobRecords.mark_interrupted`
+marks what a stopped process left ``queued`` or ``running`` as ``interrupted`` (resubmit it: a job
+is never left "running" forever and a finished result is never lost).
+
+**Runner.** :class:`JobRunner` runs jobs in a :class:`~concurrent.futures.ThreadPoolExecutor` of
+one or two workers inside the server process: pyoxigraph releases the GIL while it queries and the
+calibration spends its time in numpy, so threads overlap well. A process pool cannot be used: the
+embedded on-disk store is opened by one process only (Oxigraph locks it).
+
+**Results.** A job reads the store as it is and writes through :class:`DeferredWrites`: every graph
+it writes is kept in memory and committed in ONE update when the job ends, before its status says
+``succeeded``. A reader sees all of a job's results or none, and they are queryable the moment the
+job reports success; a failed or cancelled job writes nothing. (A job never reads a graph it wrote
+itself; such a read would see the graph as it was before the job.)
+
+**Cancel.** A queued job is cancelled at once. A running one is flagged: its work stops at its
+next progress message (:meth:`JobContext.report` raises :class:`JobCancelled`), or runs to its end,
+and its results are then discarded. A cancel that arrives while the results are being committed
+waits for the commit and is then refused: the job has ended.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import re
+import tempfile
+import threading
+import uuid
+from collections.abc import Callable, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
+from enum import StrEnum
+from pathlib import Path
+
+import numpy as np
+import pyoxigraph as ox
+
+from .assembly import EffectRequest, assemble
+from .assembly_summary import assembly_to_dict
+from .assembly_triples import assembly_triples
+from .calibration_run import calibrate, parse_window
+from .effect_recording import applied_effect_triples
+from .resources import signatures_dir
+from .signature import load_signature_library
+from .store import GraphStore, parse_rdf
+
+__all__ = [
+    "JobStatus", "JobRecord", "JobRecords", "JobResult", "JobContext", "JobCancelled", "JobStateError",
+    "DeferredWrites", "JobRunner", "JobKind", "assemble_job", "calibrate_job", "diagnose_job", "add_effect_job",
+    "json_safe",
+]
+
+log = logging.getLogger("graphtwin.jobs")
+_JOB_ID = re.compile(r"^[0-9a-f]{32}$")
+
+
+class JobStatus(StrEnum):
+    """The states of a job (stored as their text)."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+    INTERRUPTED = "interrupted"
+
+
+#: States in which a job still has work to do.
+ACTIVE = frozenset({JobStatus.QUEUED, JobStatus.RUNNING})
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+def json_safe(value):
+    """``value`` with numpy scalars/arrays as Python numbers/lists, NaN and ±inf as None, datetimes as
+    ISO text: what strict JSON (and the API's responses) can carry."""
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, set, np.ndarray)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, datetime):
+        return value.isoformat()
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    return str(value)
+
+
+@dataclass
+class JobRecord:
+    """One job as persisted; ``progress`` holds ``{"time", "message"}`` entries, oldest first."""
+
+    id: str
+    kind: str
+    params: dict
+    status: str = JobStatus.QUEUED
+    created: str = field(default_factory=_now)
+    started: str | None = None
+    finished: str | None = None
+    progress: list[dict] = field(default_factory=list)
+    result: dict | None = None
+    links: dict[str, str] = field(default_factory=dict)
+    error: str | None = None
+    cancel_requested: bool = False
+    resubmitted_from: str | None = None
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> JobRecord:
+        return cls(**{k: data[k] for k in cls.__dataclass_fields__ if k in data})
+
+
+class JobRecords:
+    """Job records as JSON files in ``folder`` (created if missing)."""
+
+    def __init__(self, folder: Path):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+
+    def path(self, job_id: str) -> Path | None:
+        """The record's file, or None for a text that is no job id (never a path outside ``folder``)."""
+        return self.folder / f"{job_id}.json" if _JOB_ID.match(job_id or "") else None
+
+    def save(self, record: JobRecord) -> None:
+        """Write ``record`` atomically: a reader (or a restart) sees the old file or the new one."""
+        text = json.dumps(json_safe(record.to_dict()), indent=1, allow_nan=False)
+        handle, temporary = tempfile.mkstemp(dir=self.folder, prefix=f".{record.id}.", suffix=".tmp")
+        try:
+            with os.fdopen(handle, "w", encoding="utf-8") as out:
+                out.write(text)
+            os.replace(temporary, self.folder / f"{record.id}.json")
+        except BaseException:
+            Path(temporary).unlink(missing_ok=True)
+            raise
+
+    def load(self, job_id: str) -> JobRecord | None:
+        path = self.path(job_id)
+        if path is None or not path.is_file():
+            return None
+        return JobRecord.from_dict(json.loads(path.read_text(encoding="utf-8")))
+
+    def all(self) -> list[JobRecord]:
+        """Every record, oldest first."""
+        records = [self.load(p.stem) for p in self.folder.glob("*.json")]
+        return sorted((r for r in records if r is not None), key=lambda r: r.created)
+
+    def mark_interrupted(self) -> list[str]:
+        """Mark records a stopped process left queued or running as ``interrupted``; their ids."""
+        marked = []
+        for record in self.all():
+            if record.status in ACTIVE:
+                record.error = f"the service stopped while the job was {record.status}; resubmit it"
+                record.status, record.finished = JobStatus.INTERRUPTED, _now()
+                self.save(record)
+                marked.append(record.id)
+        return marked
+
+
+class JobCancelled(Exception):
+    """Raised inside a job's work when its cancellation was requested."""
+
+
+class JobStateError(Exception):
+    """The operation does not apply to the job in its current state (the message says why)."""
+
+
+@dataclass(frozen=True)
+class JobResult:
+    """What a job's work returns: a JSON-able ``result`` and ``links`` to what it wrote."""
+
+    result: dict
+    links: dict[str, str] = field(default_factory=dict)
+
+
+class DeferredWrites:
+    """A :class:`~service.store.SparqlBackend` that reads ``backend`` and keeps whole-graph writes
+    until :meth:`commit` writes them in one update (one transaction): the drops, then one
+    ``INSERT DATA`` holding every written graph (blank nodes shared between graphs stay shared).
+
+    Reads go to ``backend`` unchanged: a graph written here is not seen before the commit.
+    """
+
+    def __init__(self, backend):
+        self.backend = backend
+        self._graphs: dict[ox.NamedNode, list[ox.Triple]] = {}
+
+    @property
+    def pending_graphs(self) -> list[ox.NamedNode]:
+        return list(self._graphs)
+
+    def query(self, sparql, *, substitutions=None, default_graph=None):
+        return self.backend.query(sparql, substitutions=substitutions, default_graph=default_graph)
+
+    def update(self, sparql):
+        raise TypeError("a job writes whole graphs (replace_graph, drop_graph); a SPARQL Update is not deferred")
+
+    def replace_graph(self, graph, triples):
+        self._graphs[graph] = list(triples)
+
+    def load_graph(self, graph, data, format, *, base_iri=None, source_name="<data>"):
+        triples = parse_rdf(data, format, source_name, base_iri)
+        self.replace_graph(graph, triples)
+        return len(triples)
+
+    def drop_graph(self, graph):
+        self._graphs[graph] = []
+
+    def graphs(self):
+        return self.backend.graphs()
+
+    def dump(self, graph, format):
+        return self.backend.dump(graph, format)
+
+    def triple_count(self, graph):
+        return self.backend.triple_count(graph)
+
+    def commit(self) -> None:
+        """Write every kept graph in one update; nothing to do when nothing was written."""
+        if not self._graphs:
+            return
+        drops = [f"DROP SILENT GRAPH {graph}" for graph in self._graphs]
+        blocks = [
+            f"GRAPH {graph} {{\n" + "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in triples) + "\n}"
+            for graph, triples in self._graphs.items() if triples
+        ]
+        update = " ;\n".join(drops)
+        if blocks:
+            update += " ;\nINSERT DATA {\n" + "\n".join(blocks) + "\n}"
+        self.backend.update(update)
+        self._graphs.clear()
+
+
+class JobContext:
+    """Handed to a job's work: report progress, learn about a cancel request."""
+
+    def __init__(self, runner: JobRunner, job_id: str):
+        self._runner, self.job_id = runner, job_id
+
+    @property
+    def cancel_requested(self) -> bool:
+        return self._runner.get(self.job_id).cancel_requested
+
+    def report(self, message: str) -> None:
+        """Record a progress message; raises :class:`JobCancelled` when a cancel was requested."""
+        self._runner._progress(self.job_id, message)
+        if self.cancel_requested:
+            raise JobCancelled()
+
+
+#: A job kind: ``work(store, params, context) -> JobResult``; ``store`` writes through DeferredWrites.
+JobKind = Callable[[GraphStore, dict, JobContext], JobResult]
+
+
+class JobRunner:
+    """Runs jobs of the registered ``kinds`` on ``store``, ``max_workers`` at a time; see the module
+    docstring for threads, results and cancellation. Records persist through ``records``."""
+
+    def __init__(self, store: GraphStore, records: JobRecords, kinds: Mapping[str, JobKind], *, max_workers: int = 1):
+        self.store, self.records, self.kinds = store, records, dict(kinds)
+        self._lock = threading.RLock()
+        self._jobs = {r.id: r for r in records.all()}
+        self._futures: dict[str, Future] = {}
+        self._executor = ThreadPoolExecutor(max_workers=max_workers, thread_name_prefix="graphtwin-job")
+
+    # ------------------------------------------------------------------ reading
+    def get(self, job_id: str) -> JobRecord | None:
+        with self._lock:
+            record = self._jobs.get(job_id)
+            return JobRecord.from_dict(record.to_dict()) if record is not None else None
+
+    def list(self) -> list[JobRecord]:
+        with self._lock:
+            return [JobRecord.from_dict(r.to_dict()) for r in sorted(self._jobs.values(), key=lambda r: r.created)]
+
+    def active_count(self) -> int:
+        with self._lock:
+            return sum(r.status in ACTIVE for r in self._jobs.values())
+
+    # ------------------------------------------------------------------ changing
+    def submit(self, kind: str, params: dict, *, resubmitted_from: str | None = None) -> JobRecord:
+        """Queue a job; returns its record at once.
+
+        :raises KeyError: an unknown kind.
+        """
+        if kind not in self.kinds:
+            raise KeyError(f"unknown job kind {kind!r}; known: {', '.join(sorted(self.kinds))}")
+        record = JobRecord(id=uuid.uuid4().hex, kind=kind, params=json_safe(params), resubmitted_from=resubmitted_from)
+        with self._lock:
+            self._jobs[record.id] = record
+            self.records.save(record)
+            self._futures[record.id] = self._executor.submit(self._run, record.id)
+        return self.get(record.id)
+
+    def resubmit(self, job_id: str) -> JobRecord:
+        """A new job with the kind and parameters of a finished one.
+
+        :raises KeyError: an unknown job; :raises JobStateError: the job is still queued or running.
+        """
+        old = self.get(job_id)
+        if old is None:
+            raise KeyError(job_id)
+        if old.status in ACTIVE:
+            raise JobStateError(f"job {job_id} is {old.status}: cancel it or wait for it before resubmitting")
+        return self.submit(old.kind, old.params, resubmitted_from=job_id)
+
+    def cancel(self, job_id: str) -> JobRecord:
+        """Cancel a queued job at once, flag a running one (module docstring).
+
+        :raises KeyError: an unknown job; :raises JobStateError: the job has already ended.
+        """
+        with self._lock:
+            record = self._jobs.get(job_id)
+            if record is None:
+                raise KeyError(job_id)
+            if record.status not in ACTIVE:
+                raise JobStateError(f"job {job_id} has already ended ({record.status})")
+            future = self._futures.get(job_id)
+            if record.status == JobStatus.QUEUED and future is not None and future.cancel():
+                record.status, record.finished = JobStatus.CANCELLED, _now()
+                record.progress.append({"time": _now(), "message": "cancelled before it started"})
+            else:
+                record.cancel_requested = True
+                record.progress.append({"time": _now(), "message": "cancel requested: the results will be discarded"})
+            self.records.save(record)
+        return self.get(job_id)
+
+    def shutdown(self, wait: bool = True) -> None:
+        """Stop taking jobs: queued ones are marked ``interrupted``; with ``wait``, running ones end first."""
+        self._executor.shutdown(wait=False, cancel_futures=True)
+        with self._lock:
+            for job_id, future in self._futures.items():
+                record = self._jobs[job_id]
+                if future.cancelled() and record.status == JobStatus.QUEUED:
+                    record.status, record.finished = JobStatus.INTERRUPTED, _now()
+                    record.error = "the service stopped before the job started; resubmit it"
+                    self.records.save(record)
+        if wait:
+            self._executor.shutdown(wait=True)
+
+    # ------------------------------------------------------------------ internals
+    def _progress(self, job_id: str, message: str) -> None:
+        with self._lock:
+            record = self._jobs[job_id]
+            record.progress.append({"time": _now(), "message": message})
+            self.records.save(record)
+
+    def _finish(self, job_id: str, status: str, *, error: str | None = None, message: str | None = None) -> None:
+        with self._lock:
+            record = self._jobs[job_id]
+            record.status, record.finished, record.error = status, _now(), error
+            if message:
+                record.progress.append({"time": record.finished, "message": message})
+            self.records.save(record)
+
+    def _run(self, job_id: str) -> None:
+        with self._lock:
+            record = self._jobs[job_id]
+            if record.status != JobStatus.QUEUED:
+                return
+            record.status, record.started = JobStatus.RUNNING, _now()
+            record.progress.append({"time": record.started, "message": "started"})
+            self.records.save(record)
+            kind, params = record.kind, dict(record.params)
+        writes = DeferredWrites(self.store.backend)
+        try:
+            outcome = self.kinds[kind](GraphStore(writes), params, JobContext(self, job_id))
+        except JobCancelled:
+            self._finish(job_id, JobStatus.CANCELLED, message="cancelled; nothing was written")
+            return
+        except (ValueError, KeyError, FileNotFoundError) as exc:
+            message = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+            self._finish(job_id, JobStatus.FAILED, error=message, message="failed; nothing was written")
+            return
+        except Exception as exc:  # a bug, not the user's input: keep the service up and say so
+            log.exception("job %s (%s) failed", job_id, kind)
+            self._finish(job_id, JobStatus.FAILED, error=f"internal error: {type(exc).__name__}: {exc}",
+                         message="failed; nothing was written")
+            return
+        with self._lock:
+            record = self._jobs[job_id]
+            if record.cancel_requested:
+                self._finish(job_id, JobStatus.CANCELLED, message="cancelled; the results were discarded")
+                return
+            record.result = json_safe(outcome.result)
+            try:
+                writes.commit()
+            except Exception as exc:
+                log.exception("job %s (%s) could not write its results", job_id, kind)
+                record.result = None
+                self._finish(job_id, JobStatus.FAILED, error=f"writing the results failed: {exc}")
+                return
+            record.links = dict(outcome.links)
+            self._finish(job_id, JobStatus.SUCCEEDED, message="results written to the store")
+
+
+# ---------------------------------------------------------------------- job kinds
+def _window(text: str | None):
+    return parse_window(text) if text is not None else None
+
+
+def assemble_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
+    """``{"model"}``: assemble the model and write its assembly graph."""
+    model = params["model"]
+    context.report("matching the signature library")
+    assembled = assemble(store, model)
+    store.write_graph(store.assembly_graph(model), assembly_triples(assembled, model))
+    return JobResult(assembly_to_dict(assembled), {
+        "model": f"/models/{model}", "assembly_graph": store.assembly_graph(model).value,
+    })
+
+
+def _result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:
+    return {
+        "run_graph": store.run_graph(run_id).value,
+        "calibrated_parameters": f"/queries/calibrated-parameters?model={model}",
+        "sensor_metrics": f"/queries/sensor-metrics?model={model}",
+    }
+
+
+def calibrate_job(store: GraphStore, params: dict, context: JobContext, *,
+                  locate_measurements: Callable[[str], Path]) -> JobResult:
+    """``{"model", "measurements", "train", "test", "method", "seed"}`` (windows as ``START/END``):
+    :func:`service.calibration_run.calibrate` on the uploaded CSV ``locate_measurements(id)``."""
+    model = params["model"]
+    data = locate_measurements(params["measurements"])
+    context.report(f"calibrating ({params.get('method', 'point')})")
+    outcome = calibrate(store, model, data, train=parse_window(params.get("train") or "/"),
+                        test=_window(params.get("test")), method=params.get("method", "point"),
+                        seed=int(params.get("seed", 0)))
+    context.report("calibrated; writing the run")
+    return JobResult(outcome.record.to_dict(), _result_links(store, model, outcome.record.run_id))
+
+
+def diagnose_job(store: GraphStore, params: dict, context: JobContext, *,
+                 locate_measurements: Callable[[str], Path]) -> JobResult:
+    """``{"model", "measurements", "train", "test", "seed"}``: :func:`service.diagnosis.diagnose`,
+    its phases reported as progress (a cancel stops it at the next phase)."""
+    from .diagnosis import diagnose  # the effect catalog machinery loads only when a diagnosis runs
+
+    model = params["model"]
+    data = locate_measurements(params["measurements"])
+    report = diagnose(store, model, data, train=parse_window(params["train"]), test=parse_window(params["test"]),
+                      seed=int(params.get("seed", 0)), on_progress=context.report)
+    links = _result_links(store, model, report.run_id)
+    links["diagnosis_graph"] = store.run_graph(f"{report.run_id}-diagnosis").value
+    return JobResult(report.to_dict(), links)
+
+
+def _graph_triples(store: GraphStore, graph: ox.NamedNode) -> list[ox.Triple]:
+    data = store.backend.dump(graph, ox.RdfFormat.N_TRIPLES)
+    return parse_rdf(data, ox.RdfFormat.N_TRIPLES, str(graph)) if data else []
+
+
+def add_effect_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
+    """``{"model", "effect", "target"}``: a new model version ``<model>+<effect>``: the model's triples
+    plus the applied-effect triples (:mod:`service.effect_recording`), aligned and assembled in a
+    scratch in-memory store (alignment reads the graph it derives from), then written with its
+    ``inferred`` and ``assembly`` graphs. The model ``<model>`` itself is not changed."""
+    model, effect, target = params["model"], params["effect"], params["target"]
+    library = load_signature_library(signatures_dir())
+    signature = library.get(effect)
+    if signature is None or signature.kind != "effect":
+        known = ", ".join(sorted(s.id for s in library.values() if s.kind == "effect"))
+        raise KeyError(f"no effect {effect!r}; the catalog has {known}")
+    context.report(f"checking that {effect} applies at {target}")
+    assemble(store, model, library=library, extra_effects=[EffectRequest(effect, target)])
+    version = store.check_name(f"{model}+{effect}")
+    triples = _graph_triples(store, store.model_graph(model)) + applied_effect_triples(signature, target)
+    context.report(f"aligning and assembling {version}")
+    scratch = GraphStore.embedded(None)
+    scratch.load_model(version, ox.serialize(triples, format=ox.RdfFormat.N_TRIPLES), "nt", source_name=version)
+    assembled = assemble(scratch, version, library=library)
+    store.write_graph(store.model_graph(version), triples)
+    store.write_graph(store.inferred_graph(version), _graph_triples(scratch, scratch.inferred_graph(version)))
+    store.write_graph(store.assembly_graph(version), assembly_triples(assembled, version))
+    return JobResult(
+        {"model": version, "base_model": model, "effect": effect, "target": target, "triples": len(triples),
+         "components": len(assembled.components)},
+        {"model": f"/models/{version}", "model_graph": store.model_graph(version).value},
+    )

@@ -1,0 +1,84 @@
+"""Hot-water loop: hydraulics by hand, closed valve, steady-state energy balance, the documented lags."""
+
+import math
+
+import numpy as np
+import pytest
+
+from service.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_SPECIFIC_HEAT_J_PER_KG_K
+from service.hot_water_loop import HotWaterLoop
+
+DT = 60.0
+
+
+def _inputs(valve, supply=65.0, air_in=5.0, air_flow=1.5):
+    return {"valve_position": np.array([valve]), "supply_water_temperature": np.array([supply]),
+            "inlet_air_temperature": np.array([air_in]), "air_mass_flow": np.array([air_flow])}
+
+
+def _steps(params, state, inputs, steps):
+    model = HotWaterLoop()
+    return [{k: v[0] for k, v in model.step(params, inputs, state, DT).items()} for _ in range(steps)]
+
+
+def test_water_flow_by_hand(run_model, params_for):
+    # defaults K_v = 2.5, K_v,loop = 3.3 m³/h, Δp = 0.45 bar; u = 0.6:
+    # V̇ = sqrt(0.45 / (1/1.5² + 1/3.3²)) = 0.91604 m³/h, ṁ_w = 988·0.91604/3600 = 0.25140 kg/s
+    out = run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(0.6))[0]
+    by_hand = 988.0 / 3600.0 * math.sqrt(0.45 / (1 / 1.5**2 + 1 / 3.3**2))
+    assert out["water_mass_flow"][0] == pytest.approx(by_hand, rel=1e-12)
+    assert out["water_mass_flow"][0] == pytest.approx(0.25140, abs=1e-5)
+
+
+def test_closed_valve_gives_no_flow_and_no_heat(run_model, params_for):
+    out = run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(0.0), steps=60)[-1]
+    assert out["water_mass_flow"][0] == 0.0 and out["heat_rate"][0] == 0.0
+    assert out["outlet_air_temperature"][0] == pytest.approx(5.0, abs=1e-12)
+
+
+def test_steady_state_energy_balance_within_half_a_percent(run_model, params_for):
+    out = run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(0.6), steps=200)[-1]
+    air = 1.5 * AIR_SPECIFIC_HEAT_J_PER_KG_K * (out["outlet_air_temperature"][0] - 5.0)
+    water = out["water_mass_flow"][0] * WATER_SPECIFIC_HEAT_J_PER_KG_K * (
+        out["inlet_water_temperature"][0] - out["outlet_water_temperature"][0])
+    assert air > 10000.0
+    assert air == pytest.approx(water, rel=0.005)
+    assert air == pytest.approx(out["heat_rate"][0], rel=0.005)
+
+
+def test_more_opening_gives_more_heat(run_model, params_for):
+    params = params_for(HotWaterLoop)
+    heats = [run_model(HotWaterLoop, params, _inputs(u))[0]["heat_rate"][0] for u in (0.05, 0.3, 0.6, 1.0)]
+    assert heats == sorted(heats) and heats[0] > 0
+
+
+def test_heat_rate_follows_a_valve_step_with_the_metal_time_constant(params_for):
+    """Started in steady state at u = 0.3, the valve steps to 0.6: the water inlet is already at the
+    supply temperature and the flows are constant, so Q_k = Q∞ + (Q₀ − Q∞)·(1 − a)^{k+1},
+    a = 1 − e^{−Δt/τ_metal} (the lag is reported after its update)."""
+    params = params_for(HotWaterLoop)
+    model = HotWaterLoop()
+    q0 = model.initial_state(params, _inputs(0.3), DT)["heat_rate"][0]
+    q_end = model.initial_state(params, _inputs(0.6), DT)["heat_rate"][0]
+    state = model.initial_state(params, _inputs(0.3), DT)
+    a = 1.0 - math.exp(-DT / 180.0)
+    heats = [out["heat_rate"] for out in _steps(params, state, _inputs(0.6), 10)]
+    expected = [q_end + (q0 - q_end) * (1.0 - a) ** (k + 1) for k in range(10)]
+    assert q_end > q0 * 1.1
+    np.testing.assert_allclose(heats, expected, rtol=1e-9)
+
+
+def test_coil_inlet_water_follows_the_supply_through_the_pipe_lag(params_for):
+    """A supply step 65 → 75 °C: T_w,in,k = 75 − 10·(1 − b)^{k+1}, b = 1 − e^{−Δt/(τ_pipe·ṁ_ref/ṁ_w)}."""
+    params = params_for(HotWaterLoop)
+    state = HotWaterLoop().initial_state(params, _inputs(1.0), DT)
+    outs = _steps(params, state, _inputs(1.0, supply=75.0), 8)
+    flow = outs[0]["water_mass_flow"]
+    b = 1.0 - math.exp(-DT / (90.0 * 0.5 / flow))
+    np.testing.assert_allclose([o["inlet_water_temperature"] for o in outs],
+                               [75.0 - 10.0 * (1.0 - b) ** (k + 1) for k in range(8)], rtol=1e-12)
+
+
+def test_the_reported_valve_position_is_the_clipped_command(run_model, params_for):
+    for command, reached in ((1.3, 1.0), (-0.1, 0.0), (0.42, 0.42)):
+        assert run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(command))[0]["valve_position"][0] == reached
