@@ -200,10 +200,6 @@ class DeferredWrites:
         self.backend = backend
         self._graphs: dict[ox.NamedNode, list[ox.Triple]] = {}
 
-    @property
-    def pending_graphs(self) -> list[ox.NamedNode]:
-        return list(self._graphs)
-
     def query(self, sparql, *, substitutions=None, default_graph=None):
         return self.backend.query(sparql, substitutions=substitutions, default_graph=default_graph)
 

@@ -10,7 +10,7 @@ from service.diagnosis import diagnose
 from service.resources import signatures_dir
 from service.signature import load_signature_library
 from service.store import GraphStore
-from service.synthetic_data import generate_synthetic_data
+from service.synthetic_data import NOISE_STD, generate_synthetic_data
 
 LIBRARY = load_signature_library(signatures_dir())
 TRAIN = ("2026-01-12", "2026-01-13T23:59")
@@ -53,10 +53,15 @@ def test_the_hidden_effect_ranks_first_and_adding_it_halves_the_error(tmp_path, 
     best = report.effects[0]
     assert best.significant, report.summary
     assert (best.effect, best.node) == (effect, HIDDEN[effect]), [(e.effect, e.node, e.test_improvement) for e in report.effects[:3]]
-    affected = [n for n in best.rmse_before if best.rmse_before[n] > 2 * report.sensors[n]["noise"]]
-    assert affected
+    # the sensors the hidden effect disturbs beyond the truth's measurement noise (on the evaluation
+    # half, base model refitted without the effect); with the effect added and fitted on other data,
+    # their RMSE there halves, or falls to the noise floor (an RMSE cannot fall below the noise)
+    noise = {n: NOISE_STD.get(report.sensors[n]["unit"], report.sensors[n]["noise"]) for n in best.rmse_before}
+    affected = [n for n in best.rmse_before if best.rmse_before[n] > 1.5 * noise[n]]
+    assert affected, (best.rmse_before, noise)
     for node in affected:
-        assert best.rmse_after[node] <= 0.5 * best.rmse_before[node], node
+        assert best.rmse_after[node] <= max(0.5 * best.rmse_before[node], 1.1 * noise[node]), (
+            node, best.rmse_before, best.rmse_after)
     assert best.explanation and effect in report.summary
 
 
