@@ -5,7 +5,7 @@ window (the continuation of training when it follows it, else a run of its own) 
 
 1. **compare**: RMSE, MAE, CV(RMSE), NMBE per target on the test window;
 2. **where**: a sensor *fails* when its test RMSE exceeds ``failure_ratio`` × its noise level (the
-   high-frequency noise of the measured series from the first quartile of |Δ²y|, floored at the
+   high-frequency noise of its residual from the first quartile of |Δ²e|, floored at the
    instrument accuracy of its unit, :func:`noise_level`); failures are located on the flow path
    (:mod:`service.flow_path_localization`), in operating regimes (:mod:`service.operating_regimes`:
    per-regime RMSE, the worst named) and in time (:mod:`service.failure_episodes`);
@@ -55,11 +55,13 @@ __all__ = ["DiagnosisReport", "diagnose", "noise_level", "effect_candidates"]
 
 
 def noise_level(values: np.ndarray, unit: str) -> float:
-    """Measurement noise σ from second differences (module docstring), floored at the accuracy.
+    """Measurement noise σ of a sensor from the second differences of its residual y − ŷ (the model
+    removes the signal's own dynamics, what is left at the step scale is noise), floored at the
+    instrument accuracy of its unit.
 
-    Δ²y of white noise has standard deviation √6·σ; the first quartile of |Δ²y| is 0.3186·√6·σ for
-    Gaussian noise, and stays a noise measure while the signal's own curvature occupies up to half
-    of the steps (a median would not).
+    Δ²e of white noise has standard deviation √6·σ; the first quartile of |Δ²e| is 0.3186·√6·σ for
+    Gaussian noise, and stays a noise measure while model error bends the residual on up to half of
+    the steps (a median would not).
     """
     finite = np.asarray(values, dtype=float)
     second = np.diff(finite, n=2)
@@ -271,7 +273,7 @@ def diagnose(
     sensors: dict[str, dict] = {}
     matches: dict[str, bool] = {md.node_of[c]: True for c in model.boundary_inputs}
     for node, metrics in base.record.metrics["test"].items():
-        sigma = noise_level(data.series[node], md.units[node])
+        sigma = noise_level(observed[node] - predicted[node], md.units[node])
         fails = metrics.rmse > failure_ratio * sigma
         matches[node] = not fails
         sensors[node] = {
