@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.console import Console
 from rich.syntax import Syntax
@@ -206,6 +207,52 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
                       f"{100 * e.test_improvement:.0f} %", "yes" if e.significant else "no")
     console.print(table)
     console.print(f"[bold]{report.summary}[/bold]")
+
+
+@app.command("simulate")
+def simulate_command(
+    model: Annotated[Path, typer.Argument(help="Building model file.")],
+    data: Annotated[Path, typer.Argument(help="Measurement CSV (boundary inputs; targets optional for comparison).")],
+    params: Annotated[Path | None, typer.Option(help="JSON {parameter name or key: value}; others at their defaults.")] = None,
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="CSV of measured and simulated series.")] = None,
+    name: NameOption = None,
+    store: StoreOption = Path("graphtwin-data"),
+    memory: MemoryOption = False,
+) -> None:
+    """Simulate MODEL over DATA and write each target's simulation beside its measurement."""
+    from .calibration_data import ModelData, read_model_data
+    from .measurements import write_comparison_csv
+    from .simulator import loop_substeps, target_series
+
+    graph_store = open_store(store, memory)
+    try:
+        model_name = _load(graph_store, model, name)
+        assembled = assemble(graph_store, model_name)
+        measured = read_model_data(assembled, data)
+        values = json.loads(params.read_text()) if params is not None else {}
+        refs = assembled.estimated_parameters
+        known = {r.key for r in refs} | {r.name for r in refs}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"{params}: no estimated parameter named {', '.join(unknown)}")
+        theta = [float(values.get(r.key, values.get(r.name, r.spec.default))) for r in refs]
+        md = ModelData(assembled, measured, loop_substeps(assembled, measured.step_s))
+        result = md.simulator.run(md.boundary(slice(0, measured.n_steps)), [theta])
+    except (*USER_ERRORS, json.JSONDecodeError) as exc:
+        raise fail(str(exc)) from None
+    simulated = target_series(assembled, result)
+    if output is not None:
+        write_comparison_csv(output, measured, simulated)
+        console.print(f"wrote {output}")
+    table = Table(title="Simulated against measured")
+    for column in ("sensor", "RMSE", "unit"):
+        table.add_column(column)
+    for node, values in simulated.items():
+        observed = measured.series[node]
+        finite = np.isfinite(observed)
+        rmse = float(np.sqrt(np.mean((observed[finite] - values[finite]) ** 2))) if finite.any() else float("nan")
+        table.add_row(_short(node), f"{rmse:.3g}", unit_label(measured.units[node]))
+    console.print(table)
 
 
 @app.command("diagnose")

@@ -66,3 +66,19 @@ def test_example_generate_writes_the_columns_the_model_needs(tmp_path):
     assert len(output.read_text().splitlines()) == 1 + 144
     bad = runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "Nope", "-o", str(output)])
     assert bad.exit_code == 2 and "CoilThermalMass" in bad.output
+
+
+def test_simulate_writes_simulation_beside_measurements(tmp_path):
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
+    params = tmp_path / "params.json"
+    params.write_text(json.dumps({"proportional_gain": 0.02}))
+    out = tmp_path / "out.csv"
+    result = runner.invoke(app, ["simulate", str(CASE_STUDY), str(data), "--params", str(params), "-o", str(out), "--memory"])
+    assert result.exit_code == 0, result.output
+    header = out.read_text().splitlines()[0].split(",")
+    assert "coil_outlet_air_temperature (simulated)" in header
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"proportional_gian": 0.02}))
+    result = runner.invoke(app, ["simulate", str(CASE_STUDY), str(data), "--params", str(bad), "--memory"])
+    assert result.exit_code == 2 and "proportional_gian" in result.output
