@@ -19,7 +19,7 @@
   default graph, for the queries about a building graph).
 * ``POST /jobs/{assemble,calibrate,diagnose,add-effect}`` → 202 and the job at once;
   ``GET /jobs/{id}`` for status, progress, result and links; ``POST /jobs/{id}/cancel``;
-  ``POST /jobs/{id}/resubmit`` (:mod:`service.jobs`: threads, persistence, cancellation).
+  ``POST /jobs/{id}/resubmit`` (:mod:`service.jobs`: executors, persistence, cancellation).
 * ``GET /health``.
 
 **Auth.** Writes (uploads, jobs, cancel, SPARQL Update) need ``Authorization: Bearer <GRAPHTWIN_TOKEN>``
@@ -49,11 +49,9 @@ import re
 import secrets
 import tempfile
 import uuid
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
-from functools import partial
 from itertools import islice
 from pathlib import Path
 from typing import Annotated
@@ -63,6 +61,7 @@ import numpy as np
 import pyoxigraph as ox
 from fastapi import APIRouter, Depends, FastAPI, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
@@ -75,6 +74,7 @@ from .assembly import AssemblyError, IncompleteModelError, assemble
 from .calibration_data import read_model_data
 from .jobs import (
     JobRecord, JobRecords, JobRunner, JobStateError, add_effect_job, assemble_job, calibrate_job, diagnose_job,
+    job_executor,
 )
 from .measurements import MeasurementError
 from .namespaces import PREFIXES
@@ -100,6 +100,14 @@ class ApiError(Exception):
 def _api_error_response(request: Request, exc: ApiError) -> JSONResponse:
     body = ErrorBody(detail=exc.detail, **exc.extra).model_dump(exclude_none=True)
     return JSONResponse(body, status_code=exc.status, headers=exc.headers)
+
+
+def _validation_error_response(request: Request, exc: RequestValidationError) -> JSONResponse:
+    """A request FastAPI could not validate (body, path or query) → 422 in the :class:`ErrorBody` shape,
+    one problem per invalid field (the values themselves are not echoed: they may be secrets)."""
+    problems = [f"{'.'.join(str(part) for part in error['loc'])}: {error['msg']}" for error in exc.errors()]
+    body = ErrorBody(detail="the request is not valid: " + "; ".join(problems), problems=problems)
+    return JSONResponse(body.model_dump(exclude_none=True), status_code=422)
 
 
 def _errors(*codes: int) -> dict:
@@ -405,13 +413,13 @@ async def _answer(service: Service, query: _Query) -> Response:
         raise ApiError(400, f"SPARQL syntax error: {exc}") from None
     except _ResultTooLarge as exc:
         raise ApiError(422, str(exc)) from None
-    except OSError as exc:
+    except (OSError, RuntimeError) as exc:  # an unreachable or failing SPARQL endpoint (SparqlEndpointError)
         raise ApiError(503, f"the store did not answer: {exc}") from None
     return Response(body, media_type=query.media_type)
 
 
 # ====================================================================== routes: health and models
-router = APIRouter()
+router = APIRouter(responses=_errors(422))  # every validation error has the ErrorBody shape
 _RDF_BODY = {"requestBody": {"required": True, "content": {
     media: {"schema": {"type": "string"}} for media in ("text/turtle", "application/n-triples", "application/rdf+xml", "application/ld+json")
 }}}
@@ -426,7 +434,8 @@ def health(service: ServiceDep) -> dict:
     except Exception as exc:
         raise ApiError(503, f"the store does not answer: {type(exc).__name__}") from None
     backend = "embedded" if isinstance(service.store.backend, EmbeddedBackend) else "remote"
-    return {"status": "ok", "backend": backend, "jobs_active": service.runner.active_count()}
+    return {"status": "ok", "backend": backend, "executor": service.settings.executor,
+            "jobs_active": service.runner.active_count()}
 
 
 @router.get("/models", response_model=ModelList, tags=["models"], dependencies=[ReadAccess])
@@ -776,13 +785,10 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     if interrupted:
         log.warning("%d job(s) were interrupted by the last stop: %s", len(interrupted), ", ".join(interrupted))
     uploads = MeasurementUploads(settings.measurements_dir)
-    kinds: dict[str, Callable] = {
-        "assemble": assemble_job,
-        "calibrate": partial(calibrate_job, locate_measurements=uploads.locate),
-        "diagnose": partial(diagnose_job, locate_measurements=uploads.locate),
-        "add-effect": add_effect_job,
-    }
-    runner = JobRunner(store, records, kinds, max_workers=settings.job_workers)
+    kinds = {"assemble": assemble_job, "calibrate": calibrate_job, "diagnose": diagnose_job, "add-effect": add_effect_job}
+    executor = job_executor(settings.executor, max_workers=settings.job_workers)
+    runner = JobRunner(store, records, kinds, max_workers=settings.job_workers, locate_measurements=uploads.locate,
+                       executor=executor)
     query_pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="graphtwin-sparql")
 
     @asynccontextmanager
@@ -798,5 +804,6 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     )
     app.state.graphtwin = Service(settings, store, runner, uploads, query_pool)
     app.add_exception_handler(ApiError, _api_error_response)
+    app.add_exception_handler(RequestValidationError, _validation_error_response)
     app.include_router(router)
     return app

@@ -32,6 +32,7 @@ class ErrorBody(BaseModel):
 class Health(BaseModel):
     status: Literal["ok"]
     backend: Literal["embedded", "remote"]
+    executor: str = Field(description="where job work runs: threads, processes or dask://HOST:PORT")
     jobs_active: int
 
 

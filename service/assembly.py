@@ -37,7 +37,7 @@ from .measuring_device import MeasuringDevice
 from .namespaces import GTR, RDFS
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
-from .signature_matcher import match_signature, missing_class_report
+from .signature_matcher import MatchSession, match_signature, missing_class_report
 from .store import GraphStore
 from .units import convert
 
@@ -96,9 +96,10 @@ def assemble(
     if max_complexity is not None:
         components = [s for s in components if s.complexity <= max_complexity]
     depth = _class_depth(store, dataset)
+    session = MatchSession(store, dataset)  # the graph does not change while assembling
     candidates = []
     for signature in components:
-        for match in _best_match_per_anchor(match_signature(store, signature, default_graph=dataset), signature):
+        for match in _best_match_per_anchor(match_signature(store, signature, session=session), signature):
             candidates.append((signature, match))
     candidates.sort(key=lambda c: (
         -sum(depth(cls) for node in c[0].modeled_nodes for cls in c[0].nodes[node].classes),
@@ -124,11 +125,11 @@ def assemble(
     effect_requests = list(extra_effects) + _recorded_effects(store, model_name, library)
     connections, unconnected = _wire(instances)
     for request in effect_requests:
-        connections = _splice_effect(store, model_name, library, request, instances, connections, dataset)
+        connections = _splice_effect(store, model_name, library, request, instances, connections, session)
     # measuring devices without a modelled source are boundary inputs, not missing connections
     devices = {iri for iri, inst in instances.items() if issubclass(inst.model_class, MeasuringDevice)}
     incomplete = [p for iri, p in unconnected if iri not in devices]
-    incomplete += _unmatched_anchor_report(store, library, components, claimed, dataset)
+    incomplete += _unmatched_anchor_report(store, components, claimed, session)
     if incomplete and not allow_incomplete:
         raise IncompleteModelError(incomplete)
     notes.extend(incomplete)
@@ -280,11 +281,11 @@ def _recorded_effects(store: GraphStore, model_name: str, library: Mapping[str, 
     return sorted(set(requests), key=lambda r: (r.node, r.effect))
 
 
-def _splice_effect(store, model_name, library, request, instances, connections, dataset) -> list[Connection]:
+def _splice_effect(store, model_name, library, request, instances, connections, session) -> list[Connection]:
     signature = library.get(request.effect)
     if signature is None or signature.kind != "effect" or signature.splice is None:
         raise AssemblyError(f"{request.effect!r} is not an effect signature in the library")
-    matches = [m for m in match_signature(store, signature, default_graph=dataset)
+    matches = [m for m in match_signature(store, signature, session=session)
                if m.get(signature.splice.node) == request.node]
     if not matches:
         raise AssemblyError(
@@ -325,33 +326,23 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
     return spliced
 
 
-def _unmatched_anchor_report(store, library, components, claimed, dataset) -> list[str]:
+def _unmatched_anchor_report(store, components, claimed, session: MatchSession) -> list[str]:
     """For building nodes of a signature's modelled class that no component represents: the first
     required triple of that signature that finds nothing there, as a sentence."""
     problems = []
     for signature in components:
         anchor = signature.modeled_nodes[0]
-        for node in _instances_of(store, signature.nodes[anchor].classes, dataset):
+        instances = session.instances(signature.nodes[anchor].classes)
+        for node in sorted(n.value for n in instances if isinstance(n, ox.NamedNode)):
             if node in claimed:
                 continue
-            missing = _first_failing_triple(store, signature, anchor, node, dataset)
+            missing = _first_failing_triple(store, signature, anchor, node, session)
             if missing is not None:
                 problems.append(missing)
     return sorted(set(problems))
 
 
-def _instances_of(store: GraphStore, classes: Sequence[str], dataset) -> list[str]:
-    nodes: set[str] = set()
-    for cls in classes:
-        rows = store.query(
-            "SELECT DISTINCT ?node ?class WHERE { ?node a/<%s>* ?class }" % RDFS.subClassOf.value,
-            substitutions={"class": ox.NamedNode(cls)}, default_graph=dataset,
-        )
-        nodes.update(r["node"].value for r in rows if isinstance(r["node"], ox.NamedNode))
-    return sorted(nodes)
-
-
-def _first_failing_triple(store, signature: Signature, anchor: str, node: str, dataset) -> str | None:
+def _first_failing_triple(store, signature: Signature, anchor: str, node: str, session: MatchSession) -> str | None:
     required = [t for t in signature.triples if t.rule is not Rule.OPTIONAL and anchor in (t.subject, t.object)]
     for triple in required:
         other = triple.object if triple.subject == anchor else triple.subject
@@ -359,7 +350,7 @@ def _first_failing_triple(store, signature: Signature, anchor: str, node: str, d
             signature, nodes={anchor: signature.nodes[anchor], other: signature.nodes[other]},
             triples=(triple,), modeled_nodes=(anchor,), inputs=(), outputs=(), parameters=(), splice=None,
         )
-        hits = [m for m in match_signature(store, probe, default_graph=dataset) if m.get(anchor) == node]
+        hits = [m for m in match_signature(store, probe, session=session) if m.get(anchor) == node]
         if not hits:
             return f"{node} is not modelled by {signature.id}: {_describe_missing(triple, anchor, signature, node)}"
     return None

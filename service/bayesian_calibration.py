@@ -2,8 +2,9 @@
 
 The paper's Sec. 4 (Bjørnskov, Jradi & Wetter): θ and the discrepancy hyperparameters of every target
 are sampled together from the posterior of :class:`~service.koh_likelihood.KennedyOHaganLikelihood`
-with :class:`~service.parallel_tempering.ParallelTemperingSampler`, started in a small ball around a
-:class:`~service.point_calibration.PointCalibrator` estimate (which saves most of the burn-in).
+with :class:`~service.parallel_tempering.ParallelTemperingSampler`, started around a
+:class:`~service.point_calibration.PointCalibrator` estimate with the shape of its Laplace covariance
+(:meth:`~service.koh_likelihood.KennedyOHaganLikelihood.initial_ensemble`; saves most of the burn-in).
 
 Prediction on another window (Eqs. 16–22): for each of ``n_draws`` posterior draws (θ, φ) the model
 is simulated on the training and the test window (one call each for all draws), the discrepancy GP is
@@ -109,6 +110,7 @@ class BayesianCalibrator(BaseEstimator):
     :param progress: show a rich progress bar.
 
     Results: ``samples_`` (ndarray[n_samples, n_parameters], burn-in discarded, thinned),
+    ``chain_`` (the whole β = 1 chain, ndarray[n_steps, n_walkers, n_parameters + n_hyper], for traces),
     ``hyper_samples_``, ``hyper_names_``, ``median_``, ``quantile16_``, ``quantile84_``, ``map_`` and
     ``map_hyper_`` (the highest-posterior β = 1 sample seen), ``log_probability_`` (of the samples),
     ``converged_``, ``iat_``, ``n_steps_``, ``convergence_``, ``acceptance_`` (β = 1 chain),
@@ -184,7 +186,7 @@ class BayesianCalibrator(BaseEstimator):
                 adapt_ladder=self.adapt_ladder, random_state=rng.randint(2**31 - 1),
             )
             residual_std = {key: float(np.nanstd(start.residuals_[key])) for key in problem.target_keys}
-            initial = likelihood.initial_ensemble(start.theta_, residual_std, n_walkers, rng)
+            initial = likelihood.initial_ensemble(start.theta_, residual_std, n_walkers, rng, start.covariance_)
             convergence = sampler.run(
                 initial, self.max_steps, self.check_interval, self.iat_multiple, self.iat_rtol, self.progress
             )
@@ -195,7 +197,8 @@ class BayesianCalibrator(BaseEstimator):
         self.hyper_samples_ = chain[:, p:]
         self.log_probability_ = backend.get_log_prob(discard=convergence.burn_in, thin=convergence.thin, flat=True)
         self.median_, self.quantile16_, self.quantile84_ = np.quantile(self.samples_, [0.5, 0.16, 0.84], axis=0)
-        every = backend.get_chain(flat=True)
+        self.chain_ = backend.get_chain()
+        every = self.chain_.reshape(-1, self.chain_.shape[-1])
         best = every[int(np.argmax(backend.get_log_prob(flat=True)))]
         self.map_, self.map_hyper_ = best[:p], best[p:]
         self.parameter_names_ = problem.parameter_names

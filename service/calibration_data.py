@@ -20,7 +20,7 @@ from .calibration_problem import CalibrationProblem
 from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .simulator import Simulator
 
-__all__ = ["QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data"]
+__all__ = ["QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
 
 #: Simulator unit of each quantity a signature output may carry (``signatures/README.md``).
 QUANTITY_UNITS = {
@@ -47,6 +47,27 @@ def series_specs(model: AssembledModel) -> dict[str, SeriesSpec]:
     return specs
 
 
+def check_mapped_parameters(model: AssembledModel) -> None:
+    """Refuse a model whose graph maps a parameter to a value outside that parameter's physical bounds
+    (a nominal power of 80 kW for a fan whose signature allows 50 W – 50 kW is a typo or a wrong unit,
+    and calibrating the other parameters around it would hide the mistake).
+
+    :raises ValueError: naming every such parameter, its node, the value and the bounds, in the
+        parameter's unit.
+    """
+    problems = []
+    for ref in model.mapped_parameters:
+        spec = ref.spec
+        if ref.value is not None and not spec.lower <= ref.value <= spec.upper:
+            node = model.components[ref.component].node
+            problems.append(
+                f"{spec.name} of {node} is mapped from the graph to {ref.value:g} {spec.unit}, outside its "
+                f"bounds [{spec.lower:g}, {spec.upper:g}] {spec.unit}"
+            )
+    if problems:
+        raise ValueError("; ".join(problems) + ": fix the value (or its unit) in the model graph")
+
+
 def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5, strict: bool = False) -> MeasuredData:
     """Read the CSV at ``path`` for ``model`` (:func:`service.measurements.read_measurements`)."""
     return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps, strict=strict)
@@ -61,6 +82,7 @@ class ModelData:
     substeps: int = 1
 
     def __post_init__(self) -> None:
+        check_mapped_parameters(self.model)
         nodes = {self.model.measurement(c).node: c for c in self.model.boundary_inputs + self.model.targets}
         missing = sorted(n for n in nodes if n not in self.data.series)
         if missing:
@@ -75,8 +97,14 @@ class ModelData:
         return {c: self.data.series[node][window] for c, node in self.node_of.items()}
 
     def observed(self, window: slice) -> dict[str, np.ndarray]:
-        """Target node → observed series in ``window`` (NaN where not measured)."""
-        return {self.node_of[c]: self.data.series[self.node_of[c]][window] for c in self.model.targets}
+        """Target node → observed series in ``window``: NaN where not measured, and NaN where a
+        boundary input is missing (a gap longer than the interpolation limit: the simulator holds
+        the input's last value there, so the model is not compared with the measurement)."""
+        inputs_measured = np.ones(self.data.n_steps, dtype=bool)[window]
+        for component in self.model.boundary_inputs:
+            inputs_measured &= np.isfinite(self.data.series[self.node_of[component]][window])
+        return {self.node_of[c]: np.where(inputs_measured, self.data.series[self.node_of[c]][window], np.nan)
+                for c in self.model.targets}
 
     def simulate_targets(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
         """Target node → ``ndarray[n_ensemble, n_steps]`` for θ ``ndarray[n_ensemble, n_estimated]``."""

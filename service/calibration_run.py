@@ -103,6 +103,7 @@ class CalibrationOutcome:
     test: slice | None
     predictions: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # window → node → median
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = field(default_factory=dict)
+    calibrator: object = None  # the fitted PointCalibrator or BayesianCalibrator (chains for plots)
 
 
 def _estimates(model: AssembledModel, theta, q16, q84, theta_map, se, verdicts) -> list[ParameterEstimate]:
@@ -188,7 +189,7 @@ def calibrate(
         if method == "bayes":
             test_problem = md.problem(joined or test_slice, target_scales=problem.target_scales, warmup_s=0.0)
             predictive = calibrator.predict(test_problem, n_draws=200)
-            median = {k: v[offset:] for k, v in predictive.median().items()}
+            median = {k: v[offset:] for k, v in predictive.median.items()}
             intervals["test"] = {node: {level: tuple(b[offset:] for b in predictive.interval(node, level))
                                         for level in (0.5, 0.68, 0.9, 0.95, 0.99)} for node in median}
         else:
@@ -215,7 +216,8 @@ def calibrate(
         diagnostics=diagnostics,
     )
     store_run(store, model, model_name, record)
-    return CalibrationOutcome(record, model, md, theta, train_slice, test_slice, predictions, intervals)
+    return CalibrationOutcome(record, model, md, theta, train_slice, test_slice, predictions, intervals,
+                              calibrator)
 
 
 def store_run(store: GraphStore, model: AssembledModel, model_name: str, record: CalibrationRecord,

@@ -23,6 +23,7 @@ from .assembly_summary import assembly_to_dict, print_assembly
 from .assembly_triples import assembly_triples
 from .calibration_run import calibrate, parse_window
 from .diagnosis import DiagnosisReport, diagnose
+from .error_history import error_history
 from .effect_recording import applied_effect_triples, record_effect_in_file
 from .measurements import MeasurementError
 from .resources import examples_dir, signatures_dir
@@ -207,6 +208,7 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
                       f"{100 * e.test_improvement:.0f} %", "yes" if e.significant else "no")
     console.print(table)
     console.print(f"[bold]{report.summary}[/bold]")
+    console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis -o report.html")
 
 
 @app.command("simulate")
@@ -361,25 +363,6 @@ def query_command(
     console.print(table)
 
 
-def _history_rows(store: GraphStore, model: str) -> tuple[list[str], dict[str, list[float]], dict[str, str]]:
-    """Latest test RMSE per sensor for ``model`` and every version derived from it (``model+…``)."""
-    versions: list[str] = []
-    rmse: dict[str, dict[str, float]] = {}
-    units: dict[str, str] = {}
-    for name in [m for m in store.models() if m == model or m.startswith(model + "+")]:
-        rows = store.run_named_query("sensor-metrics", model=name)
-        latest = {}
-        for row in rows:
-            if row["window"].value == "test" and row["metric"].value == "rmse":
-                latest.setdefault(row["sensor"].value, (float(row["value"].value), row["unit"].value))
-        if latest:
-            versions.append(name)
-            for sensor, (value, unit) in latest.items():
-                rmse.setdefault(sensor, {})[name] = value
-                units[sensor] = unit
-    return versions, {s: [v.get(n, float("nan")) for n in versions] for s, v in rmse.items()}, units
-
-
 @app.command("history")
 def history_command(
     model: Annotated[str, typer.Argument(help="Model name in the store.")],
@@ -388,7 +371,7 @@ def history_command(
 ) -> None:
     """Test-window error per sensor across the versions of a model (base, base+effect, …)."""
     graph_store = open_store(store, False)
-    versions, rmse, units = _history_rows(graph_store, model)
+    versions, rmse, units = error_history(graph_store, model)
     if not versions:
         raise fail(f"no calibration with a test window for model {model!r} or its versions")
     table = Table(title=f"Test RMSE per sensor across versions of {model}")
@@ -402,6 +385,29 @@ def history_command(
         from .plots import plot_error_history
 
         console.print(f"plot: {plot_error_history(plot, versions, rmse, units)}")
+
+
+@app.command("report")
+def report_command(
+    run: Annotated[str, typer.Argument(help="Run id (printed by calibrate and diagnose; \"run\" in diagnose --json).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write.")] = Path("report.html"),
+    data: Annotated[Path | None, typer.Option(help="The run's measurement CSV (default: the file name the run "
+                                                   "recorded, in the current folder).")] = None,
+    store: StoreOption = Path("graphtwin-data"),
+) -> None:
+    """One self-contained HTML page for RUN: measured vs model per sensor, where it fails on the flow
+    topology, the operating regimes, the missing effects with their evidence, the error across versions."""
+    from .report_page import UnknownRunError, data_file_locator, report_html
+
+    if data is not None and not data.is_file():
+        raise fail(f"{data}: no such file")
+    graph_store = open_store(store, False)
+    try:
+        page = report_html(graph_store, run, locate_data=data_file_locator(data))
+    except UnknownRunError as exc:
+        raise fail(str(exc)) from None
+    output.write_text(page, encoding="utf-8")
+    console.print(f"wrote {output}")
 
 
 @app.command("demo")
@@ -460,7 +466,7 @@ def demo_command(
     figure = plot_measured_vs_model(output / "before_after.png", md.data.timestamps[window], md.observed(window),
                                     {"base model": report.base_test_prediction, f"with {best.effect}": after_run.predictions["test"]},
                                     md.units, title="Test window: measured, base model, model with the effect")
-    versions, rmse, units = _history_rows(graph_store, base_name)
+    versions, rmse, units = error_history(graph_store, base_name)
     history = plot_error_history(output / "error_history.png", versions, rmse, units)
     console.rule("[bold]4. Where to look")
     console.print(f"plots: {figure}, {history}")

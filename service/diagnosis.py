@@ -14,7 +14,12 @@ window (the continuation of training when it follows it, else a run of its own) 
    of the data (:func:`_split_windows`): fitted on the training window plus the first half of the
    test window (the effect must be seen to be fitted: a fault may only be in the test data), judged
    on the second half (data not used to fit it), against the base model refitted on the same fit
-   windows (:mod:`service.effect_ranking`); ranked, the best explained in one sentence;
+   windows (:mod:`service.effect_ranking`); ranked, the best explained in one sentence. Each
+   candidate is fitted under two hypotheses and keeps the one with the smaller mean squared
+   weighted residual on the fit windows (same number of parameters): an effect *present throughout*
+   (base and effect refitted together: a property of the building, e.g. fan motor heat) and a fault
+   *appearing in the test window* (base held at its training estimate, effect null in training and
+   fitted on the first half of the test window: a valve bypass opened on the test day);
 4. when nothing significant is found: "nothing significant is missing" and, if sensors still fail,
    what their residual depends on (:mod:`service.residual_dependence`).
 
@@ -34,7 +39,7 @@ import pyoxigraph as ox
 
 from .assembly import EffectRequest, assemble
 from .calibration_data import ModelData
-from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR
+from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR, CalibrationProblem
 from .calibration_run import Window, calibrate
 from .effect_ranking import (
     EffectEvidence, delta_bic, effective_sample_fraction, rank_evidence, score_test, weighted_test_error,
@@ -146,6 +151,8 @@ class _CandidateJob:
     base_evaluation_prediction: dict[str, np.ndarray]
     seed: int
     refit_max_nfev: int
+    train_theta: dict[str, float] = field(default_factory=dict)
+    onset_windows: tuple[list[slice], slice] | None = None
 
 
 def _split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]:
@@ -172,22 +179,72 @@ def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice, the
 PROBE_SHARES = (0.05, 0.15, 0.35, 0.65, 1.0)
 
 
-def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int]) -> np.ndarray:
-    """The refit's start: the base estimate with the effect parameters at the best point of a grid
+def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None) -> np.ndarray:
+    """The refit's start: a base estimate with the effect parameters at the best point of a grid
     (the null and ``PROBE_SHARES`` of each prior width; all combinations, one simulate call).
 
     A local fit cannot leave some nulls: a first-order lag's response has zero slope at τ = 0, and a
     stuck valve's position s does nothing while its weight w is 0. The grid gets past both.
+
+    The grid is laid on ``theta0`` (the base refitted on the comparison's fit windows) and on
+    ``theta_train`` (the base as calibrated on the training window alone): when the test data hold a
+    fault, the refit without the effect bends other parameters to absorb part of it (a weakened
+    cooling coil for a leaking heating valve), and the effect is best fitted from the undistorted base.
     """
     axes = []
     for column in effect_columns:
         lo, hi = problem.lower[column], problem.upper[column]
         axes.append(np.unique(np.clip(np.r_[theta0[column], lo + np.array(PROBE_SHARES) * (hi - lo)], lo, hi)))
     grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T if axes else np.empty((1, 0))
-    ensemble = np.repeat(theta0[None, :], len(grid), axis=0)
-    ensemble[:, effect_columns] = grid
+    starts = [theta0] if theta_train is None else [theta0, theta_train]
+    ensemble = np.concatenate([np.repeat(start[None, :], len(grid), axis=0) for start in starts])
+    ensemble[:, effect_columns] = np.tile(grid, (len(starts), 1))
     cost = np.sum(problem.weighted_residuals(problem.run(ensemble)) ** 2, axis=1)
     return ensemble[int(np.argmin(cost))]
+
+
+def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effect_columns: list[int]):
+    """The effect fitted as a fault that appears in the test window: the base parameters held at
+    their training estimate (the model that matched the training data), the effect null in the
+    training window and fitted on the test window's first half. Returns (θ, standard errors, mean
+    squared weighted residual over the training window and that half).
+
+    The refit of :func:`_evaluate_candidate` assumes the effect present throughout the fit windows:
+    right for a property of the building (fan motor heat, a sensor offset), wrong for a fault
+    imposed on one day (a valve bypass opened), whose effect fitted over unfaulted and faulted data
+    alike is a compromise that fits neither, while the base parameters bend to absorb the rest.
+    """
+    before, after = job.onset_windows
+    null = theta_train.copy()
+    for column in effect_columns:
+        spec = job.model.estimated_parameters[column].spec
+        null[column] = spec.null if spec.null is not None else spec.default
+    whole = md.problem([*before, after], default=null, target_scales=job.target_scales)
+    unfaulted = [md.simulate_targets(w, null[None, :]) for w in before]
+
+    def simulate(theta_effect: np.ndarray) -> dict[str, np.ndarray]:
+        full = np.repeat(null[None, :], len(theta_effect), axis=0)
+        full[:, effect_columns] = theta_effect
+        faulted = md.simulate_targets(after, full)
+        return {node: np.concatenate([np.repeat(run[node], len(theta_effect), axis=0) for run in unfaulted]
+                                     + [faulted[node]], axis=1) for node in faulted}
+
+    def effect_problem(default: np.ndarray) -> CalibrationProblem:
+        return CalibrationProblem(
+            parameter_names=tuple(whole.parameter_names[c] for c in effect_columns),
+            lower=whole.lower[effect_columns], upper=whole.upper[effect_columns], simulate=simulate,
+            observed=whole.observed, target_scales=job.target_scales, units=whole.units, default=default,
+        )
+
+    at_null = null[effect_columns]
+    problem = effect_problem(_probe_start(effect_problem(at_null), at_null, list(range(len(effect_columns)))))
+    calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev)
+    calibrator.fit(problem)
+    theta = null.copy()
+    theta[effect_columns] = calibrator.theta_
+    standard_errors = np.zeros_like(theta)
+    standard_errors[effect_columns] = calibrator.standard_errors_
+    return theta, standard_errors, 2.0 * calibrator.cost_ / problem.n_observations
 
 
 def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
@@ -200,20 +257,28 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     ])
     problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
     score = score_test(problem, theta0, effect_columns, sample_fraction=job.sample_fraction)
-    problem = md.problem(job.fit_windows, default=_probe_start(problem, theta0, effect_columns),
+    theta_train = np.array([job.train_theta.get(r.key, theta0[j]) for j, r in enumerate(refs)])
+    problem = md.problem(job.fit_windows, default=_probe_start(problem, theta0, effect_columns, theta_train),
                          target_scales=job.target_scales)
     calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev)
     calibrator.fit(problem)
-    rss = 2.0 * calibrator.cost_
+    theta, standard_errors = calibrator.theta_, calibrator.standard_errors_
+    mean_square = 2.0 * calibrator.cost_ / problem.n_observations
+    onset = "present throughout"
+    if job.onset_windows is not None and effect_columns:
+        onset_fit = _fit_onset(md, job, theta_train, effect_columns)
+        if onset_fit[2] < mean_square:
+            theta, standard_errors, mean_square = onset_fit
+            onset = "appearing in the test window"
     n = problem.n_observations
     evidence = EffectEvidence(
         effect=job.signature.id, effect_iri=job.signature.iri, node=job.node, label=job.signature.label,
         parameter_names=tuple(refs[j].name for j in effect_columns), score=score,
-        delta_bic=delta_bic(job.base_rss, rss, job.sample_fraction * n, len(effect_columns)),
-        estimates={refs[j].name: float(calibrator.theta_[j]) for j in effect_columns},
-        standard_errors={refs[j].name: float(calibrator.standard_errors_[j]) for j in effect_columns},
+        delta_bic=delta_bic(job.base_rss, mean_square * n, job.sample_fraction * n, len(effect_columns)),
+        estimates={refs[j].name: float(theta[j]) for j in effect_columns},
+        standard_errors={refs[j].name: float(standard_errors[j]) for j in effect_columns},
     )
-    after = _predict_evaluation(md, job.run_window, job.evaluation, calibrator.theta_)
+    after = _predict_evaluation(md, job.run_window, job.evaluation, theta)
     before = job.base_evaluation_prediction
     observed = md.observed(job.evaluation)
     before_error = weighted_test_error(observed, before, job.target_scales)
@@ -236,7 +301,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     evidence.explanation = (
         f"residual on {_short(best)} correlates {rho:.2f} with what {job.signature.id} at {_short(job.node)} adds; "
         f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "
-        f"sensors); {estimates}"
+        f"sensors); {estimates}; fitted as an effect {onset}"
     )
     return evidence
 
@@ -326,9 +391,11 @@ def diagnose(
     fraction = effective_sample_fraction(base_residuals)
     base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, refit.theta_)}
     base_evaluation = _predict_evaluation(md, run_window, evaluation, refit.theta_)
+    train_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, base.theta)}
     jobs = [
         _CandidateJob(signature, node, cand_model, data, substeps, fit_windows, run_window, evaluation, base_theta,
-                      2.0 * refit.cost_, fraction, scales, base_evaluation, seed, refit_max_nfev)
+                      2.0 * refit.cost_, fraction, scales, base_evaluation, seed, refit_max_nfev, train_theta,
+                      ([train_slice], slice(test_slice.start, evaluation.start)))
         for signature, node, cand_model in candidates
     ]
     workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)

@@ -7,10 +7,24 @@ every change, so a crash leaves the previous version, never half of one. Status 
 marks what a stopped process left ``queued`` or ``running`` as ``interrupted`` (resubmit it: a job
 is never left "running" forever and a finished result is never lost).
 
-**Runner.** :class:`JobRunner` runs jobs in a :class:`~concurrent.futures.ThreadPoolExecutor` of
-one or two workers inside the server process: pyoxigraph releases the GIL while it queries and the
-calibration spends its time in numpy, so threads overlap well. A process pool cannot be used: the
-embedded on-disk store is opened by one process only (Oxigraph locks it).
+**Runner.** :class:`JobRunner` runs each job on a thread of its own
+(:class:`~concurrent.futures.ThreadPoolExecutor`, ``max_workers`` at a time). Where the work runs
+depends on its ``executor`` (:func:`job_executor`, ``GRAPHTWIN_EXECUTOR`` / ``graphtwin serve --executor``):
+
+* ``threads``: on that thread, reading the live store (pyoxigraph releases the GIL while it
+  queries and the calibration spends its time in numpy, so threads overlap well);
+* ``processes`` (the service's default): in a local process pool (:class:`ProcessJobExecutor`);
+* ``dask://HOST:PORT``: on the workers of a Dask distributed cluster (:class:`DaskJobExecutor`),
+  e.g. a portfolio of buildings calibrated in parallel.
+
+The embedded on-disk store is opened by one process only (Oxigraph locks it), so work that runs
+elsewhere never touches it: the job's thread ships a :class:`ShippedJob` (the graphs the job reads,
+``GraphStore.matching_dataset(params["model"])``, as N-Quads, and the bytes of its measurement
+upload ``params["measurements"]``), :func:`run_shipped_job` runs the work against a scratch
+in-memory store holding them and sends back the result and the graphs it wrote (N-Quads), and the
+job's thread commits those as below. Progress messages of shipped work arrive with its result; a
+cancel drops the remote task at once (a running Dask task or pool process finishes in the
+background and its results are discarded).
 
 **Results.** A job reads the store as it is and writes through :class:`DeferredWrites`: every graph
 it writes is kept in memory and committed in ONE update when the job ends, before its status says
@@ -35,11 +49,13 @@ import tempfile
 import threading
 import uuid
 from collections.abc import Callable, Mapping
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from enum import StrEnum
+from multiprocessing import get_context
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import numpy as np
 import pyoxigraph as ox
@@ -50,13 +66,15 @@ from .assembly_triples import assembly_triples
 from .calibration_run import calibrate, parse_window
 from .effect_recording import applied_effect_triples
 from .resources import signatures_dir
+from .settings import check_executor
 from .signature import load_signature_library
 from .store import GraphStore, parse_rdf
 
 __all__ = [
     "JobStatus", "JobRecord", "JobRecords", "JobResult", "JobContext", "JobCancelled", "JobStateError",
-    "DeferredWrites", "JobRunner", "JobKind", "assemble_job", "calibrate_job", "diagnose_job", "add_effect_job",
-    "json_safe",
+    "ShippedWorkError", "DeferredWrites", "JobRunner", "JobKind", "ShippedJob", "ShippedContext", "run_shipped_job", "ProcessJobExecutor",
+    "DaskJobExecutor", "job_executor", "assemble_job", "calibrate_job", "diagnose_job",
+    "add_effect_job", "json_safe",
 ]
 
 log = logging.getLogger("graphtwin.jobs")
@@ -176,6 +194,11 @@ class JobCancelled(Exception):
     """Raised inside a job's work when its cancellation was requested."""
 
 
+class ShippedWorkError(Exception):
+    """Shipped work raised something other than a bad-input error (a bug): its type and message as
+    text, since not every exception survives the way back from a pool process or a Dask worker."""
+
+
 class JobStateError(Exception):
     """The operation does not apply to the job in its current state (the message says why)."""
 
@@ -226,6 +249,19 @@ class DeferredWrites:
     def triple_count(self, graph):
         return self.backend.triple_count(graph)
 
+    def shipped(self) -> tuple[bytes, list[str]]:
+        """The kept graphs as one N-Quads document (blank nodes shared between graphs stay shared)
+        and the IRIs of the graphs kept empty (drops): what shipped work sends back."""
+        quads = [ox.Quad(t.subject, t.predicate, t.object, graph) for graph, triples in self._graphs.items() for t in triples]
+        return ox.serialize(quads, format=ox.RdfFormat.N_QUADS), [g.value for g, t in self._graphs.items() if not t]
+
+    def keep_shipped(self, nquads: bytes, dropped: list[str]) -> None:
+        """Keep what :meth:`shipped` made elsewhere, as if the work had written it here."""
+        graphs: dict[ox.NamedNode, list[ox.Triple]] = {ox.NamedNode(g): [] for g in dropped}
+        for quad in ox.parse(nquads, format=ox.RdfFormat.N_QUADS):
+            graphs.setdefault(quad.graph_name, []).append(quad.triple)
+        self._graphs.update(graphs)
+
     def commit(self) -> None:
         """Write every kept graph in one update; nothing to do when nothing was written."""
         if not self._graphs:
@@ -243,10 +279,19 @@ class DeferredWrites:
 
 
 class JobContext:
-    """Handed to a job's work: report progress, learn about a cancel request."""
+    """Handed to a job's work: report progress, learn about a cancel request, find its measurements."""
 
     def __init__(self, runner: JobRunner, job_id: str):
         self._runner, self.job_id = runner, job_id
+
+    def measurements(self, upload_id: str) -> Path:
+        """The CSV of measurement upload ``upload_id``.
+
+        :raises KeyError: no such upload.
+        """
+        if self._runner.locate_measurements is None:
+            raise KeyError(f"no measurement upload {upload_id!r}: this runner keeps no uploads")
+        return self._runner.locate_measurements(upload_id)
 
     @property
     def cancel_requested(self) -> bool:
@@ -260,15 +305,153 @@ class JobContext:
 
 
 #: A job kind: ``work(store, params, context) -> JobResult``; ``store`` writes through DeferredWrites.
+#: Kinds run by a process pool or Dask are pickled by reference: module-level functions.
 JobKind = Callable[[GraphStore, dict, JobContext], JobResult]
+
+
+# ---------------------------------------------------------------------- shipped work
+@dataclass(frozen=True)
+class ShippedJob:
+    """Everything a job needs away from the server (picklable): its ``params``, the graphs it reads
+    (``dataset``, N-Quads) and the bytes of its measurement uploads by upload id."""
+
+    job_id: str
+    params: dict
+    dataset: bytes
+    measurements: dict[str, bytes] = field(default_factory=dict)
+
+
+class ShippedContext:
+    """The :class:`JobContext` of shipped work: progress messages are kept (they travel back with
+    the result), measurements are the shipped bytes written to ``folder``."""
+
+    cancel_requested = False
+
+    def __init__(self, job: ShippedJob, folder: Path):
+        self.job_id, self._job, self._folder = job.job_id, job, Path(folder)
+        self.messages: list[dict] = []
+
+    def report(self, message: str) -> None:
+        self.messages.append({"time": _now(), "message": message})
+
+    def measurements(self, upload_id: str) -> Path:
+        if upload_id not in self._job.measurements:
+            raise KeyError(f"no measurement upload {upload_id!r}")
+        path = self._folder / f"{upload_id}.csv"
+        if not path.is_file():
+            path.write_bytes(self._job.measurements[upload_id])
+        return path
+
+
+def run_shipped_job(work: JobKind, job: ShippedJob) -> tuple[JobResult, bytes, list[str], list[dict]]:
+    """Run ``work`` on a scratch in-memory store holding ``job.dataset``: in a pool process or on a
+    Dask worker. Returns the result, the graphs written (:meth:`DeferredWrites.shipped`) and the
+    progress messages. Errors travel back in types that always unpickle: bad input as a ``KeyError``
+    or ``ValueError`` with the original message, anything else as :class:`ShippedWorkError`."""
+    scratch = GraphStore.embedded(None)
+    scratch.backend.store.load(job.dataset, format=ox.RdfFormat.N_QUADS)
+    writes = DeferredWrites(scratch.backend)
+    with tempfile.TemporaryDirectory(prefix="graphtwin-job-") as folder:
+        context = ShippedContext(job, Path(folder))
+        try:
+            outcome = work(GraphStore(writes), job.params, context)
+        except (JobCancelled, FileNotFoundError):
+            raise
+        except KeyError as exc:  # bad input: the same category and message, in a type that unpickles
+            raise KeyError(*exc.args[:1]) from None
+        except ValueError as exc:
+            raise ValueError(str(exc)) from None
+        except Exception as exc:
+            raise ShippedWorkError(f"{type(exc).__name__}: {exc}") from None
+    nquads, dropped = writes.shipped()
+    return outcome, nquads, dropped, context.messages
+
+
+def ship_job(store: GraphStore, job_id: str, params: dict,
+             locate_measurements: Callable[[str], Path] | None) -> ShippedJob:
+    """What :func:`run_shipped_job` needs for a job on ``store``: the graphs of
+    ``store.matching_dataset(params["model"])`` and the upload ``params["measurements"]``.
+
+    :raises KeyError: the upload does not exist; :raises ValueError: an invalid model name.
+    """
+    quads = []
+    if "model" in params:
+        for graph in store.matching_dataset(params["model"]):
+            quads += [ox.Quad(t.subject, t.predicate, t.object, graph) for t in store.graph_triples(graph)]
+    files = {}
+    upload = params.get("measurements")
+    if upload is not None:
+        if locate_measurements is None:
+            raise KeyError(f"no measurement upload {upload!r}: this runner keeps no uploads")
+        files[upload] = Path(locate_measurements(upload)).read_bytes()
+    return ShippedJob(job_id, dict(params), ox.serialize(quads, format=ox.RdfFormat.N_QUADS), files)
+
+
+class ProcessJobExecutor:
+    """Shipped work in a local pool of ``max_workers`` processes (started with ``spawn``: the server's
+    threads and its open store are not copied into them)."""
+
+    def __init__(self, max_workers: int = 1):
+        self.name = f"a local process pool ({max_workers} process{'es' if max_workers > 1 else ''})"
+        self._pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=get_context("spawn"))
+
+    def submit(self, function, *args):
+        return self._pool.submit(function, *args)
+
+    def shutdown(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+class DaskJobExecutor:
+    """Shipped work on a Dask distributed cluster: ``address`` is the scheduler's (``tcp://HOST:PORT``),
+    or a ``distributed.Client`` to use as it is (tests: a ``LocalCluster``'s). Workers need graphtwin
+    installed (they import ``service.jobs``); nothing else is shared with them."""
+
+    def __init__(self, address, *, connect_timeout_s: float = 10.0):
+        try:
+            from distributed import Client
+        except ImportError:  # pragma: no cover - depends on the installation
+            raise ValueError("the Dask executor needs the distributed package: pip install 'graphtwin[dask]'") from None
+        if isinstance(address, Client):
+            self.client, self._own_client = address, False
+        else:
+            try:
+                self.client, self._own_client = Client(address, timeout=connect_timeout_s, set_as_default=False), True
+            except OSError as exc:
+                raise ValueError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+        self.name = f"the Dask cluster at {self.client.scheduler.address}"
+
+    def submit(self, function, work: JobKind, job: ShippedJob):
+        return self.client.submit(function, work, job, pure=False, key=f"graphtwin-job-{job.job_id}")
+
+    def shutdown(self) -> None:
+        if self._own_client:
+            self.client.close()
+
+
+def job_executor(spec: str, *, max_workers: int = 1):
+    """The executor ``spec`` names (:func:`check_executor`): None for ``threads`` (work runs on the
+    job's thread), a :class:`ProcessJobExecutor` or a :class:`DaskJobExecutor`."""
+    check_executor(spec)
+    if spec == "threads":
+        return None
+    if spec == "processes":
+        return ProcessJobExecutor(max_workers)
+    parts = urlsplit(spec)
+    return DaskJobExecutor(f"tcp://{parts.hostname}:{parts.port}")
 
 
 class JobRunner:
     """Runs jobs of the registered ``kinds`` on ``store``, ``max_workers`` at a time; see the module
     docstring for threads, results and cancellation. Records persist through ``records``."""
 
-    def __init__(self, store: GraphStore, records: JobRecords, kinds: Mapping[str, JobKind], *, max_workers: int = 1):
+    def __init__(self, store: GraphStore, records: JobRecords, kinds: Mapping[str, JobKind], *, max_workers: int = 1,
+                 locate_measurements: Callable[[str], Path] | None = None, executor=None):
+        """:param locate_measurements: upload id → CSV path (:meth:`JobContext.measurements`).
+        :param executor: None (work on the job's thread), a :class:`ProcessJobExecutor` or a
+            :class:`DaskJobExecutor` (see :func:`job_executor`); :meth:`shutdown` shuts it down."""
         self.store, self.records, self.kinds = store, records, dict(kinds)
+        self.locate_measurements, self.executor = locate_measurements, executor
         self._lock = threading.RLock()
         self._jobs = {r.id: r for r in records.all()}
         self._futures: dict[str, Future] = {}
@@ -348,6 +531,8 @@ class JobRunner:
                     self.records.save(record)
         if wait:
             self._executor.shutdown(wait=True)
+            if self.executor is not None:
+                self.executor.shutdown()
 
     # ------------------------------------------------------------------ internals
     def _progress(self, job_id: str, message: str) -> None:
@@ -364,6 +549,24 @@ class JobRunner:
                 record.progress.append({"time": record.finished, "message": message})
             self.records.save(record)
 
+    def _run_shipped(self, job_id: str, kind: str, params: dict, writes: DeferredWrites) -> JobResult:
+        """Run the job's work on ``self.executor``; wait for it, dropping it when a cancel is requested."""
+        future = self.executor.submit(run_shipped_job, self.kinds[kind],
+                                      ship_job(self.store, job_id, params, self.locate_measurements))
+        self._progress(job_id, f"sent to {self.executor.name}")
+        while True:
+            try:
+                outcome, nquads, dropped, messages = future.result(timeout=0.2)
+                break
+            except TimeoutError:
+                if self.get(job_id).cancel_requested:
+                    future.cancel()
+                    raise JobCancelled() from None
+        with self._lock:
+            self._jobs[job_id].progress.extend(messages)
+        writes.keep_shipped(nquads, dropped)
+        return outcome
+
     def _run(self, job_id: str) -> None:
         with self._lock:
             record = self._jobs[job_id]
@@ -375,7 +578,10 @@ class JobRunner:
             kind, params = record.kind, dict(record.params)
         writes = DeferredWrites(self.store.backend)
         try:
-            outcome = self.kinds[kind](GraphStore(writes), params, JobContext(self, job_id))
+            if self.executor is None:
+                outcome = self.kinds[kind](GraphStore(writes), params, JobContext(self, job_id))
+            else:
+                outcome = self._run_shipped(job_id, kind, params, writes)
         except JobCancelled:
             self._finish(job_id, JobStatus.CANCELLED, message="cancelled; nothing was written")
             return
@@ -385,7 +591,8 @@ class JobRunner:
             return
         except Exception as exc:  # a bug, not the user's input: keep the service up and say so
             log.exception("job %s (%s) failed", job_id, kind)
-            self._finish(job_id, JobStatus.FAILED, error=f"internal error: {type(exc).__name__}: {exc}",
+            described = str(exc) if isinstance(exc, ShippedWorkError) else f"{type(exc).__name__}: {exc}"
+            self._finish(job_id, JobStatus.FAILED, error=f"internal error: {described}",
                          message="failed; nothing was written")
             return
         with self._lock:
@@ -429,12 +636,11 @@ def _result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:
     }
 
 
-def calibrate_job(store: GraphStore, params: dict, context: JobContext, *,
-                  locate_measurements: Callable[[str], Path]) -> JobResult:
+def calibrate_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
     """``{"model", "measurements", "train", "test", "method", "seed"}`` (windows as ``START/END``):
-    :func:`service.calibration_run.calibrate` on the uploaded CSV ``locate_measurements(id)``."""
+    :func:`service.calibration_run.calibrate` on the uploaded CSV ``context.measurements(id)``."""
     model = params["model"]
-    data = locate_measurements(params["measurements"])
+    data = context.measurements(params["measurements"])
     context.report(f"calibrating ({params.get('method', 'point')})")
     outcome = calibrate(store, model, data, train=parse_window(params.get("train") or "/"),
                         test=_window(params.get("test")), method=params.get("method", "point"),
@@ -443,16 +649,16 @@ def calibrate_job(store: GraphStore, params: dict, context: JobContext, *,
     return JobResult(outcome.record.to_dict(), _result_links(store, model, outcome.record.run_id))
 
 
-def diagnose_job(store: GraphStore, params: dict, context: JobContext, *,
-                 locate_measurements: Callable[[str], Path]) -> JobResult:
+def diagnose_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
     """``{"model", "measurements", "train", "test", "seed"}``: :func:`service.diagnosis.diagnose`,
-    its phases reported as progress (a cancel stops it at the next phase)."""
+    its phases reported as progress (a cancel stops it at the next phase). One worker process: the
+    job already runs beside the server's other work (or in a pool process, or on a Dask worker)."""
     from .diagnosis import diagnose  # the effect catalog machinery loads only when a diagnosis runs
 
     model = params["model"]
-    data = locate_measurements(params["measurements"])
+    data = context.measurements(params["measurements"])
     report = diagnose(store, model, data, train=parse_window(params["train"]), test=parse_window(params["test"]),
-                      seed=int(params.get("seed", 0)), on_progress=context.report)
+                      seed=int(params.get("seed", 0)), on_progress=context.report, workers=1)
     links = _result_links(store, model, report.run_id)
     links["diagnosis_graph"] = store.run_graph(f"{report.run_id}-diagnosis").value
     return JobResult(report.to_dict(), links)

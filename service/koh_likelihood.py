@@ -24,7 +24,8 @@ Priors (proper, independent):
     up to ten windows: a nearly linear trend), σ_n / s ∈ [1e-3, 2].
 
 A member outside the prior support gets −inf and is not simulated; the members inside are simulated
-in ONE call to ``problem.run``. Per target at most ``max_points_per_target`` measured points enter
+in ONE call to ``problem.run``; targets measured at the same steps share one batched GP call
+(all their hyperparameter sets stacked). Per target at most ``max_points_per_target`` measured points enter
 the GP (an evenly spaced subset when there are more; the dense GP is O(n³)).
 """
 
@@ -107,14 +108,17 @@ class KennedyOHaganLikelihood:
         masks = problem.masks
         self.train_index: dict[str, np.ndarray] = {}
         self.train_inputs: dict[str, np.ndarray] = {}
-        self._distances: dict[str, InputDistances] = {}
         for key in problem.target_keys:
             valid = np.flatnonzero(masks[key])
             if valid.size > max_points_per_target:
                 valid = valid[np.unique(np.round(np.linspace(0, valid.size - 1, max_points_per_target)).astype(int))]
             self.train_index[key] = valid
             self.train_inputs[key] = inputs[valid]
-            self._distances[key] = InputDistances(inputs[valid])
+        # targets measured at the same steps share their distances and are evaluated in one GP call
+        groups: dict[bytes, list[str]] = {}
+        for key in problem.target_keys:
+            groups.setdefault(self.train_index[key].tobytes(), []).append(key)
+        self._groups = [(InputDistances(self.train_inputs[keys[0]]), keys) for keys in groups.values()]
         self.n_theta = problem.n_parameters
         self.n_hyper_per_target = self.n_inputs + 2
         self.n_dim = self.n_theta + len(problem.target_keys) * self.n_hyper_per_target
@@ -178,15 +182,19 @@ class KennedyOHaganLikelihood:
             members = batch[inside]
             outputs = self.problem.run(members[:, : self.n_theta])
             hyper = self.hyperparameters(members)
-            total = np.zeros(members.shape[0])
-            for key in self.problem.target_keys:
-                index = self.train_index[key]
-                scale = self.problem.target_scales[key]
-                residuals = (self.problem.observed[key][index] - outputs[key][:, index]) / scale
-                h = hyper[key]
-                total += log_marginal_likelihood(
-                    residuals, self._distances[key], h.amplitude / scale, h.length_scales, h.noise_std / scale
-                ) - index.size * np.log(scale)
+            n_members = members.shape[0]
+            total = np.zeros(n_members)
+            for distances, keys in self._groups:
+                index = self.train_index[keys[0]]
+                scales = [self.problem.target_scales[key] for key in keys]
+                residuals = np.concatenate([
+                    (self.problem.observed[key][index] - outputs[key][:, index]) / scale for key, scale in zip(keys, scales)
+                ])
+                amplitude = np.concatenate([hyper[key].amplitude / scale for key, scale in zip(keys, scales)])
+                length_scales = np.concatenate([hyper[key].length_scales for key in keys])
+                noise = np.concatenate([hyper[key].noise_std / scale for key, scale in zip(keys, scales)])
+                values = log_marginal_likelihood(residuals, distances, amplitude, length_scales, noise)
+                total += values.reshape(len(keys), n_members).sum(axis=0) - index.size * np.log(scales).sum()
             log_likelihood[inside] = np.where(np.isfinite(total), total, -np.inf)
         return log_prior, log_likelihood
 
@@ -196,13 +204,19 @@ class KennedyOHaganLikelihood:
         return log_prior + log_likelihood
 
     def initial_ensemble(
-        self, theta: np.ndarray, residual_std: dict[str, float], n_walkers: int, random_state: np.random.RandomState
+        self, theta: np.ndarray, residual_std: dict[str, float], n_walkers: int, random_state: np.random.RandomState,
+        theta_covariance: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Walkers in a small ball around a point estimate, for the start of a sampler.
+        """Walkers around a point estimate, for the start of a sampler.
 
-        θ: ``theta`` + N(0, (1 % of the prior width)²); per target log σ_n and log σ_f near the
-        residual standard deviation of the point fit, log ℓ near log 0.1, each with N(0, 0.1²)
-        jitter; everything clipped a hair inside the prior bounds.
+        θ: ``theta`` + N(0, (1 % of the prior width)²), or with ``theta_covariance`` (the point
+        fit's Laplace covariance, physical units) ``theta`` + D·z with z ~ N(0, R), R its correlation
+        matrix and D its standard errors capped at 10 % of the prior width: the ensemble starts with
+        the posterior's shape (a ridge of confounded parameters included), not as a ball that must
+        first stretch along the ridge, which is most of the burn-in (flat directions start spread
+        over 10 % of their prior, not over the huge linearised variance). Per target log σ_n and
+        log σ_f near the residual standard deviation of the point fit, log ℓ near log 0.1, each with
+        N(0, 0.1²) jitter; everything clipped a hair inside the prior bounds.
 
         :returns: ``ndarray[n_walkers, n_dim]``.
         """
@@ -214,5 +228,15 @@ class KennedyOHaganLikelihood:
         width = self.upper - self.lower
         spread = np.concatenate([0.01 * width[: self.n_theta], np.full(self.n_dim - self.n_theta, 0.1)])
         walkers = centre + spread * random_state.standard_normal((n_walkers, self.n_dim))
+        if theta_covariance is not None:
+            covariance = np.asarray(theta_covariance, dtype=float)
+            if covariance.shape != (self.n_theta, self.n_theta):
+                raise ValueError(f"theta_covariance has shape {covariance.shape}, expected ({self.n_theta}, {self.n_theta})")
+            standard_error = np.sqrt(np.diag(covariance))
+            correlation = covariance / np.outer(standard_error, standard_error)
+            values, vectors = np.linalg.eigh(correlation)
+            root = vectors * np.sqrt(np.clip(values, 0.0, None))
+            z = random_state.standard_normal((n_walkers, self.n_theta)) @ root.T
+            walkers[:, : self.n_theta] = centre[: self.n_theta] + z * np.minimum(standard_error, 0.1 * width[: self.n_theta])
         margin = 1e-6 * width
         return np.clip(walkers, self.lower + margin, self.upper - margin)

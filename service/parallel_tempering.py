@@ -231,7 +231,8 @@ class ParallelTemperingSampler:
                     self.acceptance_fraction = accepted_total / (step * self.n_walkers)
                     self.swap_acceptance_fraction = swapped_total / step
                     display.update(step, history[-1] if history else np.nan, self)
-                iat = float(np.max(emcee.autocorr.integrated_time(self.backend.get_chain(), tol=0, quiet=True)))
+                with np.errstate(invalid="ignore", divide="ignore"):  # a walker stuck so far: NaN, not converged
+                    iat = float(np.max(emcee.autocorr.integrated_time(self.backend.get_chain(), tol=0, quiet=True)))
                 previous = history[-1] if history else np.inf
                 history.append(iat)
                 finite = bool(np.isfinite(iat))

@@ -19,6 +19,13 @@ Elementary effects are ``(Y(x + Δ e_i) − Y(x)) / Δ`` with Δ the step in the
 ``μ* = |c|·(hi − lo)``. Reference: Morris (1991), Technometrics 33(2):161–174,
 doi:10.1080/00401706.1991.10484804; Campolongo, Cariboni & Saltelli (2007) for μ*.
 
+Several targets (:func:`calibration_morris_by_regime`): the targets of a
+:class:`~service.calibration_problem.CalibrationProblem` are divided by their target scales and
+stacked along time, so ``Y_r`` is the root mean square *weighted* residual over every measured value
+of every target in regime r, ``Y_r = sqrt(mean_{k, t ∈ r} ((y_k(t) − ŷ_k(t)) / s_k)²)``: the
+calibration cost restricted to the regime (dimensionless). The problem's warm-up steps are NaN in
+its observations and so left out.
+
 Comparing regimes: the measures of different regimes have different sizes, so each regime's μ* is
 normalised to its share of the regime's total, ``s[r, i] = μ*[r, i] / Σ_j μ*[r, j]`` (0 where the
 regime's measure does not move at all).
@@ -26,14 +33,20 @@ regime's measure does not move at all).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from SALib.analyze import morris as morris_analyze
 from SALib.sample import morris as morris_sample
 
-__all__ = ["RegimeSensitivity", "morris_by_regime", "successive_calibration_plan"]
+from .calibration_data import ModelData
+from .calibration_problem import CalibrationProblem
+
+__all__ = [
+    "RegimeSensitivity", "morris_by_regime", "calibration_morris_by_regime", "successive_calibration_plan",
+    "dominant_parameters_by_regime",
+]
 
 
 @dataclass(frozen=True)
@@ -72,14 +85,25 @@ class RegimeSensitivity:
         order = np.argsort(-np.nan_to_num(share, nan=-1.0), kind="stable")
         return [self.names[i] for i in order if share[i] >= threshold]
 
+    def ranking(self, regime: int, top: int | None = None) -> list[dict]:
+        """The regime's parameters by decreasing μ*: ``{"parameter", "mu_star", "mu_star_conf", "sigma",
+        "share"}`` each (``share`` = normalised μ*); the ``top`` first, or all."""
+        row = self._row(regime)
+        shares = self.normalised_mu_star()[row]
+        order = np.argsort(-np.nan_to_num(self.mu_star[row], nan=-1.0), kind="stable")[:top]
+        return [{"parameter": self.names[i], "mu_star": float(self.mu_star[row, i]),
+                 "mu_star_conf": float(self.mu_star_conf[row, i]), "sigma": float(self.sigma[row, i]),
+                 "share": float(shares[i])} for i in order]
+
     def table(self) -> str:
         """Readable μ* table: one line per parameter, per regime ``μ* (share %)``."""
         shares = self.normalised_mu_star()
-        width = max(len(n) for n in self.names + ["parameter"])
+        labels = [_readable(n) for n in self.names]
+        width = max(len(n) for n in labels + ["parameter"])
         header = f"{'parameter':<{width}}" + "".join(
             f"  {f'regime {r} (n={n})':>22}" for r, n in zip(self.regimes, self.n_steps))
         lines = [f"Morris μ* of the {self.measure} per regime (share of the regime's total μ*)", header]
-        for i, name in enumerate(self.names):
+        for i, name in enumerate(labels):
             cells = "".join(f"  {f'{self.mu_star[r, i]:.3g} ({100 * shares[r, i]:.0f} %)':>22}"
                             for r in range(len(self.regimes)))
             lines.append(f"{name:<{width}}{cells}")
@@ -89,6 +113,11 @@ class RegimeSensitivity:
         return {"names": self.names, "regimes": self.regimes, "measure": self.measure, "n_steps": self.n_steps,
                 "mu_star": self.mu_star.tolist(), "mu_star_conf": self.mu_star_conf.tolist(),
                 "sigma": self.sigma.tolist(), "mu": self.mu.tolist()}
+
+
+def _readable(name: str) -> str:
+    """A parameter key ``…/component/Fan/supply_fan#c3`` as ``supply_fan.c3``; other names unchanged."""
+    return name.rsplit("/", 1)[-1].replace("#", ".")
 
 
 def _check_problem(problem: Mapping) -> None:
@@ -161,6 +190,86 @@ def morris_by_regime(
         names=list(problem["names"]), regimes=regimes, n_steps=n_steps,
         measure="rmse" if observed is not None else "mean output", **stats,
     )
+
+
+def calibration_morris_by_regime(
+    problem: CalibrationProblem,
+    labels: np.ndarray,
+    *,
+    targets: Sequence[str] | None = None,
+    n_trajectories: int = 10,
+    num_levels: int = 4,
+    seed: int | None = None,
+) -> RegimeSensitivity:
+    """Morris per regime of a calibration problem's weighted RMS residual (module docstring).
+
+    The design spans the problem's prior bounds; the whole design is ONE ``problem.run`` call.
+    ``n_steps`` of the result counts measured values (targets × steps) per regime.
+
+    :param problem: the calibration problem (its observations and target scales are used).
+    :param labels: ``ndarray[problem.n_steps]`` regime per step of the problem (−1: left out).
+    :param targets: the targets whose residuals form the measure (default all).
+    """
+    labels = np.asarray(labels)
+    if labels.shape != (problem.n_steps,):
+        raise ValueError(f"labels have shape {labels.shape}, expected ({problem.n_steps},): one per problem step")
+    keys = list(problem.target_keys if targets is None else targets)
+    unknown = sorted(set(keys) - set(problem.target_keys))
+    if unknown or not keys:
+        raise ValueError(f"unknown targets {unknown}: the problem has {list(problem.target_keys)}")
+    scales = problem.target_scales
+    spec = {"num_vars": problem.n_parameters, "names": list(problem.parameter_names),
+            "bounds": [[lo, hi] for lo, hi in zip(problem.lower, problem.upper)]}
+
+    def stacked(theta: np.ndarray) -> np.ndarray:
+        outputs = problem.run(theta)
+        return np.concatenate([outputs[k] / scales[k] for k in keys], axis=1)
+
+    observed = np.concatenate([problem.observed[k] / scales[k] for k in keys])
+    return morris_by_regime(spec, stacked, np.tile(labels, len(keys)), observed,
+                            n_trajectories=n_trajectories, num_levels=num_levels, seed=seed)
+
+
+def dominant_parameters_by_regime(
+    model_data: ModelData,
+    window: slice,
+    labels: np.ndarray,
+    *,
+    n_regimes: int | None = None,
+    top: int = 3,
+    n_trajectories: int = 10,
+    seed: int | None = 0,
+    warmup_s: float = 3600.0,
+) -> list[list[dict]]:
+    """Per regime, the ``top`` parameters that move the model's misfit most there (Morris μ*).
+
+    The measure is :func:`calibration_morris_by_regime` on the calibration problem of ``window``
+    (all targets, the first ``warmup_s`` not compared); one ensemble run of
+    ``n_trajectories · (n_parameters + 1)`` members.
+
+    :param labels: ``ndarray[window length]`` regime per step of the window (−1: left out), e.g.
+        ``OperatingRegimes.predict(features[window])``.
+    :param n_regimes: return regimes 0 … n_regimes − 1 (an empty list for a regime without
+        measured steps in the window); default the regimes present.
+    :returns: ``result[r]`` = list of ``{"parameter": "<component local name>.<name>", "key", "node",
+        "unit", "mu_star", "mu_star_conf", "sigma", "share"}``, largest μ* first; ``mu_star``,
+        ``mu_star_conf`` and ``sigma`` are in weighted-residual units (residual / target scale),
+        ``share`` is μ* over the regime's total μ*.
+    """
+    problem = model_data.problem(window, warmup_s=warmup_s)
+    sensitivity = calibration_morris_by_regime(problem, labels, n_trajectories=n_trajectories, seed=seed)
+    refs = {ref.key: ref for ref in model_data.model.estimated_parameters}
+    regimes = range(n_regimes) if n_regimes is not None else sensitivity.regimes
+    result = []
+    for regime in regimes:
+        present = regime in sensitivity.regimes and sensitivity.n_steps[sensitivity.regimes.index(regime)] > 0
+        rows = sensitivity.ranking(regime, top) if present else []
+        for row in rows:
+            ref = refs[row["parameter"]]
+            node = model_data.model.components[ref.component].node
+            row.update(parameter=_readable(ref.key), key=ref.key, node=node, unit=ref.spec.unit)
+        result.append(rows)
+    return result
 
 
 def successive_calibration_plan(

@@ -13,7 +13,11 @@
 ``GRAPHTWIN_MAX_UPLOAD_BYTES``  largest accepted upload (413 above)
 ``GRAPHTWIN_QUERY_TIMEOUT_S``   SPARQL query time limit, s (503 above)
 ``GRAPHTWIN_MAX_RESULT_ROWS``   most rows (or triples) a query may return (422 above)
-``GRAPHTWIN_JOB_WORKERS``       jobs running at once (1 or 2: they share the store and the CPU)
+``GRAPHTWIN_EXECUTOR``          where job work runs: ``processes`` (default: a local process pool),
+                                ``threads`` (inside the server process) or ``dask://HOST:PORT``
+                                (the workers of that Dask scheduler); see :mod:`service.jobs`
+``GRAPHTWIN_JOB_WORKERS``       jobs running at once: 1 or 2 with threads or processes (they share
+                                this machine's CPU), up to 64 with a Dask cluster
 ==============================  ==================================================================
 
 Secrets are :class:`~pydantic.SecretStr`: ``repr``, logs and tracebacks show ``**********``.
@@ -22,11 +26,29 @@ Secrets are :class:`~pydantic.SecretStr`: ``repr``, logs and tracebacks show ``*
 from __future__ import annotations
 
 from pathlib import Path
+from urllib.parse import urlsplit
 
-from pydantic import Field, SecretStr, field_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["Settings"]
+__all__ = ["Settings", "check_executor"]
+
+
+def check_executor(spec: str) -> str:
+    """``spec`` if it names an executor: ``threads``, ``processes`` or ``dask://HOST:PORT``.
+
+    :raises ValueError: naming the accepted forms.
+    """
+    if spec in ("threads", "processes"):
+        return spec
+    parts = urlsplit(spec)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme != "dask" or not parts.hostname or port is None or parts.path not in ("", "/"):
+        raise ValueError(f"executor {spec!r}: give threads, processes or dask://HOST:PORT (the Dask scheduler)")
+    return spec
 
 
 class Settings(BaseSettings):
@@ -43,7 +65,8 @@ class Settings(BaseSettings):
     max_upload_bytes: int = Field(default=50 * 1024 * 1024, gt=0)
     query_timeout_s: float = Field(default=30.0, gt=0)
     max_result_rows: int = Field(default=100_000, gt=0)
-    job_workers: int = Field(default=1, ge=1, le=2)
+    executor: str = "processes"
+    job_workers: int = Field(default=1, ge=1, le=64)
 
     @field_validator("token", "endpoint_token")
     @classmethod
@@ -58,6 +81,18 @@ class Settings(BaseSettings):
         if value is not None and not value.startswith(("http://", "https://")):
             raise ValueError(f"sparql_endpoint {value!r}: give an http(s):// URL")
         return value
+
+    @field_validator("executor")
+    @classmethod
+    def _known_executor(cls, value: str) -> str:
+        return check_executor(value)
+
+    @model_validator(mode="after")
+    def _workers_fit_the_executor(self) -> Settings:
+        if self.job_workers > 2 and not self.executor.startswith("dask://"):
+            raise ValueError(f"job_workers={self.job_workers}: at most 2 with the {self.executor} executor "
+                             "(jobs share this machine); more need a Dask cluster (executor dask://HOST:PORT)")
+        return self
 
     @property
     def store_path(self) -> Path:

@@ -41,7 +41,8 @@ models using an ontology-based framework"). File format (every key documented in
 Rules (the paper's Sec. 3.2): ``exact`` is one triple; ``optional`` triples may be absent from the
 graph (connected optional triples form one OPTIONAL block); ``traverse`` follows the predicate from
 subject to object through any number of intermediate nodes and stops at the *nearest* match: no
-intermediate node is an instance of either end's allowed classes (see :mod:`service.sparql_compiler`).
+intermediate node is an instance of the searched-for end's allowed classes, the end the signature
+does not model (see :mod:`service.sparql_compiler`; exact on recirculation loops).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Signature → SPARQL: one SELECT query per signature pattern.
+"""Signature → SPARQL: one SELECT query per signature pattern, and the parts the matcher runs.
 
 * A node with allowed classes becomes ``?n rdf:type/rdfs:subClassOf* ?n__class`` with
   ``VALUES ?n__class { … }`` over its classes (subclasses match; several classes are alternatives).
@@ -12,9 +12,17 @@
   classes (the end the signature does not model; both ends' when both or neither are modelled) — is
   not expressible on property paths: written as ``FILTER NOT EXISTS`` or ``MINUS`` over two paths it
   is either explosive (> 600 s at 100k triples) or wrong on recirculation loops (every candidate on
-  a loop lies "behind" another). :mod:`service.signature_matcher` checks it exactly on the rows the
-  query returns, with a search over the predicate's edges that may not pass through an instance of
-  the end classes; the compiled query records which triples need it (:attr:`CompiledQuery.traversals`).
+  a loop lies "behind" another).
+
+:attr:`CompiledQuery.text` is that whole query (``graphtwin signature explain`` prints it): run on
+any SPARQL endpoint it returns every *reachable* combination, a superset of the matches. The matcher
+(:mod:`service.signature_matcher`) runs the same pattern cut at its traverse triples: each
+:class:`QueryPart` is a connected piece of the pattern over its exact triples (with the OPTIONAL
+blocks that hang on it), one SELECT each, or just a class's instances for a node reached only by
+traverses; the parts are joined on their shared nodes and on the nearest pairs of each
+:class:`Traversal`. Cutting there keeps the query from enumerating every reachable pair (on a loop,
+everything on the loop) and the cross product of several traverses, which made the whole query
+minutes long on a campus graph.
 
 Terms from signatures are serialised through pyoxigraph (``str(NamedNode(iri))``), which validates
 and escapes them: an IRI with a space or ``>`` is refused with a ``ValueError`` naming it.
@@ -22,6 +30,7 @@ and escapes them: an IRI with a space or ``>`` is refused with a ``ValueError`` 
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import pyoxigraph as ox
@@ -29,34 +38,47 @@ import pyoxigraph as ox
 from .namespaces import PREFIXES
 from .signature import PatternTriple, Rule, Signature
 
-__all__ = ["CompiledQuery", "Traversal", "compile_signature"]
-
-_RDF_TYPE = "<http://www.w3.org/1999/02/22-rdf-syntax-ns#type>"
-_SUBCLASS = "<http://www.w3.org/2000/01/rdf-schema#subClassOf>"
+__all__ = ["CompiledQuery", "QueryPart", "Traversal", "compile_signature"]
 
 
 @dataclass(frozen=True)
 class Traversal:
-    """A traverse triple the matcher must check for nearness: ``subject`` reaches ``object`` along
-    ``predicate`` without passing an instance of ``blocking_classes``; ``optional_block`` lists the
-    nodes that become unbound when an optional traverse fails (empty for a required one)."""
+    """A traverse triple the matcher joins on nearest pairs: ``subject`` reaches ``object`` along
+    ``predicate`` without passing an instance of ``blocking_classes``; ``block``: the optional block
+    (index in :attr:`CompiledQuery.blocks`) that is unbound when it fails, None when it is required."""
 
     subject: str
     predicate: str
     object: str
     blocking_classes: tuple[str, ...]
-    optional_block: tuple[str, ...] = ()
+    block: int | None = None
+
+
+@dataclass(frozen=True)
+class QueryPart:
+    """A piece of the pattern joined by exact triples: ``text`` is its SELECT query binding
+    ``nodes`` (None when the part is one node reached only by traverses: the instances of
+    ``classes``); ``block`` is the optional block it belongs to (None: required)."""
+
+    nodes: tuple[str, ...]
+    text: str | None
+    classes: tuple[str, ...] = ()
+    block: int | None = None
 
 
 @dataclass(frozen=True)
 class CompiledQuery:
-    """``text``: the SELECT query; ``variables``: pattern node id → SPARQL variable name (without
-    ``?``); ``traversals``: the nearness checks left to the matcher."""
+    """``text``: the whole SELECT query; ``variables``: pattern node id → SPARQL variable name
+    (without ``?``; empty for a fixed IRI); ``traversals``: the nearest joins; ``parts`` and
+    ``blocks`` (the own nodes of each optional block the matcher left-joins: one holding a traverse,
+    or hanging on several parts): what the matcher runs."""
 
     signature_id: str
     text: str
     variables: dict[str, str]
     traversals: tuple[Traversal, ...]
+    parts: tuple[QueryPart, ...] = ()
+    blocks: tuple[tuple[str, ...], ...] = ()
 
 
 def _iri(value: str, where: str) -> str:
@@ -74,67 +96,132 @@ def _short(iri_text: str) -> str:
     return iri_text
 
 
-def compile_signature(signature: Signature) -> CompiledQuery:
-    """Compile ``signature``'s pattern (see the module docstring).
+class _Writer:
+    """Renders pattern pieces as SPARQL group lines; with ``subclasses`` (class → itself and every
+    subclass) a class restriction lists the subclasses instead of following ``rdfs:subClassOf*``."""
 
-    :raises ValueError: a class, predicate or fixed IRI is not a valid IRI (named in the message).
-    """
-    where = f"signature {signature.id} ({signature.source_file})"
-    variables = {node_id: node_id for node_id in signature.nodes}
+    def __init__(self, signature: Signature, subclasses: Mapping[str, Sequence[str]] | None = None):
+        self.signature = signature
+        self.subclasses = subclasses
+        self.where = f"signature {signature.id} ({signature.source_file})"
 
-    def term(node_id: str) -> str:
-        node = signature.nodes[node_id]
-        return _short(_iri(node.iri, where)) if node.iri else f"?{node_id}"
+    def term(self, node_id: str) -> str:
+        node = self.signature.nodes[node_id]
+        return _short(_iri(node.iri, self.where)) if node.iri else f"?{node_id}"
 
-    def class_restriction(node_id: str) -> list[str]:
-        node = signature.nodes[node_id]
+    def class_restriction(self, node_id: str) -> list[str]:
+        node = self.signature.nodes[node_id]
         if not node.classes:
             return []
-        classes = " ".join(_short(_iri(c, where)) for c in node.classes)
+        classes = [_short(_iri(c, self.where)) for c in node.classes]
+        if self.subclasses is not None:
+            listed = dict.fromkeys(_short(_iri(sub, self.where)) for c in node.classes for sub in (c, *self.subclasses[c]))
+            return [
+                f"# {node_id}: an instance of {' or '.join(classes)} or of one of their subclasses listed",
+                f"VALUES ?{node_id}__class {{ {' '.join(listed)} }}",
+                f"?{node_id} rdf:type ?{node_id}__class .",
+            ]
         return [
-            f"# {node_id}: an instance of {' or '.join(_short(_iri(c, where)) for c in node.classes)} (or a subclass)",
-            f"VALUES ?{node_id}__class {{ {classes} }}",
+            f"# {node_id}: an instance of {' or '.join(classes)} (or a subclass)",
+            f"VALUES ?{node_id}__class {{ {' '.join(classes)} }}",
             f"?{node_id} rdf:type/rdfs:subClassOf* ?{node_id}__class .",
         ]
 
-    def triple_pattern(triple: PatternTriple) -> list[str]:
-        predicate = _short(_iri(triple.predicate, where))
-        subject, obj = term(triple.subject), term(triple.object)
+    def triple(self, triple: PatternTriple) -> list[str]:
+        predicate = _short(_iri(triple.predicate, self.where))
+        subject, obj = self.term(triple.subject), self.term(triple.object)
         if triple.rule is Rule.TRAVERSE:
             return [
-                f"# traverse: {triple.subject} {predicate}+ {triple.object} (nearest: checked by the matcher)",
+                f"# traverse: {triple.subject} {predicate}+ {triple.object} (nearest: joined by the matcher)",
                 f"{subject} {predicate}+ {obj} .",
             ]
         return [f"{subject} {predicate} {obj} ."]
 
+    def group(self, triples: list[PatternTriple], nodes: list[str], restricted: set[str],
+              blocks: list[list[PatternTriple]], block_nodes: list[set[str]]) -> list[str]:
+        """``triples`` ordered outward from ``nodes[0]`` so each step joins on a bound variable,
+        then the other ``nodes``' restrictions (only those in ``restricted``), then the OPTIONAL
+        ``blocks`` (each restricting its ``block_nodes``)."""
+        lines: list[str] = []
+        placed: set[str] = set()
+
+        def place(node_id: str) -> None:
+            if node_id not in placed:
+                placed.add(node_id)
+                if node_id in restricted:
+                    lines.extend(self.class_restriction(node_id))
+
+        if nodes:
+            place(nodes[0])
+        pending = list(triples)
+        while pending:
+            index = next((i for i, t in enumerate(pending) if t.subject in placed or t.object in placed), 0)
+            triple = pending.pop(index)
+            lines.extend(self.triple(triple))
+            place(triple.subject)
+            place(triple.object)
+        for node_id in sorted(set(nodes) - placed):
+            place(node_id)
+        for block, own in zip(blocks, block_nodes):
+            inner: list[str] = []
+            done: set[str] = set()
+            for triple in block:
+                inner += self.triple(triple)
+                for node_id in (triple.subject, triple.object):
+                    if node_id in own and node_id not in done:
+                        inner += self.class_restriction(node_id)
+                        done.add(node_id)
+            lines.append("OPTIONAL {")
+            lines += [f"  {line}" for line in inner]
+            lines.append("}")
+        return lines
+
+    def select(self, nodes, lines: list[str], title: str) -> str:
+        projected = " ".join(f"?{n}" for n in nodes if not self.signature.nodes[n].iri)
+        prefix_lines = "\n".join(f"PREFIX {p}: <{ns}>" for p, ns in PREFIXES.items())
+        body = "\n".join(f"  {line}" for line in lines)
+        return f"{prefix_lines}\n# {title}\nSELECT DISTINCT {projected} WHERE {{\n{body}\n}}\n"
+
+
+def _components(nodes: list[str], triples: list[PatternTriple]) -> list[list[str]]:
+    """Connected components of ``nodes`` over ``triples`` (in ``nodes`` order)."""
+    parent = {n: n for n in nodes}
+
+    def root(n: str) -> str:
+        while parent[n] != n:
+            n = parent[n]
+        return n
+
+    for t in triples:
+        parent[root(t.subject)] = root(t.object)
+    groups: dict[str, list[str]] = {}
+    for n in nodes:
+        groups.setdefault(root(n), []).append(n)
+    return list(groups.values())
+
+
+def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[str]] | None = None) -> CompiledQuery:
+    """Compile ``signature``'s pattern (see the module docstring).
+
+    :param subclasses: the subclasses of each class the signature names, as read from the store
+        (:meth:`service.signature_matcher.MatchSession.subclasses`): the parts then restrict classes
+        by ``rdf:type`` over that list, which Oxigraph answers from its index, where the
+        ``rdf:type/rdfs:subClassOf*`` path is evaluated row by row (100x slower on a campus). The
+        whole query (:attr:`CompiledQuery.text`) keeps the path.
+    :raises ValueError: a class, predicate or fixed IRI is not a valid IRI (named in the message).
+    """
+    writer = _Writer(signature)
+    part_writer = _Writer(signature, subclasses)
+    order = list(signature.nodes)
+    anchor = signature.modeled_nodes[0]
     required = [t for t in signature.triples if not t.is_optional]
     optional = [t for t in signature.triples if t.is_optional]
-    required_nodes = {signature.modeled_nodes[0]}
+    required_nodes = {anchor}
     for t in required:
         required_nodes.update((t.subject, t.object))
     for node_id in signature.nodes:
         if not any(node_id in (t.subject, t.object) for t in signature.triples):
             required_nodes.add(node_id)
-
-    # order required parts outward from the anchor so each step joins on a bound variable
-    lines: list[str] = []
-    placed: set[str] = set()
-    pending = list(required)
-    frontier = [signature.modeled_nodes[0]]
-    for node_id in frontier:
-        lines += class_restriction(node_id)
-        placed.add(node_id)
-    while pending:
-        index = next((i for i, t in enumerate(pending) if t.subject in placed or t.object in placed), 0)
-        triple = pending.pop(index)
-        lines += triple_pattern(triple)
-        for node_id in (triple.subject, triple.object):
-            if node_id not in placed:
-                lines += class_restriction(node_id)
-                placed.add(node_id)
-    for node_id in sorted(required_nodes - placed):
-        lines += class_restriction(node_id)
-        placed.add(node_id)
 
     # optional blocks: connected through nodes that occur only in optional triples
     blocks: list[list[PatternTriple]] = []
@@ -144,43 +231,66 @@ def compile_signature(signature: Signature) -> CompiledQuery:
         )]
         merged = [triple] + [t for b in joined for t in b]
         blocks = [b for b in blocks if b not in joined] + [merged]
-    traversals: list[Traversal] = []
-    for block in sorted(blocks, key=lambda b: signature.triples.index(b[-1])):
-        block = sorted(block, key=signature.triples.index)
-        own = sorted({n for t in block for n in (t.subject, t.object) if n not in required_nodes},
-                     key=list(signature.nodes).index)
-        inner: list[str] = []
-        done: set[str] = set()
-        for triple in block:
-            inner += triple_pattern(triple)
-            for node_id in (triple.subject, triple.object):
-                if node_id in own and node_id not in done:
-                    inner += class_restriction(node_id)
-                    done.add(node_id)
-        lines.append("OPTIONAL {")
-        lines += [f"  {line}" for line in inner]
-        lines.append("}")
-        for triple in block:
-            if triple.rule is Rule.TRAVERSE:
-                traversals.append(_traversal(signature, triple, tuple(own)))
-    for triple in required:
-        if triple.rule is Rule.TRAVERSE:
-            traversals.append(_traversal(signature, triple, ()))
+    blocks = [sorted(b, key=signature.triples.index) for b in sorted(blocks, key=lambda b: signature.triples.index(b[-1]))]
+    owns = [{n for t in b for n in (t.subject, t.object) if n not in required_nodes} for b in blocks]
 
-    projected = " ".join(f"?{v}" for v in variables.values() if not signature.nodes[v].iri)
-    prefix_lines = "\n".join(f"PREFIX {p}: <{ns}>" for p, ns in PREFIXES.items())
-    body = "\n".join(f"  {line}" for line in lines)
-    text = (
-        f"{prefix_lines}\n# signature {signature.id}: {signature.label}\n"
-        f"SELECT DISTINCT {projected} WHERE {{\n{body}\n}}\n"
+    ordered_required = [anchor] + [n for n in order if n in required_nodes and n != anchor]
+    text = writer.select(order, writer.group(required, ordered_required, required_nodes, blocks, owns),
+                         f"signature {signature.id}: {signature.label}")
+
+    # the parts: required components over the exact triples; a block without traverse goes into the
+    # query of the one component it hangs on, any other block is joined by the matcher
+    exact = [t for t in required if t.rule is not Rule.TRAVERSE]
+    components = _components(ordered_required, exact)
+    component_of = {n: i for i, c in enumerate(components) for n in c}
+    attached: dict[int, list[int]] = {}
+    matcher_blocks: list[int] = []
+    for index, (block, own) in enumerate(zip(blocks, owns)):
+        hooks = {component_of[n] for t in block for n in (t.subject, t.object) if n not in own}
+        if all(t.rule is not Rule.TRAVERSE for t in block) and len(hooks) == 1:
+            attached.setdefault(hooks.pop(), []).append(index)
+        else:
+            matcher_blocks.append(index)
+
+    parts: list[QueryPart] = []
+    for i, component in enumerate(components):
+        triples = [t for t in exact if t.subject in component]
+        mine = attached.get(i, [])
+        node = signature.nodes[component[0]]
+        if not triples and not mine and len(component) == 1 and node.classes:
+            parts.append(QueryPart((component[0],), None, node.classes))
+            continue
+        bound = component + [n for b in mine for n in order if n in owns[b]]
+        lines = part_writer.group(triples, component, set(component), [blocks[b] for b in mine], [owns[b] for b in mine])
+        parts.append(QueryPart(tuple(n for n in bound if not signature.nodes[n].iri),
+                               writer.select(bound, lines, f"signature {signature.id}: part {len(parts) + 1}")))
+    for number, index in enumerate(matcher_blocks):
+        own = [n for n in order if n in owns[index]]
+        block_exact = [t for t in blocks[index] if t.rule is not Rule.TRAVERSE]
+        hooked = [n for n in order if n not in own and any(n in (t.subject, t.object) for t in block_exact)]
+        for component in _components(own + hooked, block_exact):
+            triples = [t for t in block_exact if t.subject in component]
+            node = signature.nodes[component[0]]
+            if not triples and len(component) == 1 and node.classes:
+                parts.append(QueryPart((component[0],), None, node.classes, number))
+                continue
+            lines = part_writer.group(triples, component, set(component) & owns[index], [], [])
+            parts.append(QueryPart(tuple(n for n in component if not signature.nodes[n].iri),
+                                   writer.select(component, lines, f"signature {signature.id}: part {len(parts) + 1}"),
+                                   block=number))
+
+    traversals = [
+        _traversal(signature, t, number)
+        for number, index in enumerate(matcher_blocks) for t in blocks[index] if t.rule is Rule.TRAVERSE
+    ] + [_traversal(signature, t, None) for t in required if t.rule is Rule.TRAVERSE]
+    variables = {n: ("" if signature.nodes[n].iri else n) for n in order}
+    return CompiledQuery(
+        signature.id, text, variables, tuple(traversals), tuple(parts),
+        tuple(tuple(n for n in order if n in owns[index]) for index in matcher_blocks),
     )
-    for node_id, node in signature.nodes.items():
-        if node.iri:
-            variables[node_id] = ""
-    return CompiledQuery(signature.id, text, variables, tuple(traversals))
 
 
-def _traversal(signature: Signature, triple: PatternTriple, block: tuple[str, ...]) -> Traversal:
+def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -> Traversal:
     """The searched-for end is the one the signature does not model (a fan looks for its nearest
     upstream sensor, a coil for its nearest downstream fan, even past another coil); when both or
     neither end is modelled, both ends' classes block."""

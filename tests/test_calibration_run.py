@@ -1,9 +1,11 @@
 """Calibration end to end on synthetic data: estimates, metrics, results as triples, bad input."""
 
+import matplotlib.image
 import numpy as np
 import pytest
 from case_study import CASE_STUDY, EX
 
+from service.calibration_plots import plot_calibration
 from service.calibration_run import calibrate, parse_window
 from service.resources import signatures_dir
 from service.signature import load_signature_library
@@ -77,3 +79,97 @@ def test_bad_windows_and_targets_write_nothing(synthetic, tmp_path):
     assert set(store.backend.graphs()) == graphs_before
     with pytest.raises(ValueError, match="START/END"):
         parse_window("2026-01-12")
+
+
+def _edited_csv(source, target, column, rows):
+    """A copy of the CSV at ``source`` with ``column`` emptied on the data rows ``rows`` (0 = first)."""
+    lines = source.read_text().splitlines()
+    index = lines[0].split(",").index(column)
+    edited = [lines[0]]
+    for row, line in enumerate(lines[1:]):
+        cells = line.split(",")
+        if row in rows:
+            cells[index] = ""
+        edited.append(",".join(cells))
+    target.write_text("\n".join(edited) + "\n")
+    return target
+
+
+def test_a_target_without_measurements_in_the_window_or_file_is_refused(synthetic, tmp_path):
+    store, path, _ = synthetic
+    graphs_before = set(store.backend.graphs())
+    # valve position missing through the whole first day (measured on the other days)
+    empty_day = _edited_csv(path, tmp_path / "empty_day.csv", "valve_position", range(144))
+    with pytest.raises(ValueError, match=f"target {EX}valve_position_sensor has no measurements in the window"):
+        calibrate(store, "case", empty_day, train=("2026-01-12", "2026-01-12T23:59"))
+    lines = path.read_text().splitlines()
+    drop = lines[0].split(",").index("coil_outlet_water_temperature")
+    no_column = tmp_path / "no_column.csv"
+    no_column.write_text("\n".join(",".join(c for i, c in enumerate(line.split(",")) if i != drop) for line in lines))
+    with pytest.raises(ValueError, match=r"no column for .*coil_outlet_water_temperature_sensor"):
+        calibrate(store, "case", no_column, train=TRAIN)
+    assert set(store.backend.graphs()) == graphs_before
+
+
+def test_bounds_that_exclude_a_mapped_value_are_refused_before_anything_is_written(synthetic, tmp_path):
+    store, path, _ = synthetic
+    text = CASE_STUDY.read_text()
+    nominal_power = 'saref:hasValue "1.8"^^xsd:double ;\n    saref:isMeasuredIn unit:KiloW'
+    assert nominal_power in text
+    store.load_model("case_80kw", text.replace(nominal_power, nominal_power.replace("1.8", "80")).encode())
+    graphs_before = set(store.backend.graphs())
+    with pytest.raises(ValueError, match=r"nominal_power of .*supply_fan is mapped from the graph to 80000 W, "
+                                         r"outside its bounds \[50, 50000\] W"):
+        calibrate(store, "case_80kw", path, train=TRAIN)
+    assert set(store.backend.graphs()) == graphs_before
+
+
+def test_nan_gaps_are_left_out_not_filled(synthetic, tmp_path):
+    """A long gap in a target leaves those steps out of that target; a long gap in a boundary input
+    leaves them out of every target (the simulator only holds the input there); the fit is unharmed."""
+    store, path, _ = synthetic
+    day = range(144)
+    target_gap, input_gap = range(40, 60), range(90, 110)  # 20 steps each, beyond the 5-step interpolation
+    gappy = _edited_csv(path, tmp_path / "gappy.csv", "valve_position", target_gap)
+    gappy = _edited_csv(gappy, gappy, "supply_air_flow", input_gap)
+    outcome = calibrate(store, "case", gappy, train=("2026-01-12", "2026-01-12T23:59"), seed=0)
+    metrics = outcome.record.metrics["train"]
+    warmup = 6  # the first hour is simulated, not compared
+    compared = len(day) - warmup - len(input_gap)
+    assert metrics[EX + "valve_position_sensor"].n == compared - len(target_gap)
+    assert metrics[EX + "coil_outlet_air_temperature_sensor"].n == compared
+    assert metrics[EX + "fan_power_meter"].rmse < 0.03 * metrics[EX + "fan_power_meter"].mean_observed
+    assert metrics[EX + "coil_outlet_air_temperature_sensor"].rmse < 0.2
+
+
+@pytest.mark.slow  # 70 s on the shared machine (load 12), a point start, 20 steps, 200 predictive draws, 3 figures
+def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_path):
+    """End to end through ``calibrate(method="bayes")`` and ``plot_calibration``; a short capped chain
+    (the acceptance of the sampler itself is in tests/calibration/test_bayesian_acceptance.py)."""
+    store, path, _ = synthetic
+    outcome = calibrate(store, "case", path, train=("2026-01-12", "2026-01-12T23:59"),
+                        test=("2026-01-13", "2026-01-13T05:59"), method="bayes", seed=1, substeps=1,
+                        bayes_settings={"max_steps": 20, "check_interval": 10, "n_temperatures": 2})
+    record = outcome.record
+    assert record.method == "bayes" and record.diagnostics["converged"] is False  # capped: said so
+    node = EX + "coil_outlet_air_temperature_sensor"
+    lower, upper = outcome.intervals["test"][node][0.9]
+    median = outcome.predictions["test"][node]
+    assert lower.shape == median.shape == (36,) and np.all(lower <= median) and np.all(median <= upper)
+    assert {c.level for c in record.metrics["test"][node].coverage} == {0.5, 0.68, 0.9, 0.95, 0.99}
+    assert any(r["run"].value.endswith(record.run_id) for r in store.run_named_query("sensor-metrics", model="case"))
+
+    paths = plot_calibration(outcome, tmp_path / "plots")
+    assert [p.name for p in paths] == [f"{record.run_id}-{kind}.png" for kind in ("fit", "trace", "corner")]
+    n_par = len(record.estimates)
+    fit, trace, corner = (matplotlib.image.imread(p) for p in paths)
+    assert fit.shape[0] == round(2.2 * 5 * 110)  # five sensors, service.plots' 2.2 in per panel at 110 dpi
+    assert trace.shape[:2] == (round((1.3 * n_par + 0.6) * 90), 9 * 90)  # one panel per parameter
+    assert corner.shape[:2] == (round(1.1 * n_par * 90),) * 2
+    assert outcome.calibrator.chain_.shape[0] == 20  # the trace shows every step, burn-in included
+
+
+def test_a_point_run_is_plotted_as_measured_against_predicted_only(point_run, tmp_path):
+    (path,) = plot_calibration(point_run, tmp_path)
+    assert path.name == f"{point_run.record.run_id}-fit.png"
+    assert matplotlib.image.imread(path).shape[0] == round(2.2 * 5 * 110)

@@ -12,9 +12,11 @@ from service.namespaces import GT, OWL, RDF, RDFS, Namespace
 from service.resources import ontologies_dir, project_home
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "ontologies"
-OFFICIAL_NAMESPACES = ("https://saref.etsi.org/", "https://w3id.org/fso#")
+OFFICIAL_NAMESPACES = ("https://saref.etsi.org/", "https://w3id.org/fso#", "https://brickschema.org/schema/Brick",
+                       "https://w3id.org/rec#")
 #: The current releases the subsets follow (see each subset's header comment).
-V4_FILES = ("saref/saref-core-v4.1.1.ttl", "saref/saref4bldg-v2.1.1.ttl", "saref/saref4syst-v1.1.2.ttl", "fso/fso.ttl")
+V4_FILES = ("saref/saref-core-v4.1.1.ttl", "saref/saref4bldg-v2.1.1.ttl", "saref/saref4syst-v1.1.2.ttl", "fso/fso.ttl",
+            "brick/Brick.ttl")
 V3_FILES = ("saref/saref-core-v3.1.1.ttl", "saref/saref4bldg-v1.1.2.ttl", "saref/saref4syst-v1.1.2.ttl")
 #: Terms the subsets take from SAREF v3.1.1 because v4.1.1 deleted them (models written in v3 use them).
 V3_ONLY = {

@@ -5,8 +5,11 @@ import pytest
 
 from service.resources import signatures_dir
 from service.signature import load_signature, signature_from_dict
-from service.signature_matcher import match_signature, missing_class_report
+from service.signature import load_signature_library
+from service.signature_matcher import MatchSession, match_signature, missing_class_report
 from service.sparql_compiler import compile_signature
+from service.store import GraphStore
+from tests.bench.campus_graph import CAMPUS_NAMESPACE, campus_turtle
 
 X = "https://example.org/t#"
 ONTOLOGY = f"""
@@ -54,6 +57,63 @@ def test_traverse_is_exact_on_a_recirculation_loop():
         x:coil a x:Coil ; x:feeds x:sat . x:sat a x:Sensor ; x:feeds x:room . x:room a x:Room ; x:feeds x:rat .
         x:rat a x:Sensor ; x:feeds x:mix .""")
     assert _pairs(match_signature(store, _sensor_upstream())) == [("coil", "sat"), ("sat", "rat")]
+
+
+def _upstream_of_box():
+    return signature_from_dict({
+        "id": "Mix", "modeled_nodes": ["mix"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"mix": {"classes": [X + "MixingBox"]}, "inlet": {"classes": [X + "Sensor"]}},
+        "triples": [{"subject": "inlet", "predicate": X + "feeds", "object": "mix", "rule": "traverse"}],
+    })
+
+
+def test_on_a_loop_through_the_mixing_box_the_nearer_of_two_sensors_wins():
+    # mix → fan → sat → room → rat_far → duct → rat_near → damper → mix (and oat → mix): both return
+    # sensors are upstream of the box, and so is sat, round the loop; only rat_near is nearest
+    store = _store("""
+        x:oat a x:Sensor ; x:feeds x:mix . x:mix a x:MixingBox ; x:feeds x:fan . x:fan a x:Fan ; x:feeds x:sat .
+        x:sat a x:Sensor ; x:feeds x:room . x:room a x:Room ; x:feeds x:rat_far . x:rat_far a x:Sensor ; x:feeds x:duct .
+        x:duct x:feeds x:rat_near . x:rat_near a x:Sensor ; x:feeds x:damper . x:damper x:feeds x:mix .""")
+    assert _pairs(match_signature(store, _upstream_of_box()), "inlet", "mix") == [("oat", "mix"), ("rat_near", "mix")]
+    # each sensor on the loop sees the equipment or sensor right before it, never the box behind the fan
+    assert _pairs(match_signature(store, _sensor_upstream())) == [
+        ("fan", "sat"), ("rat_far", "rat_near"), ("sat", "rat_far")]
+
+
+def test_an_optional_block_with_a_traverse_binds_the_nearest_node_whole_or_not_at_all():
+    signature = signature_from_dict({
+        "id": "Labelled", "modeled_nodes": ["sensor"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"sensor": {"classes": [X + "Sensor"]}, "up": {"classes": [X + "Equipment"]}, "label": {"literal": True}},
+        "triples": [
+            {"subject": "up", "predicate": X + "feeds", "object": "sensor", "rule": "traverse", "optional": True},
+            {"subject": "up", "predicate": X + "label", "object": "label", "rule": "optional"},
+        ],
+    })
+    # s1's nearest equipment (the coil) has no label: the labelled fan further up must not be taken
+    store = _store('x:fan a x:Fan ; x:label "supply fan" ; x:feeds x:coil . x:coil a x:Coil ; x:feeds x:s1 . '
+                   'x:s1 a x:Sensor . x:fan2 a x:Fan ; x:label "return fan" ; x:feeds x:s2 . x:s2 a x:Sensor .')
+    found = {m["sensor"].rsplit("#")[-1]: (m["up"] and m["up"].rsplit("#")[-1], m["label"]) for m in match_signature(store, signature)}
+    assert found == {"s1": (None, None), "s2": ("fan2", "return fan")}
+
+
+def test_campus_units_match_their_nearest_devices_round_the_return_loop():
+    store = GraphStore.embedded(None)
+    store.load_model("campus", campus_turtle(2, n_rooms=3).encode())
+    library = load_signature_library(signatures_dir())
+    session = MatchSession(store, store.matching_dataset("campus"))
+    matches = {sid: match_signature(store, sig, session=session) for sid, sig in library.items()}
+    assert not [sid for sid, found in matches.items() if not found]  # the bench campus exercises every signature
+    unit = f"{CAMPUS_NAMESPACE}ahu0#"
+    fans = {m["fan"][len(unit):]: (m["flow_source"][len(unit):], m["inlet"][len(unit):])
+            for m in matches["Fan"] if m["fan"].startswith(unit)}
+    assert fans == {"supply_fan": ("supply_flow_meter", "cooling_coil"),
+                    "return_fan": ("return_flow_meter", "return_air_sensor")}
+    boxes = {(m["outdoor_sensor"][len(unit):], m["return_sensor"][len(unit):]) for m in matches["MixingBox"]
+             if m["box"].startswith(unit)}
+    assert boxes == {("outdoor_air_sensor", "return_air_sensor")}
+    # a shared session gives what a fresh one does
+    assert match_signature(store, library["HotWaterLoop"], default_graph=store.matching_dataset("campus")) == \
+        matches["HotWaterLoop"]
 
 
 def test_parallel_branches_both_match():
@@ -125,4 +185,7 @@ def test_every_library_signature_compiles_and_runs(case_store):
         signature = load_signature(path)
         text = compile_signature(signature).text
         assert f"signature {signature.id}" in text
+        for triple in signature.triples:  # Traverse stays a property path in the query explain prints
+            if triple.rule.value == "traverse":
+                assert f"?{triple.subject} fso:suppliesFluidTo+ ?{triple.object} ." in text
         match_signature(case_store, signature, default_graph=case_store.matching_dataset("case"))

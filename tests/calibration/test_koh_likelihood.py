@@ -23,13 +23,14 @@ class CountingSimulate:
         return {"temperature": a + b * np.sin(T / 5.0), "power": 100.0 * a * np.ones(N)}
 
 
-def make_problem(simulate=None):
+def make_problem(simulate=None, gaps=True):
     rng = np.random.default_rng(0)
     observed = {
         "temperature": 1.0 + 0.5 * np.sin(T / 5.0) + 0.1 * rng.normal(size=N),
         "power": 100.0 + 5.0 * rng.normal(size=N),
     }
-    observed["temperature"][[3, 7]] = np.nan
+    if gaps:  # the targets are measured at different steps: one GP call each
+        observed["temperature"][[3, 7]] = np.nan
     return CalibrationProblem(
         parameter_names=("a", "b"), lower=np.array([0.0, 0.0]), upper=np.array([2.0, 1.0]),
         simulate=simulate or CountingSimulate(), observed=observed,
@@ -54,8 +55,9 @@ def dense_log_likelihood(problem, theta, hyper):
     return total
 
 
-def test_log_likelihood_is_the_dense_gaussian_density_summed_over_targets():
-    problem = make_problem()
+@pytest.mark.parametrize("gaps", [True, False], ids=["targets apart", "targets in one GP call"])
+def test_log_likelihood_is_the_dense_gaussian_density_summed_over_targets(gaps):
+    problem = make_problem(gaps=gaps)
     likelihood = KennedyOHaganLikelihood(problem)
     assert likelihood.n_dim == 2 + 2 * 3
     assert likelihood.names[2:] == (
@@ -132,3 +134,21 @@ def test_initial_ensemble_lies_inside_the_prior_near_the_point_estimate():
     assert np.isfinite(likelihood.log_prior(walkers)).all()
     assert np.abs(np.median(walkers[:, 0]) - 1.0) < 0.01
     assert np.median(walkers[:, 4]) == pytest.approx(np.log(0.2), abs=0.05)  # noise ≈ 0.1 / scale 0.5
+
+
+def test_initial_ensemble_takes_the_shape_of_the_point_covariance():
+    """Confounded parameters start along their ridge; a flat direction is capped at 10 % of the prior."""
+    likelihood = KennedyOHaganLikelihood(make_problem())
+    standard_errors = np.array([0.02, 5.0])  # b: far wider than its prior [0, 1]
+    correlation = np.array([[1.0, -0.99], [-0.99, 1.0]])
+    covariance = correlation * np.outer(standard_errors, standard_errors)
+    walkers = likelihood.initial_ensemble(np.array([1.0, 0.5]), {"temperature": 0.1, "power": 5.0}, 4000,
+                                          np.random.RandomState(0), covariance)
+    theta = walkers[:, :2]
+    assert np.corrcoef(theta.T)[0, 1] == pytest.approx(-0.99, abs=0.01)
+    np.testing.assert_allclose(theta.std(axis=0), [0.02, 0.1], rtol=0.05)  # 0.1 = 10 % of b's prior width
+    np.testing.assert_allclose(theta.mean(axis=0), [1.0, 0.5], atol=0.01)
+    assert np.isfinite(likelihood.log_prior(walkers)).all()
+    with pytest.raises(ValueError, match=r"theta_covariance has shape \(3, 3\), expected \(2, 2\)"):
+        likelihood.initial_ensemble(np.array([1.0, 0.5]), {"temperature": 0.1, "power": 5.0}, 10,
+                                    np.random.RandomState(0), np.eye(3))

@@ -64,8 +64,8 @@ def test_outdoor_and_return_air_and_commands_drive_the_mixed_and_supply_air_targ
         ("supply_fan", "outlet_air_temperature", "supply_air_temperature_sensor", "measured_value"),
     }
     assert wires == air_path
-    # 3 mixing box + 2 × 4 coil + 6 fan parameters, none stated in the graph
-    assert len(flexlab.estimated_parameters) == 17 and flexlab.mapped_parameters == ()
+    # 3 mixing box + 2 × 5 coil + 6 fan parameters, none stated in the graph
+    assert len(flexlab.estimated_parameters) == 19 and flexlab.mapped_parameters == ()
 
 
 def test_devices_name_their_column_and_unit(flexlab):
@@ -95,3 +95,20 @@ def test_default_model_explains_the_mixed_air_of_an_unfaulted_day(flexlab):
     error = simulated[mixed][0] - observed[mixed]
     assert np.isfinite(simulated[EX + "supply_air_temperature_sensor"]).all()
     assert np.sqrt(np.nanmean(error**2)) < 2.5
+
+
+def test_the_coil_valve_dead_band_shuts_small_commands_and_rescales_the_rest(run_model, params_for):
+    """The FLEXLAB heating valve's controller sits at 0.1–0.3 on September nights with no heat in the
+    supply air: the coil model's dead band u₀ (a 2–10 V actuator on a 0–10 V output has u₀ = 0.2)."""
+    from service.water_coil import HeatingWaterCoil
+
+    def heat(command, dead_band):
+        inputs = {"valve_position": np.array([command]), "inlet_air_temperature": np.array([20.0]),
+                  "air_mass_flow": np.array([0.5])}
+        return run_model(HeatingWaterCoil, params_for(HeatingWaterCoil, valve_dead_band=dead_band), inputs)[0]["heat_rate"][0]
+
+    assert heat(0.2, 0.25) == 0.0 and heat(0.25, 0.25) == 0.0
+    # opening v = (u − u₀)/(1 − u₀): command 0.625 with u₀ = 0.25 opens the valve as 0.5 does without
+    assert heat(0.5, 0.0) > 0.0
+    assert heat(0.625, 0.25) == pytest.approx(heat(0.5, 0.0), rel=1e-12)
+    assert heat(1.0, 0.25) == pytest.approx(heat(1.0, 0.0), rel=1e-12)

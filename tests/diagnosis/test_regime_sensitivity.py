@@ -87,3 +87,30 @@ def test_bad_problem_and_bad_simulation_are_refused():
         morris_by_regime(PROBLEM, lambda theta: np.where(LABELS == 1, np.nan, 0.0) + 0 * theta[:, :1], LABELS)
     with pytest.raises(KeyError, match="regime 7"):
         morris_by_regime(PROBLEM, CountingModel(), LABELS, n_trajectories=4, seed=0).dominant_parameters(7)
+
+
+def test_calibration_measure_is_the_weighted_rms_residual_over_the_stacked_targets():
+    from service.calibration_problem import CalibrationProblem
+    from service.regime_sensitivity import calibration_morris_by_regime
+
+    model = CountingModel()
+    observed = np.where(LABELS == 1, 0.3 * X_SIGNAL, 0.0) + np.where(LABELS == 2, 1.2 * X_SIGNAL, 0.0)
+    bounds = np.array(PROBLEM["bounds"])
+
+    def problem(targets):
+        return CalibrationProblem(
+            parameter_names=tuple(PROBLEM["names"]), lower=bounds[:, 0], upper=bounds[:, 1],
+            simulate=lambda theta: {k: model(theta) for k in targets}, observed={k: observed for k in targets},
+            target_scales={k: 0.5 for k in targets})
+
+    single = morris_by_regime(PROBLEM, CountingModel(), LABELS, observed, n_trajectories=6, seed=2)
+    weighted = calibration_morris_by_regime(problem(["y"]), LABELS, n_trajectories=6, seed=2)
+    # Dividing every residual by the scale 0.5 doubles every elementary effect of the RMS residual …
+    np.testing.assert_allclose(weighted.mu_star, single.mu_star / 0.5, atol=1e-12)
+    # … and a second, identical target leaves the RMS over both (and so μ*) unchanged, over twice the values.
+    twice = calibration_morris_by_regime(problem(["y", "z"]), LABELS, n_trajectories=6, seed=2)
+    np.testing.assert_allclose(twice.mu_star, weighted.mu_star, atol=1e-12)
+    assert twice.n_steps == [2 * n for n in weighted.n_steps]
+    ranking = twice.ranking(2, top=2)
+    assert [row["parameter"] for row in ranking] == ["b", "c"] and ranking[0]["mu_star"] > ranking[1]["mu_star"]
+    assert sum(row["share"] for row in twice.ranking(2)) == pytest.approx(1.0)

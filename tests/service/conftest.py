@@ -1,20 +1,14 @@
 """Fixtures for the HTTP service (settings in a temporary folder, an in-memory store with the case
-study as model ``case``, a client with the write token, one day of synthetic measurements) and for
-the SPARQL endpoint backend (a real Oxigraph server from the PyPI ``oxigraph`` package)."""
+study as model ``case``, a client with the write token, one day of synthetic measurements) and, from
+``oxigraph_server.py``, a real Oxigraph server from the PyPI ``oxigraph`` package with an endpoint
+backend on it."""
 
-import shutil
-import socket
-import subprocess
-import sys
 import time
-from dataclasses import dataclass
-from pathlib import Path
-
-import httpx
 
 import pytest
 from case_study import CASE_STUDY
 from fastapi.testclient import TestClient
+from oxigraph_server import endpoint_backend, oxigraph_server  # noqa: F401 (pytest fixtures, shared with every test here)
 
 from service.api import create_app
 from service.resources import signatures_dir
@@ -47,8 +41,10 @@ def case_csv(tmp_path_factory):
 
 @pytest.fixture
 def settings(tmp_path) -> Settings:
+    """Jobs run on threads here (the tests swap in work functions that cannot be pickled); the
+    process and Dask executors have tests of their own (test_job_executors.py)."""
     return Settings(data_dir=tmp_path / "service", token=TOKEN, query_timeout_s=20, max_result_rows=500,
-                    max_upload_bytes=400_000)
+                    max_upload_bytes=400_000, executor="threads")
 
 
 @pytest.fixture
@@ -94,63 +90,3 @@ def snapshot():
         return set(store.backend.store)
 
     return take
-
-
-# ---------------------------------------------------------------------- a real Oxigraph server
-def _free_loopback_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on (at the time of the call)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-@dataclass
-class OxigraphServer:
-    url: str
-    location: Path
-    process: subprocess.Popen
-
-
-@pytest.fixture(scope="session")
-def oxigraph_server(tmp_path_factory):
-    """``oxigraph serve --location DIR --bind 127.0.0.1:PORT`` for the session; stopped at the end."""
-    executable = shutil.which("oxigraph") or shutil.which("oxigraph", path=str(Path(sys.executable).parent))
-    if executable is None:
-        pytest.skip("the oxigraph server executable is not installed (pip install oxigraph)")
-    location = tmp_path_factory.mktemp("oxigraph")
-    port = _free_loopback_port()
-    process = subprocess.Popen([executable, "serve", "--location", str(location), "--bind", f"127.0.0.1:{port}"],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    server = OxigraphServer(f"http://127.0.0.1:{port}", location, process)
-    deadline = time.monotonic() + 30
-    try:
-        while True:
-            if process.poll() is not None:
-                pytest.fail(f"oxigraph serve exited with {process.returncode}: {process.stderr.read().decode()[-2000:]}")
-            try:
-                if httpx.get(f"{server.url}/query", params={"query": "ASK {}"}, timeout=2).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if time.monotonic() > deadline:
-                pytest.fail(f"oxigraph serve did not answer on {server.url} within 30 s")
-            time.sleep(0.1)
-        yield server
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(timeout=10)
-        process.stderr.close()
-
-
-@pytest.fixture
-def endpoint_backend(oxigraph_server):
-    """A :class:`SparqlEndpointBackend` on the session's server, emptied before each test."""
-    from service.sparql_endpoint_backend import SparqlEndpointBackend
-
-    with SparqlEndpointBackend.for_oxigraph_server(oxigraph_server.url) as backend:
-        backend.update("DROP SILENT ALL")
-        yield backend

@@ -3,7 +3,6 @@ with the store unchanged after each refusal."""
 
 import csv
 import io
-import json
 import threading
 import time
 
@@ -18,6 +17,7 @@ from service.assembly import assemble
 from service.calibration_data import series_specs
 from service.jobs import JobRecord, JobRecords, JobResult
 from service.settings import Settings
+from service.sparql_endpoint_backend import SparqlEndpointError
 from service.store import GraphStore
 
 GT = "https://w3id.org/graphtwin/ontology#"
@@ -243,6 +243,16 @@ def test_a_query_over_the_time_limit_gets_503(tmp_path, store, monkeypatch):
         release.set()
 
 
+def test_a_failing_sparql_endpoint_gets_503(tmp_path, store, monkeypatch):
+    def endpoint_fails(*args):
+        raise SparqlEndpointError("SPARQL endpoint http://127.0.0.1:7878/query failed on the query (HTTP 500): boom")
+
+    monkeypatch.setattr(api_module, "_execute", endpoint_fails)
+    with TestClient(create_app(Settings(data_dir=tmp_path, executor="threads"), store=store)) as client:
+        response = client.get("/sparql", params={"query": "ASK {}"})
+        assert response.status_code == 503 and "(HTTP 500): boom" in response.json()["detail"]
+
+
 def test_named_queries_are_listed_and_run_with_bindings(client):
     listed = {q["name"]: q for q in client.get("/queries").json()["data"]}
     assert "model" in listed["calibrated-parameters"]["variables"] and listed["flow-edges"]["description"]
@@ -266,7 +276,9 @@ def test_job_requests_for_unknown_things_are_refused(client, auth, case_csv):
     assert client.post("/jobs/assemble", json={"model": "nope"}, headers=auth).status_code == 404
     assert client.post("/jobs/calibrate", json={"model": "case", "measurements": "0000000000000000"}, headers=auth).status_code == 404
     bad_window = client.post("/jobs/calibrate", json={"model": "case", "measurements": upload, "train": "2026-01-12"}, headers=auth)
-    assert bad_window.status_code == 422 and "START/END" in json.dumps(bad_window.json())
+    assert bad_window.status_code == 422 and "START/END" in bad_window.json()["detail"]
+    assert bad_window.json()["problems"] == ["body.train: Value error, window '2026-01-12': write START/END, "
+                                             "e.g. 2026-01-12/2026-01-15T23:50"]
     effect = client.post("/jobs/add-effect", json={"model": "case", "effect": "Nope", "target": EX + "supply_fan"}, headers=auth)
     assert effect.status_code == 422 and "FanMotorHeat" in effect.json()["detail"]
     assert client.post("/jobs/diagnose", json={"model": "case", "measurements": upload, "train": "/"}, headers=auth).status_code == 422
@@ -325,7 +337,7 @@ def test_a_queued_job_is_cancelled_at_once_and_a_running_one_is_discarded(client
 
 
 def test_job_state_survives_a_restart_and_interrupted_jobs_can_be_resubmitted(tmp_path, store, auth, wait_job):
-    settings = Settings(data_dir=tmp_path / "service", token="test-token-0123456789")
+    settings = Settings(data_dir=tmp_path / "service", token="test-token-0123456789", executor="threads")
     with TestClient(create_app(settings, store=store)) as client:
         finished = wait_job(client, client.post("/jobs/assemble", json={"model": "case"}, headers=auth).json()["id"])
     stale = JobRecord(id="ab" * 16, kind="assemble", params={"model": "case"}, status="running",

@@ -237,8 +237,8 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
     data.write_text("time,x\n")
     calls, gate = [], threading.Event()
 
-    def fake_diagnose(diag_store, model_name, data_path, *, train, test, seed, on_progress):
-        calls.append((model_name, data_path, train, test, seed))
+    def fake_diagnose(diag_store, model_name, data_path, *, train, test, seed, on_progress, workers):
+        calls.append((model_name, data_path, train, test, seed, workers))
         on_progress("calibrating the base model")
         gate.wait(10)
         diag_store.write_graph(diag_store.run_graph("m-point-0123abcd"), [_triple(ox.NamedNode(EX + "r"), "run")])
@@ -246,13 +246,12 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
         return _Report()
 
     monkeypatch.setitem(sys.modules, "service.diagnosis", types.SimpleNamespace(diagnose=fake_diagnose))
-    kinds = {"diagnose": lambda s, p, c: diagnose_job(s, p, c, locate_measurements={"u1": data}.__getitem__)}
-    runner = runners(store, records, kinds)
+    runner = runners(store, records, {"diagnose": diagnose_job}, locate_measurements={"u1": data}.__getitem__)
     params = {"model": "m", "measurements": "u1", "train": "/2026-01-12T12:00", "test": "2026-01-12T12:10/", "seed": 3}
     gate.set()
     done = _wait(runner, runner.submit("diagnose", params).id)
     assert done.status == "succeeded" and done.result == {"summary": "nothing significant is missing", "score": 2.0}
-    assert calls == [("m", data, (None, "2026-01-12T12:00"), ("2026-01-12T12:10", None), 3)]
+    assert calls == [("m", data, (None, "2026-01-12T12:00"), ("2026-01-12T12:10", None), 3, 1)], "one diagnosis worker"
     assert [p["message"] for p in done.progress][1:3] == ["calibrating the base model", "testing the effect catalog"]
     assert done.links["run_graph"] == store.run_graph("m-point-0123abcd").value
     assert done.links["calibrated_parameters"] == "/queries/calibrated-parameters?model=m"
@@ -272,8 +271,7 @@ def test_calibrate_job_fails_clearly_when_the_upload_is_gone(records, runners):
     def locate(upload_id):
         raise KeyError(f"no measurement upload {upload_id!r}")
 
-    runner = runners(GraphStore.embedded(None), records,
-                     {"calibrate": lambda s, p, c: calibrate_job(s, p, c, locate_measurements=locate)})
+    runner = runners(GraphStore.embedded(None), records, {"calibrate": calibrate_job}, locate_measurements=locate)
     done = _wait(runner, runner.submit("calibrate", {"model": "m", "measurements": "0123456789abcdef"}).id)
     assert done.status == "failed" and done.error == "no measurement upload '0123456789abcdef'"
 

@@ -1,0 +1,207 @@
+"""Acceptance of calibration (issue 4) on the ventilation case study with a known truth.
+
+Synthetic truth: ``generate_synthetic_data`` (seed 3) runs the case-study model with parameters moved
+from their defaults towards random bounds, on two days of varied operation at 10-minute steps, and
+adds the sensors' noise (0.1 K, 0.005 valve position, 1 % of the mean fan power). Training window:
+the first day (144 steps, the first hour not compared); test window: the second day, predicted as
+the continuation of the training run.
+
+The model is simulated as ``graphtwin calibrate`` does (the 600 s step sub-divided for the PI loop,
+``loop_substeps``); the truth the same way, so the model is exact and the acceptance is about the
+calibrators. (Simulating at the data step would be five times cheaper, but the PI loop is then too
+coarse for the point fit to find the truth: tried, and dropped.)
+
+Identifiable (for the point calibration): the point fit gives the parameter the verdict "identified"
+(no flat direction, |ρ| ≤ 0.95 with every other, relative standard error ≤ 50 %, 95 % interval inside
+the prior) *and* its 95 % interval is within ±5 % of the estimate, i.e. the data pin it to the
+accuracy the acceptance asks for. The structurally unidentifiable ones of this model: the fan
+polynomial's four coefficients (only the fan curve over the measured flows is seen; they are
+confounded with each other) and the loop's flow coefficient (confounded with the loop pressure
+difference).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from case_study import CASE_STUDY, EX
+
+from service.assembly import assemble
+from service.bayesian_calibration import BayesianCalibrator
+from service.calibration_data import ModelData, read_model_data
+from service.calibration_run import continuation, fit_point
+from service.metrics import target_metrics
+from service.resources import signatures_dir
+from service.signature import load_signature_library
+from service.simulator import loop_substeps
+from service.store import GraphStore
+from service.synthetic_data import generate_synthetic_data
+
+#: The Bayesian runs go to convergence (20 × IAT) on the real case study: minutes each on one core,
+#: beyond the CI budget; they run when GRAPHTWIN_ACCEPTANCE=1 (the point-calibration checks always run).
+bayesian_acceptance = pytest.mark.skipif(
+    os.environ.get("GRAPHTWIN_ACCEPTANCE") != "1",
+    reason="Bayesian case-study acceptance runs PT-MCMC to convergence (minutes per run): set GRAPHTWIN_ACCEPTANCE=1",
+)
+TRAIN = ("2026-01-12", "2026-01-12T23:59")
+TEST = ("2026-01-13", None)
+#: Settings of the Bayesian runs: ``graphtwin calibrate --method bayes`` (4 temperatures, 60 walkers,
+#: IAT checked every 100 steps), capped at 6,000 steps (about 27 CPU minutes on this model).
+BAYES = dict(n_temperatures=4, max_steps=6000, check_interval=100, random_state=0, progress=False)
+STRUCTURALLY_UNIDENTIFIABLE = ("supply_fan#c1", "supply_fan#c2", "supply_fan#c3", "supply_fan#c4",
+                               "heating_coil_air_side#loop_flow_coefficient")
+
+
+class CaseStudyTruth:
+    """Synthetic data of the case study (optionally with a hidden effect), the model bound to it,
+    the training problem and the continuation problem (training start to test end)."""
+
+    def __init__(self, folder, hidden_effect: str | None = None):
+        store = GraphStore.embedded(None)
+        store.load_model("case", CASE_STUDY)
+        path = folder / f"case-{hidden_effect}.csv"
+        self.truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
+                                             seed=3, n_days=2.0, hidden_effect=hidden_effect)
+        model = assemble(store, "case")
+        data = read_model_data(model, path)
+        self.md = ModelData(model, data, loop_substeps(model, data.step_s))
+        self.train = data.window(*TRAIN)
+        self.test = data.window(*TEST)
+        self.problem = self.md.problem(self.train)
+        self.names = self.problem.parameter_names
+        self.true_theta = np.array([self.truth.theta.get(k, np.nan) for k in self.names])
+
+    def short(self, key: str) -> str:
+        return key.rsplit("/", 1)[-1]
+
+    def bayes(self) -> tuple[BayesianCalibrator, dict]:
+        """Bayesian fit on the training day and test-window metrics of its posterior predictive."""
+        fit = BayesianCalibrator(**BAYES).fit(self.problem)
+        joined = continuation(self.train, self.test)
+        offset = self.test.start - joined.start
+        predictive = fit.predict(self.md.problem(joined, target_scales=self.problem.target_scales, warmup_s=0.0))
+        observed = self.md.observed(self.test)
+        metrics = {
+            node: target_metrics(
+                observed[node], predictive.median[node][offset:], n_parameters=self.problem.n_parameters,
+                intervals={level: tuple(b[offset:] for b in predictive.interval(node, level)) for level in (0.68, 0.9)},
+                unit=self.problem.units[node], target=node,
+            )
+            for node in observed
+        }
+        return fit, metrics
+
+
+@pytest.fixture(scope="module")
+def exact(tmp_path_factory):
+    return CaseStudyTruth(tmp_path_factory.mktemp("exact"))
+
+
+@pytest.fixture(scope="module")
+def exact_point(exact):
+    calibrator, _ = fit_point(exact.md, exact.train, seed=0)
+    return calibrator
+
+
+@pytest.fixture(scope="module")
+def exact_bayes(exact):
+    return exact.bayes()
+
+
+@pytest.fixture(scope="module")
+def fan_heat(tmp_path_factory):
+    """The truth has fan motor heat in the air stream (f = 0.8, about 1 K); the model lacks it."""
+    return CaseStudyTruth(tmp_path_factory.mktemp("fan_heat"), hidden_effect="FanMotorHeat")
+
+
+def identifiable(point, problem) -> list[int]:
+    """Indices of the parameters the point fit identifies to within ±5 % (95 % interval; module docstring)."""
+    return [
+        j for j, name in enumerate(problem.parameter_names)
+        if point.identifiability_[name].identified and 1.96 * point.standard_errors_[j] <= 0.05 * abs(point.theta_[j])
+    ]
+
+
+def test_point_calibration_recovers_the_identifiable_parameters_within_5_percent(exact, exact_point):
+    chosen = identifiable(exact_point, exact.problem)
+    assert len(chosen) >= 4, [exact.short(exact.names[j]) for j in chosen]
+    error = np.abs(exact_point.theta_ - exact.true_theta) / np.abs(exact.true_theta)
+    assert {exact.short(exact.names[j]): round(error[j], 4) for j in chosen if error[j] > 0.05} == {}
+    # the verdicts are honest: every parameter called identified is within 3 standard errors of the truth
+    for j, name in enumerate(exact.names):
+        if exact_point.identifiability_[name].identified:
+            assert abs(exact_point.theta_[j] - exact.true_theta[j]) <= 3 * exact_point.standard_errors_[j], name
+
+
+def test_unidentifiable_parameters_are_reported_as_such(exact, exact_point):
+    for suffix in STRUCTURALLY_UNIDENTIFIABLE:
+        name = next(n for n in exact.names if n.endswith(suffix))
+        verdict = exact_point.identifiability_[name]
+        assert not verdict.identified and verdict.reasons, suffix
+    assert any("flat direction" in r for r in exact_point.identifiability_[
+        next(n for n in exact.names if n.endswith("loop_flow_coefficient"))].reasons)
+
+
+@pytest.mark.slow
+@bayesian_acceptance
+def test_bayesian_run_converges_by_the_20_iat_rule(exact_bayes):
+    fit, _ = exact_bayes
+    assert fit.converged_ and fit.n_steps_ >= 20 * fit.iat_
+    assert 0.15 < fit.acceptance_ < 0.6 and np.all(fit.swap_rate_ > 0.05)
+
+
+@pytest.mark.slow
+@bayesian_acceptance
+def test_bayesian_68_percent_intervals_contain_the_truth_for_80_percent_of_identifiable(exact, exact_point, exact_bayes):
+    fit, _ = exact_bayes
+    chosen = identifiable(exact_point, exact.problem)
+    inside = (fit.quantile16_ <= exact.true_theta) & (exact.true_theta <= fit.quantile84_)
+    report = {exact.short(exact.names[j]): (fit.quantile16_[j], exact.true_theta[j], fit.quantile84_[j]) for j in chosen}
+    assert inside[chosen].mean() >= 0.8, report
+
+
+@pytest.mark.slow
+@bayesian_acceptance
+def test_unidentifiable_parameters_have_wide_posteriors(exact, exact_point, exact_bayes):
+    """What the data cannot identify is not reported as a confident number: its 68 % posterior
+    interval is wider, relative to the value, than that of every identifiable parameter."""
+    fit, _ = exact_bayes
+    relative_width = (fit.quantile84_ - fit.quantile16_) / np.abs(fit.median_)
+    chosen = identifiable(exact_point, exact.problem)
+    for suffix in STRUCTURALLY_UNIDENTIFIABLE:
+        j = next(j for j, n in enumerate(exact.names) if n.endswith(suffix))
+        assert relative_width[j] > relative_width[chosen].max(), suffix
+
+
+@pytest.mark.slow
+@bayesian_acceptance
+def test_test_window_ace_at_90_percent_within_5_percent(exact_bayes):
+    _, metrics = exact_bayes
+    ace = {node.removeprefix(EX): next(c.ace for c in m.coverage if c.level == 0.9) for node, m in metrics.items()}
+    assert all(abs(value) <= 0.05 for value in ace.values()), ace
+
+
+def test_structure_the_model_lacks_shows_in_the_point_fit_residuals(fan_heat, exact, exact_point):
+    """Autocorrelated residuals where the model misses the motor heat; white noise where it is exact."""
+    point, _ = fit_point(fan_heat.md, fan_heat.train, seed=0)
+
+    def lag1(case, fit):
+        return {node.removeprefix(EX): target_metrics(case.problem.observed[node], fit.prediction_[node]).lag1_autocorrelation
+                for node in case.problem.target_keys}
+
+    missing, right = lag1(fan_heat, point), lag1(exact, exact_point)
+    # white residuals have a lag-1 autocorrelation of 0 ± 1/√n: significant means beyond 3/√n
+    significant = 3.0 / np.sqrt(min(m.sum() for m in exact.problem.masks.values()))
+    assert max(abs(v) for v in right.values()) < significant, right
+    assert max(missing.values()) > significant, missing
+
+
+@pytest.mark.slow
+@bayesian_acceptance
+def test_the_discrepancy_absorbs_structure_the_model_lacks_and_intervals_stay_honest(fan_heat):
+    fit, metrics = fan_heat.bayes()
+    assert fit.converged_
+    ace = {n.removeprefix(EX): next(c.ace for c in m.coverage if c.level == 0.9) for n, m in metrics.items()}
+    assert all(abs(value) <= 0.05 for value in ace.values()), ace

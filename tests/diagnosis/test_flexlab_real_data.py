@@ -1,0 +1,128 @@
+"""The diagnosis loop on real measured data: LBNL FLEXLAB X3A (SZVAV, September 2017, °F), faults imposed
+by the experimenters (Granderson et al., Sci Data 7:65, 2020).
+
+The base model (``flexlab_ahu``) is calibrated on the unfaulted 9/20 and diagnosed on the day of the
+heating-coil valve leak (9/12, bypass open to 40 % of the valve's full flow) and on the day the
+heating-coil valve was stuck fully open (9/14, the BMS logs the controller's demand, 0 all day). Both
+faults put heat into the supply air with the valve commanded shut.
+
+The data are 15-minute means of the 1-minute log: the static coil model does not resolve the coil's
+minutes-long response, nor the controller's 9-minute hunting round the valve's dead band, and the
+coarser step cuts the two diagnoses' cost fifteenfold (they remain the slowest test of the suite:
+each calibrates the base model and fits every applicable catalog entry twice).
+"""
+
+import csv
+import warnings
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.diagnosis import diagnose
+from service.resources import examples_dir
+from service.store import GraphStore
+
+EX = "https://example.org/flexlab-x3a#"
+SZVAV = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "lbnl_flexlab_single_zone_ahu" / "SZVAV.csv"
+SUPPLY = EX + "supply_air_temperature_sensor"
+HEATING = {EX + "heating_coil_valve", EX + "heating_coil"}
+TRAIN = ("2017-09-20", "2017-09-20 23:59")
+FAULT_DAYS = {"leak": "2017-09-12", "stuck_open": "2017-09-14"}
+AVERAGE_MINUTES = 15
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not SZVAV.is_file(), reason=f"{SZVAV} is absent (the FLEXLAB data live in ../shared/realdata)"),
+]
+
+
+def _block_means(source: Path, target: Path, minutes: int, days: set[str]) -> None:
+    """``minutes``-long block means of the 1-minute FLEXLAB log for ``days`` (ISO dates), spreadsheet
+    error cells and empty cells left out of the means."""
+    with source.open(newline="", encoding="utf-8") as handle:
+        header, *rows = list(csv.reader(handle))
+    stamps = [datetime.strptime(row[0], "%m/%d/%Y %H:%M") for row in rows]
+    chosen = [(t, row) for t, row in zip(stamps, rows) if t.date().isoformat() in days]
+    out = [header]
+    for start in range(0, len(chosen) - minutes + 1, minutes):
+        block = chosen[start:start + minutes]
+        means = []
+        for column in range(1, len(header)):
+            values = []
+            for _, row in block:
+                try:
+                    values.append(float(row[column]))
+                except ValueError:
+                    pass
+            means.append(repr(float(np.mean(values))) if values else "")
+        out.append([block[0][0].isoformat(sep=" ")] + means)
+    with target.open("w", newline="", encoding="utf-8") as handle:
+        csv.writer(handle).writerows(out)
+
+
+@pytest.fixture(scope="module")
+def reports(tmp_path_factory):
+    data = tmp_path_factory.mktemp("flexlab") / "szvav_15min.csv"
+    _block_means(SZVAV, data, AVERAGE_MINUTES, {TRAIN[0], *FAULT_DAYS.values()})
+    out = {}
+    for fault, day in FAULT_DAYS.items():
+        store = GraphStore.embedded(None)
+        store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # unclaimed columns (set points, status, occupancy)
+            report = diagnose(store, "flexlab", data, train=TRAIN, test=(day, f"{day} 23:59"), seed=0)
+        out[fault] = {"report": report, "supply_air": _supply_air_celsius(data, day)}
+    return out
+
+
+def _supply_air_celsius(data: Path, day: str) -> np.ndarray:
+    """The measured supply air temperature of ``day`` in the averaged file, °F → °C."""
+    with data.open(newline="", encoding="utf-8") as handle:
+        header, *rows = list(csv.reader(handle))
+    column = [h.strip() for h in header].index("AHU: Supply Air Temperature")
+    return np.array([(float(row[column]) - 32.0) / 1.8 for row in rows if row[0].startswith(day)])
+
+
+@pytest.mark.parametrize("fault", sorted(FAULT_DAYS))
+def test_the_model_fails_on_the_supply_air_temperature(reports, fault):
+    """The base model calibrated on 9/20 misses the supply air by 10-20 K on the fault day, twenty
+    times its mixed-air error. (The mixed air "fails" too, by 0.5-0.6 K against the small noise of
+    15-minute means: its sensor reads up to 1.5 K above both return and outdoor air at the fan's
+    minimum speed, which no mixing model reproduces; the localisation then treats the supply air's
+    failure as inherited from it, so it names the mixing box, not the coils.)"""
+    sensors = reports[fault]["report"].sensors
+    supply, mixed = sensors[SUPPLY], sensors[EX + "mixed_air_temperature_sensor"]
+    assert supply["fails"] and supply["rmse"] > 5.0, supply
+    assert supply["rmse"] > 10.0 * mixed["rmse"], (supply["rmse"], mixed["rmse"])
+
+
+@pytest.mark.parametrize("fault", sorted(FAULT_DAYS))
+def test_the_top_effect_is_the_heating_valve_passing_water_while_shut(reports, fault):
+    """Leakage and a valve stuck open rank first and second (nested: stuck at s with weight 1 is a
+    leak λ = s; the simpler goes first). The fit favours the effect (ΔBIC < 0) and removes most of
+    the evaluation half's error, but ΔBIC stays above the −10 the ranking calls significant: the
+    base residuals of 15-minute means are so autocorrelated that a day holds only ~15 effective
+    observations."""
+    effects = reports[fault]["report"].effects
+    assert {(e.effect, e.node in HEATING) for e in effects[:2]} == {("ValveLeakage", True), ("ValveStuck", True)}, \
+        [(e.effect, e.node, e.test_improvement) for e in effects[:3]]
+    best = effects[0]
+    assert best.effect == "ValveLeakage"
+    assert best.delta_bic < 0.0 and best.test_improvement >= 0.5, (best.delta_bic, best.test_improvement)
+
+
+@pytest.mark.parametrize("fault", sorted(FAULT_DAYS))
+def test_adding_it_at_least_halves_the_supply_air_error_on_data_it_was_not_fitted_on(reports, fault):
+    """The evaluation half of the fault day (12:00–24:00): the model plus the top effect, fitted on
+    the unfaulted day and the morning, against the base model as calibrated on the unfaulted day and
+    against the base refitted on the same data as the effect."""
+    report, observed = reports[fault]["report"], reports[fault]["supply_air"]
+    best = report.effects[0]
+    evaluation = slice(observed.size // 2, None)
+    base = report.base_test_prediction[SUPPLY][evaluation]
+    mask = np.isfinite(base) & np.isfinite(observed[evaluation])
+    rmse_base = float(np.sqrt(np.mean((base[mask] - observed[evaluation][mask]) ** 2)))
+    assert best.rmse_after[SUPPLY] <= 0.5 * rmse_base, (best.rmse_after[SUPPLY], rmse_base)
+    assert best.rmse_after[SUPPLY] <= 0.5 * best.rmse_before[SUPPLY], (best.rmse_after, best.rmse_before)

@@ -1,0 +1,121 @@
+"""Where job work runs: shipped to a local process pool (the service's default) or to a Dask
+distributed cluster (a ``LocalCluster`` on loopback TCP, reached as ``GRAPHTWIN_EXECUTOR=dask://127.0.0.1:PORT``
+like a real scheduler), with the results written to the service's store on return. (The fault test,
+test_service_faults.py, runs the process pool inside a real ``graphtwin serve``.)"""
+
+import time
+
+import pyoxigraph as ox
+import pytest
+from case_study import CASE_STUDY, EX
+from fastapi.testclient import TestClient
+
+from service.api import create_app
+from service.assembly import assemble
+from service.jobs import (
+    DaskJobExecutor, JobRecords, JobRunner, ProcessJobExecutor, ShippedJob, add_effect_job, assemble_job,
+    calibrate_job, run_shipped_job, ship_job,
+)
+from service.settings import Settings
+from service.store import GraphStore
+
+
+def _wait(runner: JobRunner, job_id: str, timeout_s: float = 120):
+    deadline = time.monotonic() + timeout_s
+    while (record := runner.get(job_id)).status in ("queued", "running"):
+        assert time.monotonic() < deadline, f"job still {record.status}: {record.progress}"
+        time.sleep(0.02)
+    return record
+
+
+def test_a_process_pool_job_failing_on_bad_input_fails_clearly_and_the_pool_runs_the_next_job(case_store, tmp_path):
+    """Failures come back as failed jobs naming the problem, also a MeasurementError (which does
+    not unpickle as it is); the pool is not broken by them."""
+    bad_csv = tmp_path / "bad.csv"
+    bad_csv.write_text("time,mystery_sensor\n2026-01-12T00:00,1.0\n2026-01-12T00:10,2.0\n")
+    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), {
+        "add-effect": add_effect_job, "assemble": assemble_job, "calibrate": calibrate_job,
+    }, executor=ProcessJobExecutor(1), locate_measurements={"0123456789abcdef": bad_csv}.__getitem__)
+    try:
+        failed = _wait(runner, runner.submit("add-effect", {
+            "model": "case", "effect": "FanMotorHeat", "target": EX + "heating_valve"}).id)
+        assert failed.status == "failed" and "does not apply" in failed.error, failed.error
+        refused = _wait(runner, runner.submit("calibrate", {"model": "case", "measurements": "0123456789abcdef"}).id)
+        assert refused.status == "failed" and f"no column for {EX}supply_air_flow_meter" in refused.error, refused.error
+        assert not any(job.error.startswith("internal error") for job in (failed, refused))
+        done = _wait(runner, runner.submit("assemble", {"model": "case"}).id)
+        assert done.status == "succeeded", done.error
+        assert [p["message"] for p in done.progress][1:3] == ["sent to a local process pool (1 process)",
+                                                                "matching the signature library"]
+        assert case_store.assembly_graph("case") in case_store.backend.graphs()
+        assert "case+FanMotorHeat" not in case_store.models()
+    finally:
+        runner.shutdown(wait=True)
+
+
+distributed = pytest.importorskip("distributed", reason="the Dask executor needs distributed (the test extra has it)")
+
+SHORT_TRAIN = "2026-01-12T06:00/2026-01-12T09:00"  # 3 h of the synthetic day: a calibration of a few seconds
+
+
+@pytest.fixture(scope="module")
+def dask_cluster():
+    """One in-process worker with two threads behind a scheduler on a loopback TCP port."""
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        yield cluster
+
+
+def test_a_portfolio_is_calibrated_on_the_dask_cluster_and_its_results_are_queryable(dask_cluster, tmp_path, case_csv,
+                                                                                   wait_job):
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    store.load_model("school", CASE_STUDY)
+    port = dask_cluster.scheduler.port
+    settings = Settings(data_dir=tmp_path / "service", token="test-token-0123456789",
+                        executor=f"dask://127.0.0.1:{port}", job_workers=2)
+    auth = {"Authorization": "Bearer test-token-0123456789"}
+    with distributed.Client(dask_cluster) as observer, distributed.get_task_stream(observer) as tasks, \
+            TestClient(create_app(settings, store=store)) as client:
+        assert client.get("/health").json()["executor"] == f"dask://127.0.0.1:{port}"
+        submitted = {}
+        for model in ("case", "school"):
+            upload = client.post(f"/models/{model}/measurements", content=case_csv.read_bytes(),
+                                 headers={**auth, "Content-Type": "text/csv"}).json()["id"]
+            submitted[model] = client.post("/jobs/calibrate", headers=auth, json={
+                "model": model, "measurements": upload, "train": SHORT_TRAIN}).json()["id"]
+        done = {model: wait_job(client, job_id, timeout_s=120) for model, job_id in submitted.items()}
+        for model, job in done.items():
+            assert job["status"] == "succeeded", job
+            messages = [p["message"] for p in job["progress"]]
+            assert messages[1] == f"sent to the Dask cluster at tcp://127.0.0.1:{port}"
+            assert "calibrated; writing the run" in messages and messages[-1] == "results written to the store"
+            rows = client.get("/queries/calibrated-parameters", params={"model": model}).json()["results"]["bindings"]
+            assert len(rows) == len(job["result"]["parameters"]) == len(assemble(store, model).estimated_parameters)
+            assert {r["run"]["value"].rsplit("/", 1)[-1] for r in rows} == {job["result"]["run_id"]}
+            assert store.run_graph(job["result"]["run_id"]) in store.backend.graphs()
+    ran = {t["key"]: t["worker"] for t in tasks.data}
+    assert {f"graphtwin-job-{job_id}" for job_id in submitted.values()} <= set(ran), ran
+    assert set(ran.values()) == set(dask_cluster.scheduler.workers)
+
+
+def test_shipped_work_reads_only_the_shipped_graphs_and_writes_nothing_until_the_commit(case_store, tmp_path):
+    shipped = ship_job(case_store, "0f" * 16, {"model": "case"}, None)
+    assert isinstance(shipped, ShippedJob) and shipped.measurements == {}
+    before = set(case_store.backend.store)
+    outcome, nquads, dropped, messages = run_shipped_job(assemble_job, shipped)
+    assert set(case_store.backend.store) == before, "the work ran on a scratch store"
+    assert [m["message"] for m in messages] == ["matching the signature library"] and dropped == []
+    assert outcome.links["assembly_graph"] == case_store.assembly_graph("case").value
+    written = GraphStore.embedded(None)
+    written.backend.store.load(nquads, format=ox.RdfFormat.N_QUADS)
+    assert written.backend.graphs() == [case_store.assembly_graph("case")]
+    with pytest.raises(KeyError, match="no measurement upload 'abc'"):
+        ship_job(case_store, "0f" * 16, {"model": "case", "measurements": "abc"}, None)
+
+
+def test_an_unreachable_scheduler_is_named(tmp_path):
+    with pytest.raises(ValueError, match=r"cannot reach the Dask scheduler at tcp://127.0.0.1:9"):
+        DaskJobExecutor("tcp://127.0.0.1:9", connect_timeout_s=0.5)
+    with pytest.raises(ValueError, match="threads, processes or dask://HOST:PORT"):
+        Settings(data_dir=tmp_path, executor="dask://127.0.0.1")

@@ -1,0 +1,155 @@
+"""The Brick alignment rules (queries/alignment/0N-brick-*.rq) on small models written here: a unit
+described by its points only, units and columns stated the Brick way or not, and the rules' contract
+(a fixpoint in one pass, SAREF models untouched, the Brick subset complete under every root)."""
+
+import re
+from collections import defaultdict
+from pathlib import Path
+
+import pyoxigraph as ox
+import pytest
+
+from service.alignment import alignment_rules, inferred_triples
+from service.assembly import IncompleteModelError, assemble
+from service.resources import examples_dir, ontologies_dir
+from service.store import GraphStore, parse_rdf
+
+BRICK_TTL = Path(__file__).resolve().parents[2] / "shared" / "ontologies" / "brick" / "Brick.ttl"
+BRICK = "https://brickschema.org/schema/Brick#"
+GT = "https://w3id.org/graphtwin/ontology#"
+EX = "https://example.org/points-only#"
+
+#: A unit described by its points only, as BMS exports write it (no brick:hasPart, no brick:feeds).
+POINTS_ONLY = """
+@prefix brick: <https://brickschema.org/schema/Brick#> .
+@prefix ref:   <https://brickschema.org/schema/Brick/ref#> .
+@prefix unit:  <http://qudt.org/vocab/unit/> .
+@prefix bu:    <http://brickschema.org/schema/Brick/units#> .
+@prefix rdfs:  <http://www.w3.org/2000/01/rdf-schema#> .
+@prefix :      <https://example.org/points-only#> .
+:ahu a brick:Air_Handling_Unit .
+:oat a brick:Outside_Air_Temperature_Sensor ; brick:isPointOf :ahu ; brick:hasUnit bu:DEG_C ; rdfs:label "OAT" .
+:rat a brick:Return_Air_Temperature_Sensor ; brick:isPointOf :ahu ; brick:hasUnit unit:DEG_C ;
+    ref:hasExternalReference [ ref:hasTimeseriesId "rat_column" ] .
+:mat a brick:Mixed_Air_Temperature_Sensor ; brick:isPointOf :ahu ; brick:hasUnit unit:DEG_C ; rdfs:label "MAT" .
+:sat a brick:Discharge_Air_Temperature_Sensor ; brick:isPointOf :ahu ; brick:hasUnit unit:DEG_C ; rdfs:label "SAT" .
+:oa_cmd a brick:Damper_Position_Command ; brick:isPointOf :ahu ; brick:hasUnit unit:PERCENT ; rdfs:label "OA Dmp" .
+:chw_cmd a brick:Valve_Command ; brick:isPointOf :ahu ; brick:hasUnit unit:PERCENT ; rdfs:label "CHW Vlv Cmd" .
+:hw_cmd a brick:Valve_Command ; brick:isPointOf :ahu ; brick:hasUnit unit:PERCENT ; rdfs:label "Preheat Valve" .
+:fan_cmd a brick:Fan_Speed_Command ; brick:isPointOf :ahu ; brick:hasUnit unit:PERCENT ; rdfs:label "SF Speed" .
+"""
+
+
+@pytest.fixture(scope="module")
+def store():
+    store = GraphStore.embedded(None)
+    store.load_model("points", POINTS_ONLY.encode())
+    store.load_model("saref", examples_dir() / "flexlab_ahu" / "model.ttl")
+    return store
+
+
+def _nodes(model, iris):
+    return sorted(model.components[i].node.removeprefix(EX) for i in iris)
+
+
+def test_a_unit_described_by_its_points_gets_the_equipment_they_imply(store):
+    model = assemble(store, "points")
+    chosen = {c.node.removeprefix(EX): c.signature.id for c in model.components.values()}
+    assert {n: s for n, s in chosen.items() if s not in ("CommandSignal", "TemperatureSensor")} == {
+        "ahu_mixing_section": "MixingBox", "hw_cmd_coil": "HeatingCoil", "chw_cmd_coil": "CoolingCoil",
+        "ahu_supply_fan": "SpeedControlledFan"}
+    assert _nodes(model, model.targets) == ["mat", "sat"]
+    wires = {(model.components[c.source].node.removeprefix(EX), model.components[c.target].node.removeprefix(EX))
+             for c in model.connections}
+    # the preheat coil upstream of the cooling coil, the fan after both, the commands on their equipment
+    assert {("mat", "hw_cmd_coil"), ("hw_cmd_coil", "chw_cmd_coil"), ("chw_cmd_coil", "ahu_supply_fan"),
+            ("ahu_supply_fan", "sat"), ("oa_cmd", "ahu_mixing_section"), ("hw_cmd", "hw_cmd_coil"),
+            ("chw_cmd", "chw_cmd_coil"), ("fan_cmd", "ahu_supply_fan"), ("rat", "ahu_mixing_section"),
+            ("oat", "ahu_mixing_section")} <= wires
+
+
+def test_every_minted_node_is_an_assumption_with_the_triples_that_remove_it(store):
+    rows = store.query(f"""
+        PREFIX gt: <{GT}>
+        SELECT ?fix ?text ?rule WHERE {{ ?a a gt:AlignmentAssumption ; gt:assumptionAbout <{EX}ahu> ;
+           gt:assumption ?text ; gt:resolvedBy ?fix ; gt:derivedByRule ?rule }}""", model="points")
+    mentioned = {m for r in rows for m in re.findall(re.escape(EX) + r"(\w+)>", r["fix"].value)}
+    minted = {"ahu_mixing_section", "ahu_outside_damper", "ahu_return_damper", "hw_cmd_coil", "hw_cmd_valve",
+              "chw_cmd_coil", "chw_cmd_valve", "ahu_supply_fan", "ahu_served_zone"}
+    assert mentioned == minted | {"ahu"}
+    assert {r["rule"].value for r in rows} == {"00-brick-ahu-equipment.rq"}
+
+
+def test_columns_and_units_stated_the_brick_way_or_assumed(store):
+    model = assemble(store, "points")
+    links = {c.node.removeprefix(EX): (c.measurement.series_id, c.measurement.unit.rsplit("/", 1)[-1])
+             for c in model.components.values() if c.measurement}
+    assert links["rat"] == ("rat_column", "DEG_C")  # ref:hasTimeseriesId
+    assert links["mat"] == ("MAT", "DEG_C")  # rdfs:label as the column: an assumption
+    assert links["oat"] == ("OAT", "DEG_C")  # a non-QUDT unit IRI read as QUDT: an assumption
+    assert links["hw_cmd"] == ("Preheat Valve", "PERCENT")
+    about = {(r["about"].value.removeprefix(EX), r["rule"].value) for r in store.query(f"""
+        PREFIX gt: <{GT}>
+        SELECT ?about ?rule WHERE {{ ?a a gt:AlignmentAssumption ; gt:assumptionAbout ?about ; gt:derivedByRule ?rule }}""",
+                                                                                    model="points")}
+    links_assumed = {a for a, rule in about if rule == "04-brick-point-links.rq"}
+    assert "rat" not in links_assumed and {"oat", "mat", "sat", "hw_cmd"} <= links_assumed
+
+
+def test_a_valve_command_of_unstated_service_makes_a_coil_of_unstated_service():
+    store = GraphStore.embedded(None)
+    store.load_model("plain", POINTS_ONLY.replace('"CHW Vlv Cmd"', '"Valve 2"').encode())
+    model = assemble(store, "plain")
+    assert model.component_for_node(EX + "chw_cmd_coil").signature.id == "WaterCoil"
+
+
+def test_a_unit_without_a_fan_command_is_incomplete_and_says_so():
+    store = GraphStore.embedded(None)
+    store.load_model("nofan", POINTS_ONLY.replace(":fan_cmd a brick:Fan_Speed_Command", ":fan_cmd a brick:Point").encode())
+    with pytest.raises(IncompleteModelError, match="ahu_supply_fan"):
+        assemble(store, "nofan")
+
+
+def test_the_rules_reach_their_fixpoint_in_one_pass_and_leave_saref_models_alone(store):
+    ontology = [t for p in sorted(ontologies_dir().glob("*.ttl"))
+                for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))]
+    model = store.graph_triples(store.model_graph("points"))
+    derived = inferred_triples(model, ontology)
+    assert derived and inferred_triples(model + derived, ontology) == []
+    saref_rules = {t.object.value for t in store.graph_triples(store.inferred_graph("saref"))
+                   if t.predicate.value == GT + "derivedByRule"}
+    assert saref_rules == set()  # no Brick rule fires on a SAREF model
+
+
+def _subclasses(triples) -> dict[str, set[str]]:
+    children = defaultdict(set)
+    for t in triples:
+        if t.predicate.value == "http://www.w3.org/2000/01/rdf-schema#subClassOf" and isinstance(t.object, ox.NamedNode):
+            children[t.object.value].add(t.subject.value)
+    return children
+
+
+@pytest.mark.skipif(not BRICK_TTL.is_file(), reason=f"official Brick.ttl not found at {BRICK_TTL}")
+def test_the_brick_subset_holds_every_official_subclass_of_the_classes_the_rules_map():
+    subset_text = (ontologies_dir() / "brick-subset.ttl").read_text(encoding="utf-8")
+    roots = {m for line in subset_text.splitlines() if line.startswith("# ---- ") and "every official subclass" in line
+             for m in re.findall(r"\b(?:brick|rec):[A-Za-z_]+", line.split(":", 1)[1])}
+    expand = {"brick": BRICK, "rec": "https://w3id.org/rec#"}
+    roots = {expand[r.split(":")[0]] + r.split(":")[1] for r in roots}
+    subset = parse_rdf(subset_text.encode(), ox.RdfFormat.TURTLE, "brick-subset.ttl")
+    declared = {t.subject.value for t in subset}
+    official = _subclasses(parse_rdf(BRICK_TTL.read_bytes(), ox.RdfFormat.TURTLE, str(BRICK_TTL)))
+    missing, todo, seen = set(), list(roots), set()
+    while todo:
+        cls = todo.pop()
+        if cls in seen:
+            continue
+        seen.add(cls)
+        if cls not in declared:
+            missing.add(cls)
+        todo += official[cls]
+    assert len(roots) > 20 and sorted(missing) == []
+    # every Brick/REC class a rule names is declared in the subset
+    named = {expand[p] + local for _n, text in alignment_rules() for p, local in re.findall(r"\b(brick|rec):([A-Za-z_]+)", text)
+             if local[0].isupper()}
+    assert sorted(named - declared) == []

@@ -1,0 +1,70 @@
+"""The open-fdd school AHU 7 (../shared/realdata/openfdd_ahu7_school): a real Brick model of a real
+unit, written by its points only. What holds whatever the data: what assembles from the file as it
+is, what the Brick report says is missing, and that stating what it names completes the model."""
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from service.assembly import IncompleteModelError, assemble
+from service.brick_report import brick_report
+from service.store import GraphStore
+
+SCHOOL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "openfdd_ahu7_school"
+AHU7 = "http://openfdd.local/ahu7#"
+#: What the report asks for: an official class for the fan speed command, units for the commands.
+FIXES = """
+@prefix brick: <https://brickschema.org/schema/Brick#> .
+@prefix unit:  <http://qudt.org/vocab/unit/> .
+@prefix : <http://openfdd.local/ahu7#> .
+:sf_spd_cmd a brick:Fan_Speed_Command ; brick:hasUnit unit:PERCENT .
+:oa_damper_cmd brick:hasUnit unit:PERCENT .
+:clg_valve_cmd brick:hasUnit unit:PERCENT .
+:prht_valve_cmd brick:hasUnit unit:PERCENT .
+"""
+
+pytestmark = pytest.mark.skipif(not (SCHOOL / "ahu7_brick_model.ttl").is_file(),
+                                reason=f"{SCHOOL} is absent (../shared/realdata)")
+
+
+@pytest.fixture(scope="module")
+def store():
+    store = GraphStore.embedded(None)
+    ttl = (SCHOOL / "ahu7_brick_model.ttl").read_bytes()
+    store.load_model("school", ttl)
+    store.load_model("school-fixed", ttl + FIXES.encode())
+    return store
+
+
+def test_the_file_as_it_is_lacks_a_fan_and_the_report_says_why(store):
+    with pytest.raises(IncompleteModelError, match="ahu_7_supply_fan"):
+        assemble(store, "school")
+    report = brick_report(store, "school")
+    unaligned = {c.class_iri.removeprefix("https://brickschema.org/schema/Brick#"): c for c in report.unaligned_classes}
+    assert set(unaligned) == {"Supply_Fan_Speed_Command", "Supply_Air_Static_Pressure_Sensor",
+                              "Supply_Air_Temperature_Setpoint", "Site"}
+    assert "brick:Fan_Speed_Command" in unaligned["Supply_Fan_Speed_Command"].needed
+    assert report.points_without_unit == tuple(AHU7 + p for p in ("clg_valve_cmd", "oa_damper_cmd", "prht_valve_cmd"))
+    # units from the non-QUDT namespace the file uses, columns from the labels: assumed, and said so
+    rules = {}
+    for a in report.assumptions:
+        rules.setdefault(a.rule, set()).add(a.about.removeprefix(AHU7))
+    assert rules["04-brick-point-links.rq"] == {"oat_sensor", "rat_sensor", "mat_sensor", "sat_sensor",
+                                                "oa_damper_cmd", "clg_valve_cmd", "prht_valve_cmd"}
+    assert rules["06-brick-sensor-placement.rq"] == {"oat_sensor", "rat_sensor", "mat_sensor", "sat_sensor"}
+    assert rules["00-brick-ahu-equipment.rq"] == {"ahu_7"}
+
+
+def test_with_what_the_report_names_the_unit_assembles_and_links_to_the_csv(store):
+    model = assemble(store, "school-fixed")
+    chosen = {c.node.removeprefix(AHU7): c.signature.id for c in model.components.values()}
+    assert {n: s for n, s in chosen.items() if s not in ("CommandSignal", "TemperatureSensor")} == {
+        "ahu_7_mixing_section": "MixingBox", "prht_valve_cmd_coil": "HeatingCoil",
+        "clg_valve_cmd_coil": "CoolingCoil", "ahu_7_supply_fan": "SpeedControlledFan"}
+    assert sorted(model.components[t].node.removeprefix(AHU7) for t in model.targets) == ["mat_sensor", "sat_sensor"]
+    with (SCHOOL / "AHU7.csv").open(newline="", encoding="utf-8") as handle:
+        headers = set(next(csv.reader(handle)))
+    links = [c.measurement for c in model.components.values() if c.measurement]
+    assert len(links) == 8 and sorted(link.series_id for link in links if link.series_id not in headers) == []
+    assert brick_report(store, "school-fixed").points_without_unit == ()
