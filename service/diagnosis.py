@@ -19,7 +19,11 @@ window (the continuation of training when it follows it, else a run of its own) 
    weighted residual on the fit windows (same number of parameters): an effect *present throughout*
    (base and effect refitted together: a property of the building, e.g. fan motor heat) and a fault
    *appearing in the test window* (base held at its training estimate, effect null in training and
-   fitted on the first half of the test window: a valve bypass opened on the test day);
+   fitted on the first half of the test window: a valve bypass opened on the test day; only for
+   effects whose signature says they can appear, ``can_appear``: a fan's motor heat cannot). In the
+   second, the parameters of the component the effect enters that the training data did not
+   identify are fitted with the effect (a leak through a coil whose valve never opened in training
+   is what first shows the coil's capacity);
 4. when nothing significant is found: "nothing significant is missing" and, if sensors still fail,
    what their residual depends on (:mod:`service.residual_dependence`).
 
@@ -152,6 +156,7 @@ class _CandidateJob:
     seed: int
     refit_max_nfev: int
     train_theta: dict[str, float] = field(default_factory=dict)
+    train_unidentified: frozenset[str] = frozenset()
     onset_windows: tuple[list[slice], slice] | None = None
 
 
@@ -179,7 +184,8 @@ def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice, the
 PROBE_SHARES = (0.05, 0.15, 0.35, 0.65, 1.0)
 
 
-def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None) -> np.ndarray:
+def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None,
+                 *, active_only: bool = False) -> np.ndarray:
     """The refit's start: a base estimate with the effect parameters at the best point of a grid
     (the null and ``PROBE_SHARES`` of each prior width; all combinations, one simulate call).
 
@@ -190,6 +196,9 @@ def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_t
     ``theta_train`` (the base as calibrated on the training window alone): when the test data hold a
     fault, the refit without the effect bends other parameters to absorb part of it (a weakened
     cooling coil for a leaking heating valve), and the effect is best fitted from the undistorted base.
+
+    ``active_only`` leaves out the grid points where any effect parameter sits at its value in
+    ``theta0`` (its null): the best start with the effect switched on.
     """
     axes = []
     for column in effect_columns:
@@ -200,6 +209,8 @@ def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_t
     ensemble = np.concatenate([np.repeat(start[None, :], len(grid), axis=0) for start in starts])
     ensemble[:, effect_columns] = np.tile(grid, (len(starts), 1))
     cost = np.sum(problem.weighted_residuals(problem.run(ensemble)) ** 2, axis=1)
+    if active_only:
+        cost[np.any(ensemble[:, effect_columns] == theta0[effect_columns], axis=1)] = np.inf
     return ensemble[int(np.argmin(cost))]
 
 
@@ -219,32 +230,58 @@ def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effec
     for column in effect_columns:
         spec = job.model.estimated_parameters[column].spec
         null[column] = spec.null if spec.null is not None else spec.default
+    host = _host_columns(job)
+    free = effect_columns + host
     whole = md.problem([*before, after], default=null, target_scales=job.target_scales)
-    unfaulted = [md.simulate_targets(w, null[None, :]) for w in before]
+    unfaulted = ({} if host else
+                 {i: md.simulate_targets(w, null[None, :]) for i, w in enumerate(before)})
 
-    def simulate(theta_effect: np.ndarray) -> dict[str, np.ndarray]:
-        full = np.repeat(null[None, :], len(theta_effect), axis=0)
-        full[:, effect_columns] = theta_effect
+    def simulate(theta_free: np.ndarray) -> dict[str, np.ndarray]:
+        full = np.repeat(null[None, :], len(theta_free), axis=0)
+        full[:, free] = theta_free
         faulted = md.simulate_targets(after, full)
-        return {node: np.concatenate([np.repeat(run[node], len(theta_effect), axis=0) for run in unfaulted]
-                                     + [faulted[node]], axis=1) for node in faulted}
+        healthy = full.copy()
+        healthy[:, effect_columns] = null[effect_columns]
+        runs = [{k: np.repeat(v, len(theta_free), axis=0) for k, v in unfaulted[i].items()} if i in unfaulted
+                else md.simulate_targets(w, healthy) for i, w in enumerate(before)]
+        return {node: np.concatenate([run[node] for run in runs] + [faulted[node]], axis=1) for node in faulted}
 
     def effect_problem(default: np.ndarray) -> CalibrationProblem:
         return CalibrationProblem(
-            parameter_names=tuple(whole.parameter_names[c] for c in effect_columns),
-            lower=whole.lower[effect_columns], upper=whole.upper[effect_columns], simulate=simulate,
+            parameter_names=tuple(whole.parameter_names[c] for c in free),
+            lower=whole.lower[free], upper=whole.upper[free], simulate=simulate,
             observed=whole.observed, target_scales=job.target_scales, units=whole.units, default=default,
         )
 
-    at_null = null[effect_columns]
-    problem = effect_problem(_probe_start(effect_problem(at_null), at_null, list(range(len(effect_columns)))))
-    calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev)
-    calibrator.fit(problem)
+    at_null = null[free]
+    probe = effect_problem(at_null)
+    own = list(range(len(effect_columns)))
+    starts = [_probe_start(probe, at_null, own)]
+    if host:  # the best active start too: with its host as trained the effect may only overshoot
+        starts.append(_probe_start(probe, at_null, own, active_only=True))
+    fits = []
+    for start in starts:  # with free host parameters, a wider screen: their training values are arbitrary
+        problem = effect_problem(start)
+        fits.append(PointCalibrator(n_starts=2 if host else 1, n_candidates=128 if host else 8, random_state=job.seed,
+                                    max_nfev=job.refit_max_nfev).fit(problem))
+    calibrator = min(fits, key=lambda fit: fit.cost_)
     theta = null.copy()
-    theta[effect_columns] = calibrator.theta_
+    theta[free] = calibrator.theta_
     standard_errors = np.zeros_like(theta)
-    standard_errors[effect_columns] = calibrator.standard_errors_
+    standard_errors[free] = calibrator.standard_errors_
     return theta, standard_errors, 2.0 * calibrator.cost_ / problem.n_observations
+
+
+def _host_columns(job: _CandidateJob) -> list[int]:
+    """Columns of the parameters of the component the effect is spliced into (its host) that the
+    training data did not identify: they say nothing about them, so a fault that makes them matter
+    (a leak through a coil whose valve never opened in training) is fitted with them free."""
+    refs = job.model.estimated_parameters
+    effect_components = {r.component for r in refs if r.key not in job.base_theta}
+    hosts = {c.target for c in job.model.connections if c.source in effect_components} | {
+        c.source for c in job.model.connections if c.target in effect_components}
+    hosts -= effect_components
+    return [j for j, r in enumerate(refs) if r.component in hosts and r.key in job.train_unidentified]
 
 
 def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
@@ -265,7 +302,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     theta, standard_errors = calibrator.theta_, calibrator.standard_errors_
     mean_square = 2.0 * calibrator.cost_ / problem.n_observations
     onset = "present throughout"
-    if job.onset_windows is not None and effect_columns:
+    if job.onset_windows is not None and effect_columns and job.signature.can_appear:
         onset_fit = _fit_onset(md, job, theta_train, effect_columns)
         if onset_fit[2] < mean_square:
             theta, standard_errors, mean_square = onset_fit
@@ -392,10 +429,11 @@ def diagnose(
     base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, refit.theta_)}
     base_evaluation = _predict_evaluation(md, run_window, evaluation, refit.theta_)
     train_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, base.theta)}
+    unidentified = frozenset(e.key for e in base.record.estimates if not e.identified)
     jobs = [
         _CandidateJob(signature, node, cand_model, data, substeps, fit_windows, run_window, evaluation, base_theta,
                       2.0 * refit.cost_, fraction, scales, base_evaluation, seed, refit_max_nfev, train_theta,
-                      ([train_slice], slice(test_slice.start, evaluation.start)))
+                      unidentified, ([train_slice], slice(test_slice.start, evaluation.start)))
         for signature, node, cand_model in candidates
     ]
     workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)

@@ -156,6 +156,7 @@ class Signature:
     splice: EffectSplice | None = None
     source_file: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    can_appear: bool = True  # effects: may appear from one day to the next (a fault), else a property
 
     @property
     def iri(self) -> str:
@@ -171,7 +172,7 @@ def signature_iri(signature_id: str) -> str:
 
 _TOP_KEYS = {
     "id", "label", "comment", "kind", "model", "fmu", "complexity", "modeled_nodes", "nodes",
-    "triples", "inputs", "outputs", "parameters", "splice", "extra",
+    "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear",
 }
 
 
@@ -303,12 +304,15 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     complexity = data.get("complexity", 1)
     if not isinstance(complexity, int):
         raise _fail(path, "complexity", "must be an integer")
+    can_appear = data.get("can_appear", True)
+    if not isinstance(can_appear, bool) or ("can_appear" in data and kind != "effect"):
+        raise _fail(path, "can_appear", "effects only, true or false")
     return Signature(
         id=sig_id, label=str(data.get("label", sig_id)), kind=kind, nodes=nodes,
         triples=tuple(triples), modeled_nodes=modeled, inputs=inputs, outputs=outputs,
         parameters=tuple(parameters), model=model, fmu=fmu_path, complexity=complexity,
         comment=str(data.get("comment", "")), splice=splice, source_file=path,
-        extra=dict(data.get("extra", {})),
+        extra=dict(data.get("extra", {})), can_appear=can_appear,
     )
 
 

@@ -138,6 +138,7 @@ def signature_triples(signature: Signature) -> list[ox.Triple]:
             ox.Triple(sig, GT.spliceNode, node(splice.node)),
             ox.Triple(sig, GT.splicePort, ox.Literal(splice.port)),
             ox.Triple(sig, GT.spliceSide, ox.Literal(splice.side)),
+            ox.Triple(sig, GT.canAppear, ox.Literal("true" if signature.can_appear else "false", datatype=XSD.boolean)),
         ]
         triples += [ox.Triple(sig, GT.hostModel, ox.Literal(m)) for m in splice.host_models]
     return triples

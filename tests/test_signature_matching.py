@@ -189,3 +189,13 @@ def test_every_library_signature_compiles_and_runs(case_store):
             if triple.rule.value == "traverse":
                 assert f"?{triple.subject} fso:suppliesFluidTo+ ?{triple.object} ." in text
         match_signature(case_store, signature, default_graph=case_store.matching_dataset("case"))
+
+
+@pytest.mark.parametrize("value, kind", [("no", "effect"), (False, "component")])
+def test_can_appear_is_a_boolean_of_effects_only(value, kind):
+    data = {"id": "Odd", "kind": kind, "modeled_nodes": ["a"], "model": "service.measuring_device:MeasuringDevice",
+            "nodes": {"a": {"classes": [X + "Fan"]}}, "can_appear": value}
+    if kind == "effect":
+        data["splice"] = {"node": "a", "input": "value_in"}
+    with pytest.raises(ValueError, match="can_appear"):
+        signature_from_dict(data)

@@ -55,6 +55,8 @@ def test_an_effect_signature_says_where_it_is_spliced():
     assert _objects(triples, effect, GT.spliceSide) == {"output"}
     assert _objects(triples, effect, GT.hostModel) == set(LIBRARY["CoilThermalMass"].splice.host_models)
     assert _objects(triples, effect, GT.sourceFile) == {"effects/coil_thermal_mass.toml"}
+    assert _objects(triples, effect, GT.canAppear) == {"false"}  # a coil's mass is a property, not a fault
+    assert _objects(signature_triples(LIBRARY["ValveLeakage"]), SIG + "ValveLeakage", GT.canAppear) == {"true"}
 
 
 def test_every_signature_of_the_library_is_described_whole():
