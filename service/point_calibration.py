@@ -96,8 +96,12 @@ class PointCalibrator(BaseEstimator):
         self.correlation_threshold = correlation_threshold
         self.relative_error_threshold = relative_error_threshold
 
-    def fit(self, problem: CalibrationProblem) -> PointCalibrator:
-        """Estimate θ and its uncertainty; returns ``self``."""
+    def fit(self, problem: CalibrationProblem, candidates: np.ndarray | None = None) -> PointCalibrator:
+        """Estimate θ and its uncertainty; returns ``self``.
+
+        :param candidates: ndarray[n, n_parameters], physical units: further start candidates
+            screened with the Latin hypercube and the problem's default (e.g. a probe's best points).
+        """
         if self.n_starts < 1 or self.n_candidates < self.n_starts:
             raise ValueError(
                 f"need 1 ≤ n_starts ≤ n_candidates, got n_starts={self.n_starts}, "
@@ -106,7 +110,7 @@ class PointCalibrator(BaseEstimator):
         self.n_simulate_calls_ = 0
         self.n_simulated_members_ = 0
         with threadpool_limits(limits=1):
-            starts = self._screen_starts(problem)
+            starts = self._screen_starts(problem, candidates)
             fits = [self._local_fit(problem, start) for start in starts]
         self.start_costs_ = np.array([fit.cost for fit in fits])
         best = fits[int(np.argmin(self.start_costs_))]
@@ -127,11 +131,14 @@ class PointCalibrator(BaseEstimator):
         self.n_simulated_members_ += theta.shape[0]
         return problem.run(theta)
 
-    def _screen_starts(self, problem: CalibrationProblem) -> np.ndarray:
-        """The ``n_starts`` lowest-cost points of a seeded Latin hypercube (+ the default), in [0, 1]."""
+    def _screen_starts(self, problem: CalibrationProblem, extra: np.ndarray | None = None) -> np.ndarray:
+        """The ``n_starts`` lowest-cost points of a seeded Latin hypercube (+ the default and
+        ``extra``), in [0, 1]."""
         rng = check_random_state(self.random_state)
         sampler = qmc.LatinHypercube(d=problem.n_parameters, seed=rng.randint(2**31 - 1))
         candidates = sampler.random(self.n_candidates)
+        if extra is not None:
+            candidates = np.vstack([problem.to_unit(np.atleast_2d(extra)), candidates])
         if problem.default is not None:
             candidates = np.vstack([problem.to_unit(problem.default)[None, :], candidates])
         residuals = problem.weighted_residuals(self._run(problem, problem.from_unit(candidates)))
