@@ -200,6 +200,12 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
     for node, episodes in report.episodes.items():
         for episode in episodes[:3]:
             console.print(f"  {_short(node)}: {episode['text']}")
+    for node, found in report.residual_dependence.items():
+        for signal in found["signals"]:
+            console.print(f"  residual of {_short(node)}: {signal['text']}")
+    if not report.effects_tested:
+        console.print(f"[bold]{report.summary}[/bold]")
+        return
     table = Table(title="Which effect is missing (best first)")
     for column in ("effect", "at", "score", "ΔBIC", "test error removed", "significant"):
         table.add_column(column)
@@ -257,6 +263,45 @@ def simulate_command(
     console.print(table)
 
 
+def _save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
+    """The test window measured against the base model, and the residuals with the matching band
+    and the failure episodes, as PNGs in ``folder``."""
+    from .plots import plot_measured_vs_model, plot_residuals
+
+    folder.mkdir(parents=True, exist_ok=True)
+    units = {n: s["unit"] for n, s in report.sensors.items()}
+    observed = report.test_observed
+    residuals = {n: observed[n] - report.base_test_prediction[n] for n in observed}
+    episodes = {n: [(e["start"], e["end"]) for e in found] for n, found in report.episodes.items()}
+    # the failure threshold of noise_level: a sensor fails beyond 2 × its noise σ
+    thresholds = {n: 2.0 * s["noise"] for n, s in report.sensors.items()}
+    return [
+        plot_measured_vs_model(folder / f"{report.run_id}-test.png", report.test_timestamps, observed,
+                               {"model": report.base_test_prediction}, units, title="Test window: measured and model"),
+        plot_residuals(folder / f"{report.run_id}-residuals.png", report.test_timestamps, residuals, units, thresholds,
+                       episodes, title="Test window: where the model fails (shaded: failure episodes)"),
+    ]
+
+
+def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects) -> None:
+    graph_store = open_store(store, memory)
+    try:
+        model_name = _load(graph_store, model, name)
+        report = diagnose(graph_store, model_name, data, train=parse_window(train), test=parse_window(test),
+                          seed=seed, rank_effects=rank_effects,
+                          on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
+    except USER_ERRORS as exc:
+        raise fail(str(exc)) from None
+    if as_json:
+        console.print_json(json.dumps(report.to_dict(), default=str))
+        return
+    _print_diagnosis(report)
+    console.print("plots: " + ", ".join(str(p) for p in _save_diagnosis_plots(report, plots)))
+
+
+PlotsOption = Annotated[Path, typer.Option(help="Folder for the plots (text output only).")]
+
+
 @app.command("diagnose")
 def diagnose_command(
     model: Annotated[Path, typer.Argument(help="Building model file.")],
@@ -266,21 +311,30 @@ def diagnose_command(
     name: NameOption = None,
     seed: SeedOption = 0,
     as_json: JsonOption = False,
+    plots: PlotsOption = Path("graphtwin-plots"),
     store: StoreOption = Path("graphtwin-data"),
     memory: MemoryOption = False,
 ) -> None:
     """Calibrate on TRAIN, compare on TEST, locate the failures and rank the missing effects."""
-    graph_store = open_store(store, memory)
-    try:
-        model_name = _load(graph_store, model, name)
-        report = diagnose(graph_store, model_name, data, train=parse_window(train), test=parse_window(test),
-                          seed=seed, on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
-    except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
-    if as_json:
-        console.print_json(json.dumps(report.to_dict(), default=str))
-    else:
-        _print_diagnosis(report)
+    _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=True)
+
+
+@app.command("compare")
+def compare_command(
+    model: Annotated[Path, typer.Argument(help="Building model file.")],
+    data: Annotated[Path, typer.Argument(help="Measurement CSV.")],
+    train: Annotated[str, typer.Option(help="Training window START/END.")],
+    test: Annotated[str, typer.Option(help="Test window START/END (after the training start).")],
+    name: NameOption = None,
+    seed: SeedOption = 0,
+    as_json: JsonOption = False,
+    plots: PlotsOption = Path("graphtwin-plots"),
+    store: StoreOption = Path("graphtwin-data"),
+    memory: MemoryOption = False,
+) -> None:
+    """Calibrate on TRAIN, compare on TEST and locate the failures (sensor, flow path, regime, time),
+    without testing the effect catalog: the diagnosis' first two steps, in seconds."""
+    _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=False)
 
 
 @app.command("add-effect")

@@ -100,6 +100,9 @@ class DiagnosisReport:
     residual_dependence: dict[str, dict] = field(default_factory=dict)
     summary: str = ""
     base_test_prediction: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    effects_tested: bool = True
+    test_timestamps: np.ndarray | None = field(default=None, repr=False)
+    test_observed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
     def significant(self) -> list[EffectEvidence]:
@@ -111,7 +114,8 @@ class DiagnosisReport:
             "sensors": self.sensors, "localization": self.localization,
             "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
             "episodes": self.episodes, "effects": [e.to_dict() for e in self.effects],
-            "nothing_significant_missing": not self.significant,
+            "effects_tested": self.effects_tested,
+            "nothing_significant_missing": not self.significant if self.effects_tested else None,
             "not_applicable": self.not_applicable, "residual_dependence": self.residual_dependence,
         }
 
@@ -365,8 +369,11 @@ def diagnose(
     refit_max_nfev: int = 30,
     workers: int | None = None,
     on_progress: Callable[[str], None] | None = None,
+    rank_effects: bool = True,
 ) -> DiagnosisReport:
-    """Calibrate on ``train``, compare on ``test``, locate the failures and rank the missing effects."""
+    """Calibrate on ``train``, compare on ``test``, locate the failures and rank the missing effects
+    (``rank_effects=False``: compare and locate only, ``graphtwin compare``; the failing sensors'
+    residual dependence is then always reported)."""
     say = on_progress or (lambda message: None)
     library = library or load_signature_library(signatures_dir())
     say("calibrating the base model")
@@ -425,6 +432,43 @@ def diagnose(
         if found:
             episodes[node] = [e.to_dict() for e in found]
 
+    ranked, skipped = (_rank_catalog(store, model_name, library, base, seed=seed, refit_max_nfev=refit_max_nfev,
+                                     workers=workers, say=say)
+                       if rank_effects else ([], []))
+
+    dependence: dict[str, dict] = {}
+    failing = [n for n, s in sensors.items() if s["fails"]]
+    if not any(e.significant for e in ranked) and failing:
+        window = slice(train_slice.start, test_slice.stop) if test_slice.start >= train_slice.start else test_slice
+        everything = md.simulate_all(window, base.theta)
+        offset = test_slice.start - window.start
+        candidates_signals = {f"measured {_short(n)}": data.series[n][test_slice] for n in data.series}
+        for (component, port), values in everything.outputs.items():
+            candidates_signals[f"model {_short(component)}.{port}"] = values[0][offset:]
+        for node in failing:
+            residual = observed[node] - predicted[node]
+            ranked_signals = residual_dependence(
+                residual, {k: v for k, v in candidates_signals.items() if _short(node) not in k})
+            dependence[node] = {"signals": [d.to_dict() | {"text": d.describe(data.step_s)}
+                                            for d in ranked_signals[:3] if d.skipped_reason is None]}
+
+    report = DiagnosisReport(
+        model_name=model_name, run_id=base.record.run_id, sensors=sensors, localization=localization,
+        regimes=regimes, regime_rule_accuracy=regimes_model.rule_accuracy_, episodes=episodes,
+        effects=ranked, not_applicable=skipped, residual_dependence=dependence, base_test_prediction=predicted,
+        effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice], test_observed=observed,
+    )
+    report.summary = _summary(report)
+    store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
+    return report
+
+
+def _rank_catalog(store, model_name, library, base, *, seed, refit_max_nfev, workers, say):
+    """Every applicable (effect, node) candidate evaluated and ranked (module docstring, step 3);
+    returns (ranked evidence, the reasons the others do not apply)."""
+    md, model = base.model_data, base.model
+    substeps, data = md.substeps, md.data
+    train_slice, test_slice = base.train, base.test
     say("testing the effect catalog")
     candidates, skipped = effect_candidates(store, model_name, library)
     fit_windows, run_window, evaluation = _split_windows(train_slice, test_slice)
@@ -450,36 +494,17 @@ def diagnose(
             evidence = list(pool.map(_evaluate_candidate, jobs))
     else:
         evidence = [_evaluate_candidate(job) for job in jobs]
-    ranked = rank_evidence(evidence)
-
-    dependence: dict[str, dict] = {}
-    failing = [n for n, s in sensors.items() if s["fails"]]
-    if not any(e.significant for e in ranked) and failing:
-        window = slice(train_slice.start, test_slice.stop) if test_slice.start >= train_slice.start else test_slice
-        everything = md.simulate_all(window, base.theta)
-        offset = test_slice.start - window.start
-        candidates_signals = {f"measured {_short(n)}": data.series[n][test_slice] for n in data.series}
-        for (component, port), values in everything.outputs.items():
-            candidates_signals[f"model {_short(component)}.{port}"] = values[0][offset:]
-        for node in failing:
-            residual = observed[node] - predicted[node]
-            ranked_signals = residual_dependence(
-                residual, {k: v for k, v in candidates_signals.items() if _short(node) not in k})
-            dependence[node] = {"signals": [d.to_dict() | {"text": d.describe(data.step_s)}
-                                            for d in ranked_signals[:3] if d.skipped_reason is None]}
-
-    report = DiagnosisReport(
-        model_name=model_name, run_id=base.record.run_id, sensors=sensors, localization=localization,
-        regimes=regimes, regime_rule_accuracy=regimes_model.rule_accuracy_, episodes=episodes,
-        effects=ranked, not_applicable=skipped, residual_dependence=dependence, base_test_prediction=predicted,
-    )
-    report.summary = _summary(report)
-    store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
-    return report
+    return rank_evidence(evidence), skipped
 
 
 def _summary(report: DiagnosisReport) -> str:
     failing = [n for n, s in report.sensors.items() if s["fails"]]
+    if not report.effects_tested:
+        if not failing:
+            return "The model matches every sensor within its noise."
+        return (f"The model fails at {', '.join(_short(n) for n in failing)}: see localization, regimes and episodes "
+                "for where, residual_dependence for what the residual follows, and graphtwin diagnose for which "
+                "effect is missing.")
     if not report.significant:
         if not failing:
             return "The model matches every sensor within its noise; nothing significant is missing."

@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 
 from .units import unit_label  # noqa: E402
 
-__all__ = ["plot_measured_vs_model", "plot_error_history"]
+__all__ = ["plot_measured_vs_model", "plot_residuals", "plot_error_history"]
 
 
 def _short(iri: str) -> str:
@@ -47,6 +47,40 @@ def plot_measured_vs_model(
         ax.set_ylabel(f"{_short(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="upper right", fontsize=8, ncol=4)
+    if title:
+        axes[0, 0].set_title(title)
+    fig.autofmt_xdate()
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_residuals(
+    path: Path,
+    timestamps: np.ndarray,
+    residuals: Mapping[str, np.ndarray],
+    units: Mapping[str, str],
+    thresholds: Mapping[str, float],
+    episodes: Mapping[str, list[tuple[object, object]]] | None = None,
+    title: str = "",
+) -> Path:
+    """One panel per sensor: the residual y − ŷ, the band ±``thresholds[sensor]`` within which the
+    model counts as matching (the diagnosis' failure threshold), and each failure episode
+    (start, end) shaded: where in time the model fails."""
+    sensors = list(residuals)
+    fig, axes = plt.subplots(len(sensors), 1, figsize=(11, 2.0 * len(sensors)), sharex=True, squeeze=False)
+    for ax, sensor in zip(axes[:, 0], sensors):
+        for start, end in (episodes or {}).get(sensor, []):
+            ax.axvspan(np.datetime64(start), np.datetime64(end), color="tab:red", alpha=0.15, lw=0)
+        band = thresholds.get(sensor, 0.0)
+        ax.axhspan(-band, band, color="tab:green", alpha=0.15, lw=0, label="matching band")
+        ax.axhline(0.0, color="grey", lw=0.6)
+        ax.plot(timestamps, residuals[sensor], color="black", lw=0.8, label="measured − model")
+        ax.set_ylabel(f"{_short(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=2)
     if title:
         axes[0, 0].set_title(title)
     fig.autofmt_xdate()

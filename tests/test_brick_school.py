@@ -9,6 +9,7 @@ import pytest
 
 from service.assembly import IncompleteModelError, assemble
 from service.brick_report import brick_report
+from service.diagnosis import diagnose
 from service.store import GraphStore
 
 SCHOOL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "openfdd_ahu7_school"
@@ -68,3 +69,25 @@ def test_with_what_the_report_names_the_unit_assembles_and_links_to_the_csv(stor
     links = [c.measurement for c in model.components.values() if c.measurement]
     assert len(links) == 8 and sorted(link.series_id for link in links if link.series_id not in headers) == []
     assert brick_report(store, "school-fixed").points_without_unit == ()
+
+
+def test_a_winter_week_compared_fails_at_the_mixed_air_with_the_fan_off(store):
+    """Calibrated on 2–3 January 2025 and compared on Monday 6 January: the model fails at the mixed
+    and the supply air, the failure sits in the mixing section (the outdoor and return air sensors
+    are boundary inputs the model matches by construction), and the worst regime is the fan off in
+    the cold. With the fan off the preheat valve stands at 100 % and the mixed air sensor reads up
+    to 94 °F: it sees still air warmed by the coil, not an air stream, which the mixing model cannot
+    reproduce (the README records the full diagnosis)."""
+    report = diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", train=("2025-01-02", "2025-01-03 23:59"),
+                      test=("2025-01-06", "2025-01-06 23:59"), seed=0, rank_effects=False)
+    assert not report.effects_tested and report.effects == []
+    assert {n.removeprefix(AHU7) for n, s in report.sensors.items() if s["fails"]} == {"mat_sensor", "sat_sensor"}
+    assert report.sensors[AHU7 + "mat_sensor"]["rmse"] > 5.0
+    located = {(loc["between"][0].removeprefix(AHU7), loc["between"][1].removeprefix(AHU7)): loc["components"]
+               for loc in report.localization}
+    assert set(located) == {("oat_sensor", "mat_sensor"), ("rat_sensor", "mat_sensor")}
+    assert all(AHU7 + "ahu_7_mixing_section" in components for components in located.values())
+    worst = next(r for r in report.regimes if r["worst"])
+    assert "sf spd cmd ≤" in worst["rule"] and worst["share"] > 0.2, worst
+    mat_episodes = report.episodes[AHU7 + "mat_sensor"]
+    assert mat_episodes[0]["start"].startswith("2025-01-06T00:00"), mat_episodes[0]

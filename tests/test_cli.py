@@ -82,3 +82,28 @@ def test_simulate_writes_simulation_beside_measurements(tmp_path):
     bad.write_text(json.dumps({"proportional_gian": 0.02}))
     result = runner.invoke(app, ["simulate", str(CASE_STUDY), str(data), "--params", str(bad), "--memory"])
     assert result.exit_code == 2 and "proportional_gian" in result.output
+
+
+def test_compare_locates_a_hidden_leak_without_testing_the_catalog_and_saves_its_plots(tmp_path):
+    from matplotlib.image import imread
+
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "ValveLeakage",
+                               "--days", "2", "--seed", "2", "-o", str(data)]).exit_code == 0
+    window = ["--train", "2026-01-12/2026-01-12T23:59", "--test", "2026-01-13/"]
+    result = runner.invoke(app, ["compare", str(CASE_STUDY), str(data), *window, "--memory", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["effects"] == [] and report["effects_tested"] is False
+    assert report["nothing_significant_missing"] is None  # not asked, so not answered
+    failing = {node for node, sensor in report["sensors"].items() if sensor["fails"]}
+    assert EX + "coil_outlet_air_temperature_sensor" in failing, report["sensors"]
+    assert any(EX + "heating_valve" in loc["components"] for loc in report["localization"]), report["localization"]
+    assert set(report["residual_dependence"]) == failing  # pointers for every failing sensor
+    plots = tmp_path / "plots"
+    text = runner.invoke(app, ["compare", str(CASE_STUDY), str(data), *window, "--memory", "--plots", str(plots)])
+    assert text.exit_code == 0, text.output
+    assert "fails" in text.output and "Which effect is missing" not in text.output
+    pngs = sorted(plots.glob("*.png"))
+    assert [p.name.rsplit("-", 1)[1] for p in pngs] == ["residuals.png", "test.png"]
+    assert all(imread(p).shape[0] > 200 for p in pngs)
