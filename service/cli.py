@@ -91,17 +91,47 @@ def assemble_command(
     memory: MemoryOption = False,
 ) -> None:
     """Load MODEL into the store, assemble its simulation model and write it back as triples."""
+    from .brick_report import brick_report
+
     graph_store = open_store(store, memory)
     try:
         model_name = _load(graph_store, model, name)
-        assembled = assemble(graph_store, model_name, max_complexity=max_complexity)
     except USER_ERRORS as exc:
         raise fail(str(exc)) from None
+    try:
+        assembled = assemble(graph_store, model_name, max_complexity=max_complexity)
+    except USER_ERRORS as exc:
+        hint = (f"\n{model} is a Brick model: graphtwin brick-report {model} lists what the alignment could not use"
+                if brick_report(graph_store, model_name).is_brick else "")
+        raise fail(f"{exc}{hint}") from None
     graph_store.write_graph(graph_store.assembly_graph(model_name), assembly_triples(assembled, model_name))
     if as_json:
         console.print_json(json.dumps(assembly_to_dict(assembled)))
     else:
         print_assembly(assembled, console)
+
+
+@app.command("brick-report")
+def brick_report_command(
+    model: Annotated[Path, typer.Argument(help="Building model file (Brick 1.3/1.4).")],
+    name: NameOption = None,
+    as_json: JsonOption = False,
+    store: StoreOption = Path("graphtwin-data"),
+    memory: MemoryOption = False,
+) -> None:
+    """What the Brick alignment could not use in MODEL: unaligned classes, unread relations, the
+    assumptions it made and the triples that would remove them, points without a column or unit."""
+    from .brick_report import brick_report, print_brick_report
+
+    graph_store = open_store(store, memory)
+    try:
+        report = brick_report(graph_store, _load(graph_store, model, name))
+    except USER_ERRORS as exc:
+        raise fail(str(exc)) from None
+    if as_json:
+        console.print_json(json.dumps(report.to_dict()))
+    else:
+        print_brick_report(report, console)
 
 
 @signature_app.command("list")

@@ -91,3 +91,24 @@ def test_a_winter_week_compared_fails_at_the_mixed_air_with_the_fan_off(store):
     assert "sf spd cmd ≤" in worst["rule"] and worst["share"] > 0.2, worst
     mat_episodes = report.episodes[AHU7 + "mat_sensor"]
     assert mat_episodes[0]["start"].startswith("2025-01-06T00:00"), mat_episodes[0]
+
+
+def test_the_cli_points_an_incomplete_brick_model_to_its_report(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from service.cli import app
+
+    runner = CliRunner()
+    model = SCHOOL / "ahu7_brick_model.ttl"
+    failed = runner.invoke(app, ["assemble", str(model), "--memory"])
+    assert failed.exit_code == 2 and "ahu_7_supply_fan" in failed.output and "brick-report" in failed.output
+    result = runner.invoke(app, ["brick-report", str(model), "--memory", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert {c["class_iri"].rsplit("#", 1)[1] for c in report["unaligned_classes"]} >= {"Supply_Fan_Speed_Command"}
+    assert len(report["points_without_unit"]) == 3
+    fixed = tmp_path / "school.ttl"
+    fixed.write_bytes(model.read_bytes() + FIXES.encode())
+    assert runner.invoke(app, ["assemble", str(fixed), "--memory"]).exit_code == 0
