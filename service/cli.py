@@ -332,39 +332,32 @@ def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, m
 PlotsOption = Annotated[Path, typer.Option(help="Folder for the plots (text output only).")]
 
 
-@app.command("diagnose")
-def diagnose_command(
-    model: Annotated[Path, typer.Argument(help="Building model file.")],
-    data: Annotated[Path, typer.Argument(help="Measurement CSV.")],
-    train: Annotated[str, typer.Option(help="Training window START/END.")],
-    test: Annotated[str, typer.Option(help="Test window START/END (after the training start).")],
-    name: NameOption = None,
-    seed: SeedOption = 0,
-    as_json: JsonOption = False,
-    plots: PlotsOption = Path("graphtwin-plots"),
-    store: StoreOption = Path("graphtwin-data"),
-    memory: MemoryOption = False,
-) -> None:
-    """Calibrate on TRAIN, compare on TEST, locate the failures and rank the missing effects."""
-    _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=True)
+def _diagnosis_command(rank_effects: bool, doc: str):
+    """The ``diagnose`` (``rank_effects``) or ``compare`` command: the same options, the same report."""
+
+    def command(
+        model: Annotated[Path, typer.Argument(help="Building model file.")],
+        data: Annotated[Path, typer.Argument(help="Measurement CSV.")],
+        train: Annotated[str, typer.Option(help="Training window START/END.")],
+        test: Annotated[str, typer.Option(help="Test window START/END (after the training start).")],
+        name: NameOption = None,
+        seed: SeedOption = 0,
+        as_json: JsonOption = False,
+        plots: PlotsOption = Path("graphtwin-plots"),
+        store: StoreOption = Path("graphtwin-data"),
+        memory: MemoryOption = False,
+    ) -> None:
+        _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=rank_effects)
+
+    command.__doc__ = doc
+    return command
 
 
-@app.command("compare")
-def compare_command(
-    model: Annotated[Path, typer.Argument(help="Building model file.")],
-    data: Annotated[Path, typer.Argument(help="Measurement CSV.")],
-    train: Annotated[str, typer.Option(help="Training window START/END.")],
-    test: Annotated[str, typer.Option(help="Test window START/END (after the training start).")],
-    name: NameOption = None,
-    seed: SeedOption = 0,
-    as_json: JsonOption = False,
-    plots: PlotsOption = Path("graphtwin-plots"),
-    store: StoreOption = Path("graphtwin-data"),
-    memory: MemoryOption = False,
-) -> None:
-    """Calibrate on TRAIN, compare on TEST and locate the failures (sensor, flow path, regime, time),
-    without testing the effect catalog: the diagnosis' first two steps, in seconds."""
-    _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=False)
+app.command("diagnose")(_diagnosis_command(
+    True, "Calibrate on TRAIN, compare on TEST, locate the failures and rank the missing effects."))
+app.command("compare")(_diagnosis_command(
+    False, "Calibrate on TRAIN, compare on TEST and locate the failures (sensor, flow path, regime, time), "
+           "without testing the effect catalog: the diagnosis' first two steps, in seconds."))
 
 
 @app.command("add-effect")

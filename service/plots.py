@@ -24,6 +24,19 @@ def _short(iri: str) -> str:
     return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
 
 
+def _save_time_panels(fig, axes, path: Path, title: str, legend_columns: int) -> Path:
+    """Legend and title on the first of the stacked time-series panels, dates slanted, saved as PNG."""
+    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=legend_columns)
+    if title:
+        axes[0, 0].set_title(title)
+    fig.autofmt_xdate()
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def plot_measured_vs_model(
     path: Path,
     timestamps: np.ndarray,
@@ -46,15 +59,7 @@ def plot_measured_vs_model(
             ax.plot(timestamps, prediction[sensor], color=color, lw=1.0, label=name)
         ax.set_ylabel(f"{_short(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=4)
-    if title:
-        axes[0, 0].set_title(title)
-    fig.autofmt_xdate()
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save_time_panels(fig, axes, path, title, legend_columns=4)
 
 
 def plot_residuals(
@@ -80,15 +85,7 @@ def plot_residuals(
         ax.plot(timestamps, residuals[sensor], color="black", lw=0.8, label="measured − model")
         ax.set_ylabel(f"{_short(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=2)
-    if title:
-        axes[0, 0].set_title(title)
-    fig.autofmt_xdate()
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save_time_panels(fig, axes, path, title, legend_columns=2)
 
 
 def plot_error_history(path: Path, versions: list[str], rmse: Mapping[str, list[float]], units: Mapping[str, str]) -> Path:
