@@ -52,7 +52,6 @@ import uuid
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
-from itertools import islice
 from pathlib import Path
 from typing import Annotated
 from urllib.parse import parse_qs
@@ -81,7 +80,7 @@ from .namespaces import PREFIXES
 from .resources import queries_dir, signatures_dir
 from .settings import Settings
 from .signature import load_signature_library
-from .store import EmbeddedBackend, GraphStore, ModelLoadError, bind_values, rdf_format
+from .store import EmbeddedBackend, GraphStore, ModelLoadError, bind_values, drain, rdf_format
 
 __all__ = ["create_app", "ApiError", "MeasurementUploads", "query_form", "negotiate"]
 
@@ -347,12 +346,15 @@ def _native_answer(store: ox.Store, query: _Query, max_rows: int):
     kwargs = {"use_default_graph_as_union": True} if query.union_default_graph else (
         {"default_graph": query.default_graph} if query.default_graph else {})
     result = store.query(query.text, **kwargs)
-    if isinstance(result, ox.QueryBoolean):
-        return bool(result)
-    if isinstance(result, ox.QuerySolutions):
-        variables = [v.value for v in result.variables]
-        return variables, [tuple(s[i] for i in range(len(variables))) for s in islice(result, max_rows + 1)]
-    return list(islice(result, max_rows + 1))
+    try:
+        if isinstance(result, ox.QueryBoolean):
+            return bool(result)
+        if isinstance(result, ox.QuerySolutions):
+            variables = [v.value for v in result.variables]
+            return variables, drain(result, tuple, limit=max_rows + 1)
+        return drain(result, limit=max_rows + 1)
+    finally:
+        del result  # see service.store.drain
 
 
 def _execute(store: GraphStore, query: _Query, max_rows: int) -> bytes:

@@ -31,6 +31,7 @@ import pyoxigraph as ox
 
 from .signature import Signature
 from .sparql_compiler import CompiledQuery, QueryPart, Traversal, compile_signature
+from .store import drain
 
 __all__ = ["Match", "MatchSession", "match_signature", "missing_class_report"]
 
@@ -54,7 +55,7 @@ def _select(store, sparql: str, names: Sequence[str], default_graph) -> list[tup
         store = store.backend.store  # the embedded store: read solutions without building dicts
     if isinstance(store, ox.Store):
         kwargs = {"default_graph": list(default_graph)} if default_graph is not None else {}
-        return [tuple(s) for s in store.query(sparql, **kwargs)]
+        return drain(store.query(sparql, **kwargs), tuple)
     return [tuple(row.get(n) for n in names) for row in store.query(sparql, default_graph=default_graph)]
 
 

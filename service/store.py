@@ -48,6 +48,7 @@ from .resources import ontologies_dir, queries_dir
 from .signature import Signature
 
 __all__ = [
+    "drain",
     "ModelLoadError", "SparqlBackend", "bind_values", "insert_data_update", "EmbeddedBackend", "GraphStore",
     "rdf_format", "parse_rdf", "skolemize", "ONTOLOGY_GRAPH", "SIGNATURE_GRAPH",
 ]
@@ -162,21 +163,43 @@ class SparqlBackend(Protocol):
     def triple_count(self, graph: ox.NamedNode) -> int: ...
 
 
+def drain(result, convert=lambda item: item, limit: int | None = None) -> list:
+    """The first ``limit`` (all when None) items of a lazy pyoxigraph result (``QuerySolutions`` or
+    ``QueryTriples``), each passed through ``convert``, read and released on this thread.
+
+    pyoxigraph's lazy results are unsendable: one dropped on another thread raises. Holding one in
+    a frame's local is enough for that to happen: a sampling profiler (a Dask worker's) keeps the
+    frame objects it samples, with their locals, and releases them on its own thread. So the result
+    is read in a plain loop (a comprehension's frame would hold it too) and the local is deleted
+    before this frame ends, whatever happens.
+    """
+    items = []
+    try:
+        for item in result:
+            if limit is not None and len(items) >= limit:
+                break
+            items.append(convert(item))
+    finally:
+        del result
+    return items
+
+
 def _rows(result) -> list[dict[str, Term]] | bool | list[ox.Triple]:
-    if isinstance(result, ox.QueryBoolean):
-        return bool(result)
-    if isinstance(result, ox.QuerySolutions):
-        names = [v.value for v in result.variables]
-        rows = []
-        for solution in result:
-            row = {}
-            for name in names:
-                value = solution[name]
-                if value is not None:
-                    row[name] = value
-            rows.append(row)
-        return rows
-    return list(result)
+    """A pyoxigraph query result as plain Python values (every frame that holds a lazy result
+    deletes it before it ends: see :func:`drain`)."""
+    try:
+        if isinstance(result, ox.QueryBoolean):
+            return bool(result)
+        if isinstance(result, ox.QuerySolutions):
+            names = [v.value for v in result.variables]
+
+            def row(solution) -> dict[str, Term]:
+                return {name: value for name in names if (value := solution[name]) is not None}
+
+            return drain(result, row)
+        return drain(result)
+    finally:
+        del result
 
 
 _COMMENT = re.compile(r"(^|\s)#[^\n]*")
