@@ -173,3 +173,25 @@ def test_a_point_run_is_plotted_as_measured_against_predicted_only(point_run, tm
     (path,) = plot_calibration(point_run, tmp_path)
     assert path.name == f"{point_run.record.run_id}-fit.png"
     assert matplotlib.image.imread(path).shape[0] == round(2.2 * 5 * 110)
+
+
+def test_the_latest_run_of_each_parameter_is_the_one_queried(point_run):
+    """A newer run that estimated only some parameters supersedes the older run for those only."""
+    import dataclasses
+    from datetime import timedelta
+
+    from service.calibration_run import store_run
+
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    older = point_run.record
+    newer = dataclasses.replace(older, run_id=older.run_id + "-newer", finished=older.finished + timedelta(hours=1),
+                                estimates=[dataclasses.replace(e, median=e.median * 1.5) for e in older.estimates[:3]])
+    for record in (newer, older):  # the order written does not matter
+        store_run(store, point_run.model, "case", record)
+    rows = store.run_named_query("calibrated-parameters", model="case")
+    assert len(rows) == len(older.estimates)
+    run_of = {(r["component"].value, r["name"].value): r["run"].value.rsplit("/", 1)[-1] for r in rows}
+    renewed = {(e.component, e.name) for e in newer.estimates}
+    assert run_of == {(e.component, e.name): newer.run_id if (e.component, e.name) in renewed else older.run_id
+                      for e in older.estimates}
