@@ -303,8 +303,7 @@ def _save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
     observed = report.test_observed
     residuals = {n: observed[n] - report.base_test_prediction[n] for n in observed}
     episodes = {n: [(e["start"], e["end"]) for e in found] for n, found in report.episodes.items()}
-    # the failure threshold of noise_level: a sensor fails beyond 2 × its noise σ
-    thresholds = {n: 2.0 * s["noise"] for n, s in report.sensors.items()}
+    thresholds = {n: report.failure_ratio * s["noise"] for n, s in report.sensors.items()}
     return [
         plot_measured_vs_model(folder / f"{report.run_id}-test.png", report.test_timestamps, observed,
                                {"model": report.base_test_prediction}, units, title="Test window: measured and model"),

@@ -103,6 +103,7 @@ class DiagnosisReport:
     effects_tested: bool = True
     test_timestamps: np.ndarray | None = field(default=None, repr=False)
     test_observed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    failure_ratio: float = 2.0
 
     @property
     def significant(self) -> list[EffectEvidence]:
@@ -297,9 +298,8 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     md = ModelData(job.model, job.data, job.substeps)
     refs = job.model.estimated_parameters
     effect_columns = [j for j, r in enumerate(refs) if r.key not in job.base_theta]
-    theta0 = np.array([
-        job.base_theta.get(r.key, r.spec.null if r.spec.null is not None else r.spec.default) for r in refs
-    ])
+    theta0 = np.array([job.base_theta.get(r.key, np.nan) for r in refs])
+    theta0[effect_columns] = _null(refs, effect_columns)
     problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
     score = score_test(problem, theta0, effect_columns, sample_fraction=job.sample_fraction)
     theta_train = np.array([job.train_theta.get(r.key, theta0[j]) for j, r in enumerate(refs)])
@@ -457,6 +457,7 @@ def diagnose(
         regimes=regimes, regime_rule_accuracy=regimes_model.rule_accuracy_, episodes=episodes,
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, base_test_prediction=predicted,
         effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice], test_observed=observed,
+        failure_ratio=failure_ratio,
     )
     report.summary = _summary(report)
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
