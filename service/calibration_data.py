@@ -160,4 +160,5 @@ class ModelData:
             observed={node: np.concatenate(parts) for node, parts in observed.items()}, units=self.units,
             default=start, target_scales=dict(target_scales or {}),
             gp_inputs=hours if gp_time_column else None,
+            vectorised_simulate=all(c.model_class.vectorised for c in self.model.components.values()),
         )

@@ -86,6 +86,8 @@ class CalibrationProblem:
     :param units: ``{target: unit}`` (``"degC"``, ``"1"``, ``"W"``, …); missing entries are ``""``.
     :param default: a θ known to be plausible (the components' defaults), ``ndarray[n_parameters]``
         within the bounds; the point calibrator screens it with its start candidates.
+    :param vectorised_simulate: a simulate call with a few dozen members costs about what one
+        member costs (numpy over the ensemble); False when it steps each member on its own (an FMU).
     :raises ValueError: naming the parameter, target or array and the expected shape.
     """
 
@@ -98,6 +100,7 @@ class CalibrationProblem:
     gp_inputs: np.ndarray | None = None
     units: Mapping[str, str] = field(default_factory=dict)
     default: np.ndarray | None = None
+    vectorised_simulate: bool = True
 
     def __post_init__(self) -> None:
         names = tuple(self.parameter_names)

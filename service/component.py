@@ -92,6 +92,15 @@ class ComponentModel:
     outputs: ClassVar[tuple[Port, ...]] = ()
     parameters: ClassVar[tuple[Parameter, ...]] = ()
     states: ClassVar[tuple[str, ...]] = ()
+    #: One :meth:`step` advances a whole ensemble with numpy at about the cost of one member (False
+    #: when each member is stepped on its own, an FMU instance per member).
+    vectorised: ClassVar[bool] = True
+
+    @classmethod
+    def memoryless(cls) -> bool:
+        """Outputs at t_k depend on the inputs at t_k alone: no declared state and no
+        :meth:`initial_state` of its own (the simulator then evaluates it over all steps at once)."""
+        return not cls.states and cls.initial_state is ComponentModel.initial_state
 
     @classmethod
     def input_names(cls) -> tuple[str, ...]:

@@ -263,6 +263,7 @@ class FMUComponent(ComponentModel):
     """
 
     fmu: ClassVar[_FMUFile]
+    vectorised: ClassVar[bool] = False
 
     def __reduce__(self):
         return (_instance_for, (str(self.fmu.path),))

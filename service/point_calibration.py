@@ -7,6 +7,11 @@ reflective) in parameters scaled to the unit cube, so every parameter moves on t
 Vectorisation (the contract of :class:`~service.calibration_problem.CalibrationProblem`): the start
 candidates (a seeded Latin hypercube plus the problem's default) are screened in ONE simulate call,
 and the forward-difference Jacobian ``J`` is ONE simulate call with ``n_parameters + 1`` members.
+With ``jacobian_with_residuals`` (the default for a ``vectorised_simulate`` problem) every residual evaluation is that call: the trial
+point and its Jacobian are simulated together, so an accepted trust-region step costs one call, not
+two. That is right when a call's cost is the per-step work of the vectorised simulator (an ensemble
+of 20 costs what one member costs); a simulator whose cost grows with the members (an FMU per
+member) wants it off, and pays p extra members only where it needs a Jacobian.
 
 Uncertainty from the linearisation at the optimum θ̂ (Gauss–Newton / Laplace):
 ``Cov(θ̂) = σ̂² (JᵀJ)⁻¹`` with ``J`` the Jacobian of the weighted residuals in physical units and
@@ -61,6 +66,8 @@ class PointCalibrator(BaseEstimator):
     :param random_state: seed (int), ``numpy.random.RandomState`` or None.
     :param max_nfev: residual evaluations per start (each Jacobian is one more simulate call).
     :param diff_step: forward-difference step in the unit-scaled parameters.
+    :param jacobian_with_residuals: simulate each trial point's Jacobian members in the same call as
+        the point (module docstring); None follows the problem's ``vectorised_simulate``.
     :param flat_ratio: singular value ratio below which a direction counts as flat.
     :param flat_loading: |component| of a flat direction's vector that implicates a parameter.
     :param correlation_threshold: |ρ| above which two parameters are reported as confounded.
@@ -85,6 +92,7 @@ class PointCalibrator(BaseEstimator):
         flat_loading: float = 0.2,
         correlation_threshold: float = 0.95,
         relative_error_threshold: float = 0.5,
+        jacobian_with_residuals: bool | None = None,
     ) -> None:
         self.n_starts = n_starts
         self.n_candidates = n_candidates
@@ -95,6 +103,7 @@ class PointCalibrator(BaseEstimator):
         self.flat_loading = flat_loading
         self.correlation_threshold = correlation_threshold
         self.relative_error_threshold = relative_error_threshold
+        self.jacobian_with_residuals = jacobian_with_residuals
 
     def fit(self, problem: CalibrationProblem, candidates: np.ndarray | None = None) -> PointCalibrator:
         """Estimate θ and its uncertainty; returns ``self``.
@@ -109,21 +118,23 @@ class PointCalibrator(BaseEstimator):
             )
         self.n_simulate_calls_ = 0
         self.n_simulated_members_ = 0
+        self._evaluations: dict[bytes, tuple] = {}
         with threadpool_limits(limits=1):
             starts = self._screen_starts(problem, candidates)
             fits = [self._local_fit(problem, start) for start in starts]
-        self.start_costs_ = np.array([fit.cost for fit in fits])
-        best = fits[int(np.argmin(self.start_costs_))]
-        self.theta_ = problem.from_unit(best.x)
-        self.cost_ = float(best.cost)
-        outputs = self._run(problem, self.theta_[None, :])
+            self.start_costs_ = np.array([fit.cost for fit in fits])
+            best = fits[int(np.argmin(self.start_costs_))]
+            self.theta_ = problem.from_unit(best.x)
+            self.cost_ = float(best.cost)
+            outputs, _, jacobian = self._evaluate(problem, best.x, with_jacobian=True)
+        del self._evaluations
         masks = problem.masks
-        self.prediction_ = {key: outputs[key][0] for key in problem.target_keys}
+        self.prediction_ = {key: outputs[key] for key in problem.target_keys}
         self.residuals_ = {
-            key: np.where(masks[key], problem.observed[key] - outputs[key][0], np.nan)
+            key: np.where(masks[key], problem.observed[key] - outputs[key], np.nan)
             for key in problem.target_keys
         }
-        self._set_uncertainty(problem, best.x, best.fun)
+        self._set_uncertainty(problem, jacobian, best.fun)
         return self
 
     def _run(self, problem: CalibrationProblem, theta: np.ndarray) -> dict[str, np.ndarray]:
@@ -149,31 +160,47 @@ class PointCalibrator(BaseEstimator):
         return candidates[finite[np.argsort(costs[finite], kind="stable")[: self.n_starts]]]
 
     def _local_fit(self, problem: CalibrationProblem, start: np.ndarray):
+        fused = problem.vectorised_simulate if self.jacobian_with_residuals is None else self.jacobian_with_residuals
+
         def residuals(unit_theta: np.ndarray) -> np.ndarray:
-            return problem.weighted_residuals(self._run(problem, problem.from_unit(unit_theta[None, :])))[0]
+            return self._evaluate(problem, unit_theta, with_jacobian=fused)[1]
 
         def jacobian(unit_theta: np.ndarray) -> np.ndarray:
-            return self._jacobian(problem, unit_theta)
+            return self._evaluate(problem, unit_theta, with_jacobian=True)[2]
 
         return least_squares(
             residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev
         )
 
-    def _jacobian(self, problem: CalibrationProblem, unit_theta: np.ndarray) -> np.ndarray:
-        """Forward differences in the unit cube (backward at the upper bound), one simulate call."""
-        n_par = problem.n_parameters
-        step = np.where(unit_theta + self.diff_step <= 1.0, self.diff_step, -self.diff_step)
-        members = np.repeat(unit_theta[None, :], n_par + 1, axis=0)
-        members[1:][np.diag_indices(n_par)] += step
-        residuals = problem.weighted_residuals(self._run(problem, problem.from_unit(members)))
-        return ((residuals[1:] - residuals[0]) / step[:, None]).T
+    def _evaluate(self, problem: CalibrationProblem, unit_theta: np.ndarray, *, with_jacobian: bool):
+        """(outputs {target: ndarray[n_steps]}, weighted residuals, Jacobian or None) at
+        ``unit_theta`` in one simulate call, remembered for the rest of the fit. The Jacobian is by
+        forward differences in the unit cube (backward at the upper bound)."""
+        key = np.asarray(unit_theta, dtype=float).tobytes()
+        known = self._evaluations.get(key)
+        if known is not None and (known[2] is not None or not with_jacobian):
+            return known
+        members = unit_theta[None, :]
+        if with_jacobian:
+            n_par = problem.n_parameters
+            step = np.where(unit_theta + self.diff_step <= 1.0, self.diff_step, -self.diff_step)
+            members = np.repeat(members, n_par + 1, axis=0)
+            members[1:][np.diag_indices(n_par)] += step
+        outputs = self._run(problem, problem.from_unit(members))
+        residuals = problem.weighted_residuals(outputs)
+        jacobian = ((residuals[1:] - residuals[0]) / step[:, None]).T if with_jacobian else None
+        known = ({target: values[0] for target, values in outputs.items()}, residuals[0], jacobian)
+        if len(self._evaluations) >= 64:  # the starts' last points are what fit() asks for again
+            self._evaluations.pop(next(iter(self._evaluations)))
+        self._evaluations[key] = known
+        return known
 
-    def _set_uncertainty(self, problem: CalibrationProblem, unit_theta: np.ndarray, residuals: np.ndarray) -> None:
+    def _set_uncertainty(self, problem: CalibrationProblem, jacobian: np.ndarray, residuals: np.ndarray) -> None:
         n, p = residuals.size, problem.n_parameters
         if n <= p:
             raise ValueError(f"{n} measured values cannot determine {p} parameters (need n > p)")
         sigma2 = float(residuals @ residuals) / (n - p)
-        _, singular, vt = np.linalg.svd(self._jacobian(problem, unit_theta), full_matrices=False)
+        _, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
         self.singular_values_ = singular
         floor = singular[0] * 1e-12 if singular[0] > 0 else 1e-300
         clipped = np.maximum(singular, floor)

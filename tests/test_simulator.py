@@ -166,3 +166,63 @@ def test_a_cycle_without_feedback_port_is_broken_at_a_flow():
     order, delayed, notes = component_order(model)
     assert delayed == {connections[0]} and order == ["urn:b", "urn:a"]
     assert notes == ["cycle without a feedback port: delayed urn:a.m → urn:b.a by one step"]
+
+
+class Lag(ComponentModel):
+    """First-order lag y_{k+1} = y_k + (1 − e^{−Δt/τ})(x_k − y_k), τ = 120 s: a state, so stepped."""
+
+    inputs = (Port("x", "1"),)
+    outputs = (Port("y", "1"),)
+    states = ("y",)
+
+    def initial_state(self, params, inputs, dt_s):
+        return {"y": np.array(inputs["x"], dtype=float)}
+
+    def step(self, params, inputs, state, dt_s):
+        state["y"] = state["y"] + -np.expm1(-dt_s / 120.0) * (inputs["x"] - state["y"])
+        return {"y": state["y"].copy()}
+
+
+def test_memoryless_ends_are_evaluated_at_once_and_agree_with_stepping():
+    """source → pre-gain (memoryless, fed by the boundary: evaluated over all steps at once) → a
+    feedback loop and a lag (stepped) → two sensors (memoryless, feeding nothing: evaluated at the
+    data steps only); the outputs are those of stepping every component."""
+    import sys
+
+    from service.measuring_device import MeasuringDevice
+
+    sys.modules[__name__].Lag = Lag
+    base = _loop_model()
+    components = {**base.components, "urn:pre": _instance("urn:pre", Gain), "urn:lag": _instance("urn:lag", Lag),
+                  "urn:out": _instance("urn:out", MeasuringDevice, True),
+                  "urn:out2": _instance("urn:out2", MeasuringDevice, True)}
+    connections = (
+        Connection("urn:source", "measured_value", "urn:pre", "x"),
+        Connection("urn:pre", "y", "urn:sum", "a"),
+        Connection("urn:sum", "y", "urn:gain", "x"),
+        Connection("urn:gain", "y", "urn:sum", "b"),
+        Connection("urn:gain", "y", "urn:out", "measured_value"),
+        Connection("urn:pre", "y", "urn:lag", "x"),
+        Connection("urn:lag", "y", "urn:out2", "measured_value"),
+    )
+    model = AssembledModel(components, connections, ("urn:source",), ("urn:out", "urn:out2"), (),
+                           (ParameterRef("urn:pre", Gain.parameters[0]), ParameterRef("urn:gain", Gain.parameters[0])))
+    sim = Simulator(model, 60.0, substeps=3)
+    assert sim.ahead == ["urn:pre", "urn:source"] or sim.ahead == ["urn:source", "urn:pre"]
+    assert sorted(sim.behind) == ["urn:out", "urn:out2"]
+    u = np.sin(np.arange(12) / 2.0)
+    theta = np.array([[2.0, 0.5], [1.0, -0.3], [0.5, 0.9]])
+    at_once = sim.run({"urn:source": u}, theta)
+    sim.ahead, sim.behind = [], []
+    stepped = sim.run({"urn:source": u}, theta)
+    assert at_once.outputs.keys() == stepped.outputs.keys()
+    for key in stepped.outputs:
+        np.testing.assert_array_equal(at_once.outputs[key], stepped.outputs[key], err_msg=str(key))
+    # the loop as stated: y_k = 2·u_k + 0.5·y_{k−1} on the sub-steps, reported every third one
+    y, fine_u = 0.0, np.interp(np.arange(34) / 3.0, np.arange(12), u)
+    expected = []
+    for i, value in enumerate(fine_u):
+        y = 2.0 * value + 0.5 * y
+        if i % 3 == 0:
+            expected.append(0.5 * y)
+    assert at_once.target("urn:out")[0] == pytest.approx(expected)

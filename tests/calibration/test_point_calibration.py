@@ -78,10 +78,17 @@ def test_linear_model_gives_the_ordinary_least_squares_estimate_and_covariance()
 def test_jacobian_and_start_screening_are_one_simulate_call_each():
     calls: list[int] = []
     problem, *_ = linear_problem(calls, default=np.array([0.0, 0.0]))
-    fit = PointCalibrator(n_starts=2, n_candidates=16, random_state=0).fit(problem)
+    separate = PointCalibrator(n_starts=2, n_candidates=16, random_state=0, jacobian_with_residuals=False).fit(problem)
     assert calls[0] == 17  # 16 Latin-hypercube candidates + the default, one call
     assert set(calls[1:]) == {1, 3}  # residuals (1 member) and Jacobians (p + 1 = 3 members)
-    assert fit.n_simulate_calls_ == len(calls) and fit.n_simulated_members_ == sum(calls)
+    assert separate.n_simulate_calls_ == len(calls) and separate.n_simulated_members_ == sum(calls)
+    n_separate = len(calls)
+    calls.clear()
+    fused = PointCalibrator(n_starts=2, n_candidates=16, random_state=0).fit(problem)
+    assert calls[0] == 17 and set(calls[1:]) == {3}  # every trial point simulated with its Jacobian
+    assert len(calls) < n_separate  # an accepted step is one call, and the final point is not simulated again
+    np.testing.assert_array_equal(fused.theta_, separate.theta_)
+    np.testing.assert_array_equal(fused.covariance_, separate.covariance_)
 
 
 def test_a_seeded_fit_is_reproducible():
