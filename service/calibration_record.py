@@ -4,7 +4,7 @@ A :class:`CalibrationRecord` is independent of how the estimate was made (point 
 estimated parameter gets a median and a 16–84 % interval (the Bayesian posterior quantiles, or for a
 point fit θ̂ ± one standard error of the Jacobian covariance, clipped to the prior bounds), a MAP
 (the posterior mode, or θ̂), and the identifiability verdict; every target gets its metrics on the
-training window and, when given, the test window.
+training window and, when given, the test window, and there per operating regime.
 """
 
 from __future__ import annotations
@@ -64,6 +64,9 @@ class CalibrationRecord:
     estimates: list[ParameterEstimate]
     metrics: dict[str, dict[str, TargetMetrics]] = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
+    #: Test-window error per operating regime (:meth:`service.regime_breakdown.RegimeBreakdown.rows`).
+    regimes: list[dict] = field(default_factory=list)
+    regime_rule_accuracy: float = float("nan")
 
     def to_dict(self) -> dict:
         return {
@@ -76,4 +79,5 @@ class CalibrationRecord:
             "parameters": {e.key: e.to_dict() for e in self.estimates},
             "metrics": {w: {t: m.to_dict() for t, m in per.items()} for w, per in self.metrics.items()},
             "diagnostics": self.diagnostics,
+            "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
         }

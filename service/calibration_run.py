@@ -5,7 +5,8 @@ multi-start bounded least squares; the 16–84 % interval is θ̂ ± one standar
 covariance, clipped to the prior. Bayesian (``method="bayes"``): Kennedy–O'Hagan with the Matérn-3/2
 discrepancy GP, parallel-tempering MCMC to 20 integrated autocorrelation times, posterior
 predictive intervals on the test window. The test window is simulated as the continuation of the
-training window (one run from the training start), so it carries no start-up transient.
+training window (one run from the training start), so it carries no start-up transient. With a test
+window the run also records the error per operating regime (:mod:`service.regime_breakdown`).
 
 Everything a run produced goes into its named graph in ONE transaction after the fit: a reader
 sees the whole run or none of it; a failed run writes nothing.
@@ -32,6 +33,7 @@ from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
 from .metrics import TargetMetrics, target_metrics
 from .point_calibration import PointCalibrator
+from .regime_breakdown import RegimeBreakdown, regime_breakdown
 from .simulator import loop_substeps
 from .store import GraphStore
 
@@ -104,6 +106,7 @@ class CalibrationOutcome:
     predictions: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # window → node → median
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = field(default_factory=dict)
     calibrator: object = None  # the fitted PointCalibrator or BayesianCalibrator (chains for plots)
+    regimes: RegimeBreakdown | None = None  # the test-window error per operating regime
 
 
 def _estimates(model: AssembledModel, theta, q16, q84, theta_map, se, verdicts) -> list[ParameterEstimate]:
@@ -155,6 +158,7 @@ def calibrate(
     settings = {"substeps": substeps, "step_s": data.step_s}
     diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes)}
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
+    regimes = None
     if method == "point":
         calibrator = PointCalibrator(n_starts=2, n_candidates=32, random_state=seed, max_nfev=40).fit(problem)
         theta = calibrator.theta_
@@ -202,6 +206,7 @@ def calibrate(
                                  intervals=intervals.get("test", {}).get(node), unit=md.units[node], target=node)
             for node in observed_test
         }
+        regimes = regime_breakdown(md, test_slice, observed_test, median, seed=seed)
     finished = datetime.now(timezone.utc)
     times = data.timestamps
     as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime)  # noqa: E731
@@ -214,10 +219,12 @@ def calibrate(
         started=started, finished=finished, settings=settings,
         estimates=_estimates(model, theta, q16, q84, theta_map, se, verdicts), metrics=metrics,
         diagnostics=diagnostics,
+        regimes=regimes.rows() if regimes is not None else [],
+        regime_rule_accuracy=regimes.rule_accuracy if regimes is not None else float("nan"),
     )
     store_run(store, model, model_name, record)
     return CalibrationOutcome(record, model, md, theta, train_slice, test_slice, predictions, intervals,
-                              calibrator)
+                              calibrator, regimes)
 
 
 def store_run(store: GraphStore, model: AssembledModel, model_name: str, record: CalibrationRecord,

@@ -14,6 +14,9 @@ Shape (vocabulary in ``ontologies/graphtwin.ttl``), all in the run's named graph
         gt:lowerBound ; gt:upperBound ; gt:identified true|false ; rdfs:comment "why not identified" .
     <metric> a gt:Metric ; prov:wasGeneratedBy <run> ; gt:onSensor <sensor node> ;
         gt:window "train" | "test" ; gt:metricName "rmse" ; gt:value 0.21 ; gt:unit "degC" .
+    <regime> a gt:OperatingRegime ; prov:wasGeneratedBy <run> ; gt:regimeRule "fan speed > 0.6 …" ;
+        gt:share 0.4 ; gt:ruleAccuracy 0.97 .
+    <metric> … gt:window "test" ; gt:metricName "rmse" ; gt:inRegime <regime> .   (the RMSE per regime)
 
 Parameter IRIs are those of the assembly (:func:`service.assembly_triples.parameter_iri`), so an
 estimate joins the assembled model's parameter, its component and the building node.
@@ -121,6 +124,21 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
                     ox.Triple(node, GT.unit, ox.Literal("%" if attribute.endswith("percent") else
                                                          "1" if attribute in ("r2", "lag1_autocorrelation") else metrics.unit)),
                 ]
+    units = {sensor: m.unit for sensor, m in record.metrics.get("test", {}).items()}
+    for row in record.regimes:
+        regime = ox.NamedNode(f"{run.value}/regime/{row['regime']}")
+        t += [ox.Triple(regime, RDF.type, GT.OperatingRegime), ox.Triple(regime, PROV.wasGeneratedBy, run),
+              ox.Triple(regime, GT.regimeRule, ox.Literal(row["rule"])), ox.Triple(regime, GT.share, _double(row["share"]))]
+        if math.isfinite(record.regime_rule_accuracy):
+            t.append(ox.Triple(regime, GT.ruleAccuracy, _double(record.regime_rule_accuracy)))
+        for sensor, value in row["rmse"].items():
+            if not math.isfinite(value):
+                continue
+            node = ox.NamedNode(f"{run.value}/metric/test/{_local(sensor)}/rmse/regime/{row['regime']}")
+            t += [ox.Triple(node, RDF.type, GT.Metric), ox.Triple(node, PROV.wasGeneratedBy, run),
+                  ox.Triple(node, GT.onSensor, ox.NamedNode(sensor)), ox.Triple(node, GT.window, ox.Literal("test")),
+                  ox.Triple(node, GT.metricName, ox.Literal("rmse")), ox.Triple(node, GT.value, _double(value)),
+                  ox.Triple(node, GT.unit, ox.Literal(units.get(sensor, ""))), ox.Triple(node, GT.inRegime, regime)]
     return t
 
 

@@ -445,22 +445,39 @@ def history_command(
     plot: Annotated[Path | None, typer.Option(help="Write a bar chart of the error per version here (PNG).")] = None,
     store: StoreOption = Path("graphtwin-data"),
 ) -> None:
-    """Test-window error per sensor across the versions of a model (base, base+effect, …)."""
+    """Test-window error per sensor and operating regime across the versions of a model (base,
+    base+effect, …)."""
     graph_store = open_store(store, False)
-    versions, rmse, units = error_history(graph_store, model)
-    if not versions:
+    history = error_history(graph_store, model)
+    if not history.versions:
         raise fail(f"no calibration with a test window for model {model!r} or its versions")
     table = Table(title=f"Test RMSE per sensor across versions of {model}")
     table.add_column("sensor")
-    for version in versions:
+    for version in history.versions:
         table.add_column(version)
-    for sensor, values in rmse.items():
-        table.add_row(_short(sensor), *[f"{v:.3g} {unit_label(units[sensor])}" for v in values])
+    for sensor, values in history.rmse.items():
+        table.add_row(_short(sensor), *[_with_unit(v, history.units[sensor]) for v in values])
     console.print(table)
+    if history.regime_rmse:
+        table = Table(title="Test RMSE per operating regime (share of the test window)")
+        for column in ("regime", "rule", "sensor", *history.versions):
+            table.add_column(column)
+        for number, (rule, sensors) in enumerate(history.regime_rmse.items()):
+            shares = history.regime_share[rule]
+            share = next((f" ({100 * s:.0f} %)" for s in shares if s == s), "")
+            for i, (sensor, values) in enumerate(sensors.items()):
+                table.add_row(str(number) if i == 0 else "", rule + share if i == 0 else "", _short(sensor),
+                              *[_with_unit(v, history.units.get(sensor, "")) for v in values])
+            table.add_section()
+        console.print(table)
     if plot is not None:
         from .plots import plot_error_history
 
-        console.print(f"plot: {plot_error_history(plot, versions, rmse, units)}")
+        console.print(f"plot: {plot_error_history(plot, history)}")
+
+
+def _with_unit(value: float, unit: str) -> str:
+    return f"{value:.3g} {unit_label(unit)}" if value == value else "–"
 
 
 @app.command("report")
@@ -542,8 +559,7 @@ def demo_command(
     figure = plot_measured_vs_model(output / "before_after.png", md.data.timestamps[window], md.observed(window),
                                     {"base model": report.base_test_prediction, f"with {best.effect}": after_run.predictions["test"]},
                                     md.units, title="Test window: measured, base model, model with the effect")
-    versions, rmse, units = error_history(graph_store, base_name)
-    history = plot_error_history(output / "error_history.png", versions, rmse, units)
+    history = plot_error_history(output / "error_history.png", error_history(graph_store, base_name))
     console.rule("[bold]4. Where to look")
     console.print(f"plots: {figure}, {history}")
     console.print(f"calibrated parameters by SPARQL: graphtwin query calibrated-parameters --model {version} --store {store}")

@@ -7,8 +7,8 @@ window (the continuation of training when it follows it, else a run of its own) 
 2. **where**: a sensor *fails* when its test RMSE exceeds ``failure_ratio`` × its noise level (the
    high-frequency noise of its residual from the first quartile of |Δ²e|, floored at the
    instrument accuracy of its unit, :func:`noise_level`); failures are located on the flow path
-   (:mod:`service.flow_path_localization`), in operating regimes (:mod:`service.operating_regimes`:
-   per-regime RMSE, the worst named) and in time (:mod:`service.failure_episodes`);
+   (:mod:`service.flow_path_localization`), in operating regimes (the calibration's
+   :mod:`service.regime_breakdown`: per-regime RMSE, the worst named) and in time (:mod:`service.failure_episodes`);
 3. **what is missing**: every (effect, node) pair of the catalog that applies to the model gets a
    score test at the null, a refit from the base estimate, ΔBIC and the error after, all on a split
    of the data (:func:`_split_windows`): fitted on the training window plus the first half of the
@@ -51,7 +51,6 @@ from .effect_ranking import (
 from .failure_episodes import find_episodes
 from .flow_path_localization import FlowTopology, localize_failures
 from .namespaces import GT, PROV, RDF, RDFS, XSD
-from .operating_regimes import OperatingRegimes, per_regime_metrics
 from .point_calibration import PointCalibrator
 from .residual_dependence import residual_dependence
 from .signature import Signature, load_signature_library
@@ -256,6 +255,7 @@ def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effec
             parameter_names=tuple(whole.parameter_names[c] for c in free),
             lower=whole.lower[free], upper=whole.upper[free], simulate=simulate,
             observed=whole.observed, target_scales=job.target_scales, units=whole.units, default=default,
+            vectorised_simulate=whole.vectorised_simulate,
         )
 
     at_null = null[free]
@@ -404,24 +404,11 @@ def diagnose(
     locations = localize_failures(topology, matches, all_devices)
     localization = [dict(loc.to_dict(), text=loc.describe()) for loc in locations]
 
-    signal_nodes = [md.node_of[c] for c in model.boundary_inputs]
-    signals = np.column_stack([data.series[n] for n in signal_nodes])
-    regimes_model = OperatingRegimes(random_state=seed).fit(
-        signals, [_short(n).replace("_", " ") for n in signal_nodes],
-        feature_units=[unit_label(data.units[n]) for n in signal_nodes], step_s=data.step_s,
-    )
-    labels = regimes_model.predict(signals[test_slice])
-    rmse = lambda y, yhat: float(np.sqrt(np.mean((y - yhat) ** 2)))  # noqa: E731
-    regimes = []
-    for regime in range(regimes_model.n_regimes_):
-        regimes.append({"regime": regime, "rule": regimes_model.rules_[regime], "rmse": {}, "worst": False,
-                        "share": float(np.mean(labels[labels >= 0] == regime)) if (labels >= 0).any() else 0.0})
-    for node in observed:
-        for row in per_regime_metrics(labels, observed[node], predicted[node], {"rmse": rmse},
-                                      n_regimes=regimes_model.n_regimes_):
-            regimes[row["regime"]]["rmse"][node] = row["rmse"]
+    regimes = base.regimes.rows()
     scaled = [np.nanmean([r["rmse"][k] / sensors[k]["noise"] for k in r["rmse"]]) if r["share"] > 0 else np.nan
               for r in regimes]
+    for row in regimes:
+        row["worst"] = False
     if np.isfinite(scaled).any():
         regimes[int(np.nanargmax(scaled))]["worst"] = True
 
@@ -454,7 +441,7 @@ def diagnose(
 
     report = DiagnosisReport(
         model_name=model_name, run_id=base.record.run_id, sensors=sensors, localization=localization,
-        regimes=regimes, regime_rule_accuracy=regimes_model.rule_accuracy_, episodes=episodes,
+        regimes=regimes, regime_rule_accuracy=base.regimes.rule_accuracy, episodes=episodes,
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, base_test_prediction=predicted,
         effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice], test_observed=observed,
         failure_ratio=failure_ratio,
@@ -516,7 +503,8 @@ def _summary(report: DiagnosisReport) -> str:
 
 
 def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
-    """The diagnosis as triples: a gt:DiagnosisRun with its ranked candidates and failure locations."""
+    """The diagnosis as triples: a gt:DiagnosisRun with its ranked candidates and failure locations
+    (the operating regimes and their error are the base calibration's)."""
     from .calibration_triples import run_iri
 
     run = ox.NamedNode(run_iri(report.run_id).value + "/diagnosis")
@@ -545,8 +533,4 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
         if matching:
             t.append(ox.Triple(node, GT.matchingSensor, ox.NamedNode(matching)))
         t += [ox.Triple(node, GT.suspect, ox.NamedNode(c)) for c in location["components"]]
-    for row in report.regimes:
-        node = ox.NamedNode(f"{run.value}/regime/{row['regime']}")
-        t += [ox.Triple(node, RDF.type, GT.OperatingRegime), ox.Triple(node, PROV.wasGeneratedBy, run),
-              ox.Triple(node, GT.regimeRule, ox.Literal(row["rule"])), ox.Triple(node, GT.share, dbl(row["share"]))]
     return t

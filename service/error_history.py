@@ -1,31 +1,65 @@
-"""The test-window error of a model across its versions (``model``, ``model+Effect``, …): what
-``graphtwin history``, the demo and the report page show so the user sees the error fall."""
+"""The test-window error of a model across its versions (``model``, ``model+Effect``, …), per sensor
+and per operating regime: what ``graphtwin history``, the demo and the report page show so the user
+sees the error fall, and where it fell."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from .store import GraphStore
 
+__all__ = ["ErrorHistory", "error_history"]
 
-def error_history(store: GraphStore, model: str) -> tuple[list[str], dict[str, list[float]], dict[str, str]]:
-    """(versions, test RMSE per sensor and version, unit per sensor) for ``model`` without its
-    ``+effect`` suffixes and every version derived from it (``model+Effect…``), each version's
-    latest calibration with a test window (``queries/sensor-metrics.rq``, newest first)."""
+
+@dataclass
+class ErrorHistory:
+    """``rmse[sensor][i]``: the test RMSE of ``versions[i]`` (NaN: not measured in that version);
+    ``regime_rmse[rule][sensor][i]`` and ``regime_share[rule][i]`` the same per operating regime,
+    regimes identified by their rule (versions calibrated on the same data share their regimes;
+    a regime a version does not have is NaN there)."""
+
+    versions: list[str]
+    rmse: dict[str, list[float]]
+    units: dict[str, str]
+    regime_rmse: dict[str, dict[str, list[float]]]
+    regime_share: dict[str, list[float]]
+
+
+def error_history(store: GraphStore, model: str) -> ErrorHistory:
+    """The history of ``model`` without its ``+effect`` suffixes and every version derived from it
+    (``model+Effect…``), each version's latest calibration with a test window
+    (``queries/sensor-metrics.rq``, newest first)."""
     base = model.split("+", 1)[0]
     versions: list[str] = []
     rmse: dict[str, dict[str, float]] = {}
     units: dict[str, str] = {}
+    regime_rmse: dict[str, dict[str, dict[str, float]]] = {}
+    regime_share: dict[str, dict[str, float]] = {}
     for name in [m for m in store.models() if m == base or m.startswith(base + "+")]:
-        latest: dict[str, tuple[float, str]] = {}
-        newest_run = None
+        newest_run, found = None, False
         for row in store.run_named_query("sensor-metrics", model=name):
             if row["window"].value != "test" or row["metric"].value != "rmse":
                 continue
             newest_run = newest_run or row["run"]
-            if row["run"] == newest_run:
-                latest[row["sensor"].value] = (float(row["value"].value), row["unit"].value)
-        if latest:
-            versions.append(name)
-            for sensor, (value, unit) in latest.items():
+            if row["run"] != newest_run:
+                continue
+            sensor, value = row["sensor"].value, float(row["value"].value)
+            if "rule" in row:
+                rule = row["rule"].value
+                regime_rmse.setdefault(rule, {}).setdefault(sensor, {})[name] = value
+                regime_share.setdefault(rule, {})[name] = float(row["share"].value)
+            else:
                 rmse.setdefault(sensor, {})[name] = value
-                units[sensor] = unit
-    return versions, {s: [v.get(n, float("nan")) for n in versions] for s, v in rmse.items()}, units
+                units[sensor] = row["unit"].value
+                found = True
+        if found:
+            versions.append(name)
+
+    def per_version(values: dict[str, float]) -> list[float]:
+        return [values.get(v, float("nan")) for v in versions]
+
+    return ErrorHistory(
+        versions, {s: per_version(v) for s, v in rmse.items()}, units,
+        {rule: {s: per_version(v) for s, v in sensors.items()} for rule, sensors in regime_rmse.items()},
+        {rule: per_version(v) for rule, v in regime_share.items()},
+    )

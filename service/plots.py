@@ -15,6 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .error_history import ErrorHistory  # noqa: E402
 from .units import unit_label  # noqa: E402
 
 __all__ = ["plot_measured_vs_model", "plot_residuals", "plot_error_history"]
@@ -88,15 +89,30 @@ def plot_residuals(
     return _save_time_panels(fig, axes, path, title, legend_columns=2)
 
 
-def plot_error_history(path: Path, versions: list[str], rmse: Mapping[str, list[float]], units: Mapping[str, str]) -> Path:
-    """Test-window RMSE per sensor (one panel each) across model versions: the error falling."""
-    sensors = list(rmse)
-    fig, axes = plt.subplots(1, len(sensors), figsize=(2.6 * len(sensors), 3.2), squeeze=False)
+def plot_error_history(path: Path, history: ErrorHistory) -> Path:
+    """Test-window RMSE per sensor (one column each) across model versions: the error falling; with
+    regimes, a second row with the RMSE per regime (regime i: the i-th rule of the history's
+    table), one bar per version."""
+    sensors, versions = list(history.rmse), history.versions
+    rules = list(history.regime_rmse)
+    rows = 2 if rules else 1
+    fig, axes = plt.subplots(rows, len(sensors), figsize=(2.8 * len(sensors), 3.2 * rows), squeeze=False)
+    colours = plt.get_cmap("tab10")
     for ax, sensor in zip(axes[0], sensors):
-        ax.bar(range(len(versions)), rmse[sensor], color="tab:blue")
+        ax.bar(range(len(versions)), history.rmse[sensor], color=[colours(i) for i in range(len(versions))])
         ax.set_xticks(range(len(versions)), [v.replace("+", "\n+") for v in versions], fontsize=7)
         ax.set_title(_short(sensor), fontsize=8)
-        ax.set_ylabel(f"test RMSE [{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.set_ylabel(f"test RMSE [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
+    if rules:
+        width = 0.8 / len(versions)
+        for ax, sensor in zip(axes[1], sensors):
+            for i, version in enumerate(versions):
+                values = [history.regime_rmse[rule].get(sensor, [np.nan] * len(versions))[i] for rule in rules]
+                ax.bar(np.arange(len(rules)) + (i - (len(versions) - 1) / 2) * width, values, width,
+                       color=colours(i), label=version)
+            ax.set_xticks(range(len(rules)), [f"regime {j}" for j in range(len(rules))], fontsize=7)
+            ax.set_ylabel(f"RMSE per regime [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
+        axes[1][0].legend(fontsize=7)
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=110)

@@ -1,16 +1,17 @@
 """A run's report: one self-contained HTML page built from what the store holds about the run.
 
 ``report_html(store, run_id)`` reads the calibration run ``gtr:run/<run_id>`` (provenance, estimates,
-metrics; :mod:`service.calibration_triples`) and the diagnosis based on it, if any (ranked effect
-candidates, failure locations, operating regimes; :func:`service.diagnosis.diagnosis_triples`), and
+metrics, operating regimes; :mod:`service.calibration_triples`) and the diagnosis based on it, if
+any (ranked effect candidates, failure locations; :func:`service.diagnosis.diagnosis_triples`), and
 shows:
 
 1. per sensor: the stored metrics and a figure of measured against modelled with an interval;
 2. the flow-path localisation drawn on the system topology (``queries/flow-edges.rq``,
    ``observed-node.rq``): the suspects between the last matching and the first failing sensor;
-3. the operating regimes with their rules;
+3. the operating regimes with their rules and the test RMSE per sensor in each;
 4. the ranked missing effects with their evidence;
-5. the test RMSE per sensor across the model's versions (``queries/sensor-metrics.rq``).
+5. the test RMSE per sensor, overall and per regime, across the model's versions
+   (``queries/sensor-metrics.rq``).
 
 **Series.** A run stores numbers, not series. The measured-vs-model figures are recomputed: the
 model graph (whose version must still be the run's ``gt:modelVersion``) is assembled again, the
@@ -100,14 +101,14 @@ SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value 
   OPTIONAL { GRAPH <https://w3id.org/graphtwin/resource/graph/signatures/library> {
     ?effect dcterms:identifier ?id ; rdfs:label ?label } }
 } ORDER BY ?rank"""
+_REGIMES_QUERY = _PREFIXES + """SELECT ?regime ?rule ?share WHERE { GRAPH ?g {
+  ?regime a gt:OperatingRegime ; prov:wasGeneratedBy ?run ; gt:regimeRule ?rule ; gt:share ?share .
+} }"""
 _LOCATIONS_QUERY = _PREFIXES + """SELECT ?location ?failing ?matching ?text ?suspect WHERE { GRAPH ?g {
   ?location a gt:FailureLocation ; prov:wasGeneratedBy ?diagnosis ; gt:failingSensor ?failing ; rdfs:comment ?text .
   OPTIONAL { ?location gt:matchingSensor ?matching }
   OPTIONAL { ?location gt:suspect ?suspect }
 } } ORDER BY ?location ?suspect"""
-_REGIMES_QUERY = _PREFIXES + """SELECT ?regime ?rule ?share WHERE { GRAPH ?g {
-  ?regime a gt:OperatingRegime ; prov:wasGeneratedBy ?diagnosis ; gt:regimeRule ?rule ; gt:share ?share .
-} } ORDER BY ?regime"""
 
 
 class UnknownRunError(KeyError):
@@ -128,8 +129,9 @@ def _float(row: Mapping, key: str) -> float:
 # ====================================================================== what the store holds
 @dataclass
 class StoredRun:
-    """A calibration run as stored: provenance, estimates (``component#name`` → dict) and metrics
-    (``metrics[window][sensor][metric] = value``, ``units[sensor]``)."""
+    """A calibration run as stored: provenance, estimates (``component#name`` → dict), metrics
+    (``metrics[window][sensor][metric] = value``, ``units[sensor]``) and the operating regimes of
+    its test window (``{"regime", "rule", "share", "rmse": {sensor: value}}``, by regime number)."""
 
     run_id: str
     model: str
@@ -143,6 +145,7 @@ class StoredRun:
     estimates: dict[str, dict]
     metrics: dict[str, dict[str, dict[str, float]]]
     units: dict[str, str]
+    regimes: list[dict]
 
 
 def _run_id(run_id: str) -> str:
@@ -173,10 +176,16 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         }
     metrics: dict[str, dict[str, dict[str, float]]] = {}
     units: dict[str, str] = {}
+    regimes = {r["regime"].value: {"regime": _short(r["regime"].value), "rule": r["rule"].value,
+                                   "share": float(r["share"].value), "rmse": {}}
+               for r in store.query(_REGIMES_QUERY, substitutions={"run": run})}
     for m in store.run_named_query("sensor-metrics", model=row["model"].value):
         if m["run"] != run:
             continue
         sensor = m["sensor"].value
+        if "regime" in m:
+            regimes[m["regime"].value]["rmse"][sensor] = float(m["value"].value)
+            continue
         metrics.setdefault(m["window"].value, {}).setdefault(sensor, {})[m["metric"].value] = float(m["value"].value)
         if m["metric"].value == "rmse":
             units[sensor] = m["unit"].value
@@ -186,18 +195,18 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         test=(row["test_start"].value, row["test_end"].value) if "test_start" in row else None,
         ended=row["ended"].value, settings=json.loads(row["settings"].value), estimates=estimates,
         metrics=metrics, units=units,
+        regimes=sorted(regimes.values(), key=lambda r: int(r["regime"]) if r["regime"].isdigit() else r["regime"]),
     )
 
 
 @dataclass
 class StoredDiagnosis:
-    """The diagnosis based on a run: its summary, ranked candidates, failure locations and regimes."""
+    """The diagnosis based on a run: its summary, ranked candidates and failure locations."""
 
     iri: str
     summary: str
     effects: list[dict]
     locations: list[dict]
-    regimes: list[dict]
 
     @property
     def failing_sensors(self) -> set[str]:
@@ -234,10 +243,8 @@ def read_diagnosis(store: GraphStore, run_id: str) -> StoredDiagnosis | None:
             "text": r["text"].value, "components": []})
         if "suspect" in r:
             loc["components"].append(r["suspect"].value)
-    regimes = [{"regime": _short(r["regime"].value), "rule": r["rule"].value, "share": float(r["share"].value)}
-               for r in store.query(_REGIMES_QUERY, substitutions=bound)]
     return StoredDiagnosis(diagnosis.value, rows[0]["summary"].value if "summary" in rows[0] else "",
-                           effects, list(locations.values()), regimes)
+                           effects, list(locations.values()))
 
 
 # ====================================================================== series, recomputed
@@ -545,13 +552,23 @@ def _boundary_nodes(store: GraphStore, model: str) -> set[str]:
             if r["role"].value == "boundary input"}
 
 
+def _regimes_section(run: StoredRun) -> str:
+    out = "<h2>Operating regimes</h2>"
+    if not run.regimes:
+        return out + '<p class="note">The run has no test window, so no error per regime.</p>'
+    sensors = [s for s in run.metrics.get("test", {}) if any(s in r["rmse"] for r in run.regimes)]
+    rows = [[html.escape(r["regime"]), html.escape(r["rule"]), f"{100 * r['share']:.0f} %"]
+            + [f"{_number(r['rmse'][s])} {html.escape(unit_label(run.units.get(s, '')))}" if s in r["rmse"] else "–"
+               for s in sensors] for r in run.regimes]
+    header = ["regime", "rule", "share of the test window"] + [f"RMSE {_short(s)}" for s in sensors]
+    return (out + "<p>Clusters of the boundary inputs (mini-batch k-means), each described by the rule of a "
+            "shallow decision tree, and the test RMSE of every sensor in each: where the model fails.</p>"
+            + _table(header, rows, "regimes"))
+
+
 def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
     if diagnosis is None:
-        return ("<h2>Operating regimes</h2><p class=\"note\">No diagnosis is based on this run.</p>"
-                "<h2>Which effect is missing</h2><p class=\"note\">No diagnosis is based on this run.</p>")
-    regimes = _table(["regime", "rule", "share of the test window"],
-                     [[html.escape(r["regime"]), html.escape(r["rule"]), f"{100 * r['share']:.0f} %"]
-                      for r in diagnosis.regimes], "regimes")
+        return "<h2>Which effect is missing</h2><p class=\"note\">No diagnosis is based on this run.</p>"
     effects = _table(
         ["rank", "effect", "at", "significant", "test error removed", "ΔBIC", "score", "p", "evidence"],
         [[str(e["rank"]), f'<span class="effect">{html.escape(e["effect"])}</span><br>'
@@ -560,24 +577,29 @@ def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
           f"{100 * e['test_improvement']:.0f} %" if np.isfinite(e["test_improvement"]) else "–",
           _number(e["delta_bic"], 4), _number(e["score"]), _number(e["p_value"], 2), html.escape(e["explanation"])]
          for e in diagnosis.effects], "effects")
-    return (f"<h2>Operating regimes</h2><p>The regimes the diagnosis found in the boundary inputs, with the "
-            f"decision-tree rule that describes each (the diagnosis stores rules and shares, not the "
-            f"error per regime).</p>{regimes}"
-            f"<h2>Which effect is missing (best first)</h2><p>Significant: ΔBIC &lt; −10 and at least 20 % of the "
+    return (f"<h2>Which effect is missing (best first)</h2><p>Significant: ΔBIC &lt; −10 and at least 20 % of the "
             f"test-window error removed.</p>{effects}")
 
 
 def _history_section(store: GraphStore, run: StoredRun) -> str:
     from .plots import plot_error_history
 
-    versions, rmse, units = error_history(store, run.model)
+    history = error_history(store, run.model)
+    versions, units = history.versions, history.units
     out = ["<h2>Error across model versions</h2>"]
     if not versions:
         return out[0] + '<p class="note">No calibration of this model with a test window is stored.</p>'
-    rows = [[html.escape(_short(s))] + [f"{_number(v)} {html.escape(unit_label(units[s]))}" for v in values]
-            for s, values in rmse.items()]
+
+    def cells(values: list[float], sensor: str) -> list[str]:
+        return [f"{_number(v)} {html.escape(unit_label(units.get(sensor, '')))}" if v == v else "–" for v in values]
+
+    rows = [[html.escape(_short(s))] + cells(values, s) for s, values in history.rmse.items()]
     out.append(_table(["sensor"] + versions, rows, "history"))
-    picture = _png(lambda path: plot_error_history(path, versions, rmse, units))
+    if history.regime_rmse:
+        rows = [[str(number), html.escape(rule), html.escape(_short(s))] + cells(values, s)
+                for number, (rule, sensors) in enumerate(history.regime_rmse.items()) for s, values in sensors.items()]
+        out.append(_table(["regime", "rule", "sensor"] + versions, rows, "history-regimes"))
+    picture = _png(lambda path: plot_error_history(path, history))
     out.append(f'<figure>{_img(picture, "image/png", f"test RMSE across versions of {run.model}", "history")}</figure>')
     return "".join(out)
 
@@ -624,7 +646,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         f"<style>{_STYLE}</style></head><body>"
         f"<h1>{html.escape(title)}</h1><dl class=\"facts\">{facts}</dl>{summary}"
         f"{_sensor_section(run, diagnosis, series, series_note)}{_topology_section(store, run, diagnosis)}"
-        f"{_diagnosis_sections(diagnosis)}{_history_section(store, run)}"
+        f"{_regimes_section(run)}{_diagnosis_sections(diagnosis)}{_history_section(store, run)}"
         f"<p class=\"note\">Generated {generated} by graphtwin from the store's graphs ({html.escape(str(GTR))}…); "
         "measured-vs-model series are recomputed from the stored estimates and the run's data file.</p>"
         "</body></html>\n"

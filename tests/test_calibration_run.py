@@ -59,6 +59,16 @@ def test_results_are_queryable_with_sparql(synthetic, point_run):
     assert by_name["proportional_gain"]["node"].value == EX + "coil_outlet_air_temperature_controller"
     metrics = store.run_named_query("sensor-metrics", model="case")
     assert {r["window"].value for r in metrics} == {"train", "test"}
+    # the test RMSE per operating regime: the regimes' mean squared errors, weighted by their share
+    # of the test window, make up the whole window's
+    mine = [r for r in metrics if r["run"].value.endswith(point_run.record.run_id) and r["metric"].value == "rmse"
+            and r["window"].value == "test"]
+    regimes = {r["regime"].value: r for r in mine if "regime" in r}
+    assert len(regimes) >= 2 and {r["rule"].value for r in regimes.values()} == {r["rule"] for r in point_run.record.regimes}
+    assert sum(float(r["share"].value) for r in regimes.values()) == pytest.approx(1.0)
+    for sensor, m in point_run.record.metrics["test"].items():
+        parts = [(float(r["share"].value), float(r["value"].value)) for r in mine if "regime" in r and r["sensor"].value == sensor]
+        assert sum(s * v**2 for s, v in parts) == pytest.approx(m.rmse**2, rel=0.1), sensor
     history = store.run_named_query("parameter-history", model="case", name="integral_time")
     assert len(history) >= 1 and history[0]["unit"].value == "s"
 

@@ -222,14 +222,26 @@ def test_the_regimes_and_the_ranked_effects_with_their_evidence_are_listed(case,
 
 
 def test_the_error_history_compares_the_model_versions(case, page):
-    versions, rmse, units = error_history(case.store, "case")
+    history = error_history(case.store, "case")
+    versions, rmse = history.versions, history.rmse
     assert versions == ["case", f"case+{case.report.effects[0].effect}"]
     for sensor, values in rmse.items():
         assert values == pytest.approx([case.report.sensors[sensor]["rmse"], case.version.metrics["test"][sensor].rmse])
     air = EX + "coil_outlet_air_temperature_sensor"
     assert rmse[air][1] < 0.5 * rmse[air][0], "adding the leak halves the air temperature error"
+    # per regime: the base version's numbers are the diagnosis's, both versions have the same regimes
+    # (same data), and the leak's error falls in the regime the diagnosis calls worst
+    for row in case.report.regimes:
+        for sensor, value in row["rmse"].items():
+            if value == value:
+                assert history.regime_rmse[row["rule"]][sensor][0] == pytest.approx(value)
+    assert all(share == share for shares in history.regime_share.values() for share in shares)
+    worst = next(r for r in case.report.regimes if r["worst"])
+    assert history.regime_rmse[worst["rule"]][air][1] < history.regime_rmse[worst["rule"]][air][0]
     parsed = PageParser(page)
     assert parsed.tables["history"][0] == ["sensor", *versions]
+    assert parsed.tables["history-regimes"][0] == ["regime", "rule", "sensor", *versions]
+    assert [row[1] for row in parsed.tables["regimes"][1:]] == [r["rule"] for r in case.report.regimes]
     history = next(i for i in parsed.images if i["class"] == "history")
     assert Image.open(io.BytesIO(image_bytes(history, "image/png"))).size[0] > 500
 
@@ -255,7 +267,11 @@ def test_runs_are_found_by_their_id_or_their_diagnosis_graph_and_unknown_ones_ra
 
 def test_a_run_without_diagnosis_says_so(case):
     page = report_html(case.store, case.version.run_id)
-    assert page.count("No diagnosis is based on this run") == 3
+    assert page.count("No diagnosis is based on this run") == 2
+    # the regimes and their error are the run's own: shown without a diagnosis
+    rows = PageParser(page).tables["regimes"]
+    assert [row[1] for row in rows[1:]] == [r["rule"] for r in case.version.regimes]
+    assert rows[0][:3] == ["regime", "rule", "share of the test window"] and len(rows[0]) > 3
     assert "no data locator was given" in page
     assert not any("suspect" in classes or "failing" in classes for classes in topology_classes(page).values())
 
@@ -331,3 +347,24 @@ def test_graphtwin_report_writes_the_page_from_an_on_disk_store(case, tmp_path):
                                        "--store", str(folder)])
     assert unknown.exit_code == 2 and "no calibration run 'case-point-00000000'" in unknown.output
     assert not (tmp_path / "x.html").exists()
+
+
+def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_versions(case, tmp_path):
+    from matplotlib.image import imread
+
+    folder = tmp_path / "store"
+    disk = GraphStore.embedded(folder)
+    disk.backend.store.extend(case.store.backend.store)
+    del disk
+    plot = tmp_path / "history.png"
+    result = CliRunner(env={"COLUMNS": "400"}).invoke(cli, ["history", "case", "--store", str(folder), "--plot", str(plot)])
+    assert result.exit_code == 0, result.output
+    history = error_history(case.store, "case")
+    assert "Test RMSE per operating regime" in result.output
+    for rule in history.regime_rmse:
+        assert rule in result.output
+    air = f"{history.rmse[EX + 'coil_outlet_air_temperature_sensor'][1]:.3g}"
+    assert air in result.output
+    assert imread(plot).shape[0] > imread(plot).shape[1] / len(history.rmse)  # two rows of panels
+    missing = CliRunner().invoke(cli, ["history", "nothing", "--store", str(folder)])
+    assert missing.exit_code == 2 and "no calibration with a test window" in missing.output
