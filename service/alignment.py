@@ -7,11 +7,12 @@ device observes (the accepted spellings are listed in ``ontologies/README.md``).
 
 The rules run in a scratch in-memory store holding the model, the ontology subsets and what has been
 derived so far, in file-name order, each seeing what the rules before it derived, round after round
-until a round adds nothing (a fixpoint; rules only add triples, so this terminates). The order makes
-the rules stratified: a rule may test for the absence of a triple (``FILTER NOT EXISTS``) only when
-the triple is stated in the model or derived by a rule earlier in the order, so that its answer
-cannot change in a later round. The Brick rules (``0N-brick-*.rq``, run first) use this: the sensor
-placement rule reads the flow edges and mixing boxes of the rules before it.
+until every rule has run since the last triple was added (a fixpoint; rules only add triples, so
+this terminates). The order makes the rules stratified: a rule may test for the absence of a triple
+(``FILTER NOT EXISTS``) only when the triple is stated in the model or derived by a rule earlier in
+the order, so that its answer cannot change in a later round. The Brick rules (``0N-brick-*.rq``,
+run first) use this: the sensor placement rule reads the flow edges and mixing boxes of the rules
+before it.
 
 The scratch store also holds, for every ``rdf:type`` triple of the model or derived, the types it
 entails by ``rdfs:subClassOf`` in the ontology — only those a rule names (:func:`rule_terms`), so a
@@ -21,6 +22,13 @@ These entailed triples are not part of the result: the store's queries see the h
 ontology graph. Computing locally keeps the store's write of the model and its
 inferences one transaction, and works the same whatever the backend. The user's graph is never
 changed: the result goes to the model's ``inferred`` graph (:meth:`service.store.GraphStore.load_model`).
+
+Rules that scale (tests/bench/bench_brick_alignment.py; Oxigraph plans a nested group without
+knowing which of its variables the outer row binds, so it may evaluate it over the whole graph once
+per outer row): inside ``OPTIONAL``, ``EXISTS`` and ``NOT EXISTS`` write ``FILTER(?c IN (…))``, not
+``VALUES ?c {…}``, and test a second pattern with ``FILTER EXISTS`` rather than joining it; prefer
+``MINUS`` to a ``NOT EXISTS`` that shares only bound variables with the outer pattern; filter a set of
+anchors in a subquery before the patterns that read from it.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ import re
 from collections import defaultdict
 from collections.abc import Iterable
 from functools import lru_cache
+from itertools import cycle, islice
 
 import pyoxigraph as ox
 
@@ -42,8 +51,8 @@ _PREFIX = re.compile(r"PREFIX\s+([\w-]*):\s*<([^>]+)>", re.IGNORECASE)
 _TERM = re.compile(r"<([^>\s]+)>|(?<![\w?$])([A-Za-z][\w-]*):([A-Za-z_][\w-]*)")
 _COMMENT = re.compile(r"(^|\s)#[^\n]*")
 
-#: Safety cap on fixpoint rounds (the shipped rules reach the fixpoint in the first round; the second
-#: confirms it).
+#: Safety cap on fixpoint rounds (the shipped rules reach the fixpoint in the first round; a rule that
+#: ran after the last addition is not run again to confirm it).
 MAX_ROUNDS = 8
 
 
@@ -100,26 +109,36 @@ def inferred_triples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple]) 
     scratch = ox.Store()
     scratch.extend(ox.Quad(t.subject, t.predicate, t.object) for t in model)
     scratch.extend(ox.Quad(t.subject, t.predicate, t.object) for t in ontology)
-    stated = {ox.Triple(q.subject, q.predicate, q.object) for q in scratch}
-    derived: set[ox.Triple] = set()
-    entailed: set[ox.Triple] = set()
+    derived: list[ox.Triple] = []
 
-    def entail(triples) -> None:
-        more = {ox.Triple(t.subject, _RDF_TYPE, c) for t in triples if t.predicate == _RDF_TYPE
-                for c in supers.get(t.object, ())} - stated - derived - entailed
-        entailed.update(more)
-        scratch.extend(ox.Quad(t.subject, t.predicate, t.object) for t in more)
+    def add(triples: Iterable[ox.Triple]) -> list[ox.Triple]:
+        """Add to the scratch store the triples it lacks (the store's membership test is the one set
+        of what is stated, derived or entailed: no Python copy of it); those added, in order."""
+        fresh, quads = [], []
+        for t in dict.fromkeys(triples):
+            quad = ox.Quad(t.subject, t.predicate, t.object)
+            if quad not in scratch:
+                fresh.append(t)
+                quads.append(quad)
+        scratch.extend(quads)
+        return fresh
+
+    def entail(triples: Iterable[ox.Triple]) -> None:
+        add(ox.Triple(t.subject, _RDF_TYPE, c) for t in triples if t.predicate == _RDF_TYPE
+            for c in supers.get(t.object, ()))
 
     entail(model)
-    for _ in range(MAX_ROUNDS):
-        added = 0
-        for _name, text in alignment_rules():
-            new = set(scratch.query(text)) - stated - derived - entailed
-            if new:
-                added += len(new)
-                derived |= new
-                scratch.extend(ox.Quad(t.subject, t.predicate, t.object) for t in new)
-                entail(new)
-        if not added:
+    texts = [text for _name, text in alignment_rules()]
+    # A rule's answer is a function of the store, so a rule need not run again until some rule (itself
+    # included) has added a triple since its last run: the fixpoint is reached as soon as the rules
+    # run since the last addition are all of them (at best one round and the rules before the last
+    # one that added, rather than a whole confirming round).
+    stale = 0
+    for text in islice(cycle(texts), MAX_ROUNDS * len(texts)):
+        new = add(scratch.query(text))
+        stale = 0 if new else stale + 1
+        if stale == len(texts):
             return sorted(derived, key=str)
+        derived += new
+        entail(new)
     raise RuntimeError(f"alignment rules in {queries_dir() / 'alignment'} did not reach a fixpoint in {MAX_ROUNDS} rounds")

@@ -153,3 +153,19 @@ def test_the_brick_subset_holds_every_official_subclass_of_the_classes_the_rules
     named = {expand[p] + local for _n, text in alignment_rules() for p, local in re.findall(r"\b(brick|rec):([A-Za-z_]+)", text)
              if local[0].isupper()}
     assert sorted(named - declared) == []
+
+
+def test_two_coils_at_one_path_position_are_both_fed_and_both_feed_the_next():
+    """00-brick-ahu-path.rq: each minted element feeds every element at the next position present, so
+    two heating coils (position 1) sit side by side between the mixing section and the cooling coil."""
+    model = parse_rdf(POINTS_ONLY.replace(":fan_cmd a", ':hw2_cmd a brick:Valve_Command ; brick:isPointOf :ahu ; '
+                                          'rdfs:label "Htg Valve 2" .\n:fan_cmd a').encode(), ox.RdfFormat.TURTLE, "two")
+    ontology = [t for p in sorted(ontologies_dir().glob("*.ttl"))
+                for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))]
+    derived = inferred_triples(model, ontology)
+    placed = {t.subject for t in derived if t.predicate.value == GT + "assumedPathPosition"}
+    feeds = {(t.subject.value.removeprefix(EX), t.object.value.removeprefix(EX)) for t in derived
+             if t.predicate.value == BRICK + "feeds" and t.subject in placed}
+    assert feeds == {("ahu_mixing_section", "hw_cmd_coil"), ("ahu_mixing_section", "hw2_cmd_coil"),
+                     ("hw_cmd_coil", "chw_cmd_coil"), ("hw2_cmd_coil", "chw_cmd_coil"),
+                     ("chw_cmd_coil", "ahu_supply_fan"), ("ahu_supply_fan", "ahu_served_zone")}
