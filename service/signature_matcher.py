@@ -10,53 +10,69 @@ twice, so loops (return air mixed back into the supply) terminate and give the r
 sensor on a loop finds the equipment right before it, not everything on the loop.
 
 A :class:`MatchSession` reads each traversed predicate's edge list, each class's instances and
-subclasses ONCE and caches every search, so matching a whole library costs one query per pattern
-part plus one per predicate and class, and one search per distinct start node. It keeps what it read:
-make a new session after the graph changes.
+subclasses ONCE, runs each distinct part query once (signatures share sensor and device parts) and
+caches every search, so matching a whole library costs one query per distinct pattern part plus one
+per predicate and class, and one search per distinct start node. It keeps what it read: make a new
+session after the graph changes.
 
 The compiled pattern is cut at its traverse triples (:attr:`CompiledQuery.parts`): the required
 parts are joined on their shared nodes and on the nearest pairs of the required traverses (a node
 with no nearest partner drops the row); each optional block holding a traverse is left-joined the
 same way and binds all together or not at all. Matches are de-duplicated and sorted.
+
+Inside a session a term is its text in SPARQL TSV results (N-Triples syntax: ``<iri>``, ``_:id``,
+``"lexical"^^<datatype>``, or a bare ``42`` / ``true``), and a row is a tuple of those texts, one
+per bound node ("" when an optional part left the node unbound): Oxigraph writes TSV several times
+faster than it hands out term objects, and strings hash and compare at C speed in the joins (a
+term object hashes in Rust on every dict lookup). Terms become values only for the final matches.
 """
 
 from __future__ import annotations
 
 import gc
-from collections import defaultdict, deque
-from collections.abc import Iterator, Sequence
+from collections import defaultdict
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from itertools import repeat
+from operator import itemgetter
+from types import MappingProxyType
 
 import pyoxigraph as ox
 
 from .signature import Signature
 from .sparql_compiler import CompiledQuery, QueryPart, Traversal, compile_signature
-from .store import drain
 
 __all__ = ["Match", "MatchSession", "match_signature", "missing_class_report"]
 
 _RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
 _SUBCLASS = "http://www.w3.org/2000/01/rdf-schema#subClassOf"
-_ROW = "\0row"  # key of the input row index while an optional block is joined
+_ROW = "\0row"  # column of the input row index while an optional block is joined
+_UNBOUND = ""  # a row's term for a node its optional part left unbound
+
+Row = tuple  # the terms (TSV text) of a row's bound nodes, in the order of its columns
 
 
 class Match(dict):
     """Pattern node id → bound IRI string / literal lexical form / None; ``literals`` keeps the
-    bound :class:`pyoxigraph.Literal` of literal nodes (datatype, language)."""
+    bound :class:`pyoxigraph.Literal` of literal nodes (datatype, language). The matcher sets it on
+    the matches that bind literals; the others share an empty read-only mapping (an ``__init__``
+    taking it cost 0.2 s for the 240k matches of a 1M-triple campus)."""
 
-    def __init__(self, *args, literals: dict[str, ox.Literal] | None = None, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.literals = literals or {}
+    literals: Mapping[str, ox.Literal] = MappingProxyType({})
 
 
-def _select(store, sparql: str, names: Sequence[str], default_graph) -> list[tuple]:
-    """Rows of a SELECT projecting ``names`` (in that order) as tuples of terms (None: unbound)."""
+def _select(store, sparql: str, names: Sequence[str], default_graph) -> list[Row]:
+    """Rows of a SELECT projecting ``names`` (in that order) as tuples of term texts ("": unbound)."""
     if hasattr(store, "backend") and isinstance(getattr(store.backend, "store", None), ox.Store):
-        store = store.backend.store  # the embedded store: read solutions without building dicts
+        store = store.backend.store  # the embedded store: read its TSV results, no term objects
     if isinstance(store, ox.Store):
         kwargs = {"default_graph": list(default_graph)} if default_graph is not None else {}
-        return drain(store.query(sparql, **kwargs), tuple)
-    return [tuple(row.get(n) for n in names) for row in store.query(sparql, default_graph=default_graph)]
+        lines = store.query(sparql, **kwargs).serialize(format=ox.QueryResultsFormat.TSV).decode().split("\n")
+        if lines[0] != "\t".join(f"?{n}" for n in names):
+            raise ValueError(f"expected the columns {names}, the query returned {lines[0]!r}")
+        return [tuple(line.split("\t")) for line in lines[1:-1]]  # a newline ends every row
+    return [tuple(_UNBOUND if (term := row.get(n)) is None else str(term) for n in names)
+            for row in store.query(sparql, default_graph=default_graph)]
 
 
 def _ask(store, sparql: str, default_graph) -> bool:
@@ -66,36 +82,85 @@ def _ask(store, sparql: str, default_graph) -> bool:
     return store.query(sparql, default_graph=default_graph)
 
 
-def _value(term) -> str:
-    if isinstance(term, ox.BlankNode):
-        return f"_:{term.value}"
-    return term.value
+def _is_literal(term: str) -> bool:
+    return term != _UNBOUND and term[0] != "<" and not term.startswith("_:")
+
+
+class _Literals(dict):
+    """Literal text (N-Triples, or TSV's bare numbers and booleans: all Turtle) → literal, parsed once."""
+
+    def __missing__(self, text: str) -> ox.Literal:
+        [quad] = ox.parse(f"<urn:s> <urn:p> {text} .".encode(), format=ox.RdfFormat.TURTLE)
+        literal = self[text] = quad.object
+        return literal
+
+
+class _Values(dict):
+    """Term text → the value a match gives it (IRI, ``_:id``, lexical form; None: unbound), made once."""
+
+    def __init__(self, literals: _Literals):
+        super().__init__({_UNBOUND: None})
+        self.literals = literals
+
+    def __missing__(self, text: str) -> str:
+        value = self[text] = text[1:-1] if text[0] == "<" else text if text[0] == "_" else self.literals[text].value
+        return value
+
+
+def _getter(indices: Sequence[int]) -> Callable[[Row], object]:
+    """A row's items at ``indices``, as a key: one item, or a tuple of several (or of none)."""
+    return itemgetter(*indices) if indices else lambda row: ()
+
+
+def _columns(indices: Sequence[int]) -> Callable[[Row], Row]:
+    """A row's items at ``indices``, as a tuple."""
+    if len(indices) == 1:
+        index = indices[0]
+        return lambda row: (row[index],)
+    return _getter(indices)
+
+
+def _text_without_comments(sparql: str) -> str:
+    return "\n".join(line for line in sparql.splitlines() if not line.lstrip().startswith("#"))
 
 
 class MatchSession:
-    """One graph state's edges, class instances and nearest searches, shared by every signature
-    matched in it (``store``: a :class:`~service.store.GraphStore`, a backend or a bare pyoxigraph
-    ``Store``; ``default_graph``: the graphs the patterns are matched in)."""
+    """One graph state's edges, class instances, part rows and nearest searches, shared by every
+    signature matched in it (``store``: a :class:`~service.store.GraphStore`, a backend or a bare
+    pyoxigraph ``Store``; ``default_graph``: the graphs the patterns are matched in). ``literals``
+    and ``values`` map term texts to literals and to match values, each made once."""
 
     def __init__(self, store, default_graph: Sequence[ox.NamedNode] | None = None):
         self.store = store
         self.default_graph = list(default_graph) if default_graph is not None else None
-        self._edges: dict[tuple[str, bool], dict[object, list]] = {}
-        self._class_instances: dict[str, frozenset] = {}
+        self._edges: dict[tuple[str, bool], dict[str, list[str]]] = {}
+        self._class_instances: dict[str, frozenset[str]] = {}
         self._subclasses: dict[str, tuple[str, ...]] = {}
         self._compiled: dict[str, tuple[Signature, CompiledQuery]] = {}
-        self._instances: dict[tuple[str, ...], frozenset] = {}
-        self._near: dict[tuple, dict[object, frozenset]] = {}
+        self._instances: dict[tuple[str, ...], frozenset[str]] = {}
+        self._part_rows: dict[str, list[Row]] = {}
+        self._near: dict[tuple, dict[str, frozenset[str]]] = {}
+        self.literals = _Literals()
+        self.values = _Values(self.literals)
 
-    def select(self, sparql: str, names: Sequence[str]) -> list[tuple]:
+    def select(self, sparql: str, names: Sequence[str]) -> list[Row]:
+        """Rows of a SELECT projecting ``names``, as tuples of term texts (see the module docstring)."""
         return _select(self.store, sparql, names, self.default_graph)
 
-    def edges(self, predicate: str, forward: bool) -> dict[object, list]:
+    def part_rows(self, part: QueryPart) -> list[Row]:
+        """The rows of ``part``'s query (over ``part.nodes``); a query another signature's part
+        already ran (same text but for comments) is not run again."""
+        key = _text_without_comments(part.text)
+        if key not in self._part_rows:
+            self._part_rows[key] = self.select(part.text, part.nodes)
+        return self._part_rows[key]
+
+    def edges(self, predicate: str, forward: bool) -> dict[str, list[str]]:
         """Node → the nodes it links to along ``predicate`` (``forward``) or that link to it."""
         key = (predicate, forward)
         if key not in self._edges:
-            successors: dict[object, list] = defaultdict(list)
-            predecessors: dict[object, list] = defaultdict(list)
+            successors: dict[str, list[str]] = defaultdict(list)
+            predecessors: dict[str, list[str]] = defaultdict(list)
             for a, b in self.select(f"SELECT ?a ?b WHERE {{ ?a {ox.NamedNode(predicate)} ?b }}", ("a", "b")):
                 successors[a].append(b)
                 predecessors[b].append(a)
@@ -109,7 +174,7 @@ class MatchSession:
             if cls not in self._subclasses:
                 query = f"SELECT DISTINCT ?sub WHERE {{ ?sub <{_SUBCLASS}>+ {ox.NamedNode(cls)} }}"
                 self._subclasses[cls] = tuple(sorted(
-                    r[0].value for r in self.select(query, ("sub",)) if isinstance(r[0], ox.NamedNode)))
+                    sub[1:-1] for (sub,) in self.select(query, ("sub",)) if sub.startswith("<")))
         return {cls: self._subclasses[cls] for cls in classes}
 
     def compiled(self, signature: Signature) -> CompiledQuery:
@@ -119,54 +184,68 @@ class MatchSession:
             self._compiled[signature.id] = (signature, compile_signature(signature, self.subclasses(classes)))
         return self._compiled[signature.id][1]
 
-    def instances(self, classes: tuple[str, ...]) -> frozenset:
-        """Instances of any of ``classes`` or their subclasses."""
+    def instance_terms(self, classes: tuple[str, ...]) -> frozenset[str]:
+        """The term texts of the instances of any of ``classes`` or their subclasses."""
         if classes not in self._instances:
-            found: set = set()
+            found: set[str] = set()
             for cls in classes:
                 if cls not in self._class_instances:
                     query = f"SELECT DISTINCT ?x WHERE {{ ?x <{_RDF_TYPE}>/<{_SUBCLASS}>* {ox.NamedNode(cls)} }}"
-                    rows = self.select(query, ("x",))
-                    self._class_instances[cls] = frozenset(r[0] for r in rows)
+                    self._class_instances[cls] = frozenset(x for (x,) in self.select(query, ("x",)))
                 found |= self._class_instances[cls]
             self._instances[classes] = frozenset(found)
         return self._instances[classes]
 
-    def nearest(self, traversal: Traversal, start, forward: bool) -> frozenset:
-        """The nodes ``start`` reaches along the traversal's predicate (``forward``) or that reach it,
-        on a path whose intermediate nodes are no instances of its blocking classes."""
+    def instances(self, classes: tuple[str, ...]) -> frozenset[ox.NamedNode | ox.BlankNode | ox.Literal]:
+        """The instances of any of ``classes`` or their subclasses, as terms."""
+        return frozenset(map(self.term, self.instance_terms(classes)))
+
+    def term(self, text: str) -> ox.NamedNode | ox.BlankNode | ox.Literal:
+        """The term a term text (see the module docstring) stands for."""
+        if text.startswith("<"):
+            return ox.NamedNode(text[1:-1])
+        if text.startswith("_:"):
+            return ox.BlankNode(text[2:])
+        return self.literals[text]
+
+    def nearest(self, traversal: Traversal, starts: Iterable[str], forward: bool) -> dict[str, frozenset[str]]:
+        """For each of ``starts`` (and every start searched before): the nodes it reaches along the
+        traversal's predicate (``forward``) or that reach it, on a path whose intermediate nodes are
+        no instances of its blocking classes."""
         searches = self._near.setdefault((traversal.predicate, traversal.blocking_classes, forward), {})
-        found = searches.get(start)
-        if found is None:
+        new = [start for start in set(starts) if start not in searches]
+        if new:
             adjacency = self.edges(traversal.predicate, forward)
-            blocking = self.instances(traversal.blocking_classes)
-            seen: set = set()
-            queue = deque([start])
-            while queue:
-                for nxt in adjacency.get(queue.popleft(), ()):
-                    if nxt not in seen:
-                        seen.add(nxt)
-                        if nxt not in blocking:
-                            queue.append(nxt)
-            found = searches[start] = frozenset(seen)
-        return found
+            blocking = self.instance_terms(traversal.blocking_classes)
+            for start in new:
+                seen: set[str] = set()
+                frontier = [start]
+                while frontier:
+                    reached = []
+                    for node in frontier:
+                        for nxt in adjacency.get(node, ()):
+                            if nxt not in seen:
+                                seen.add(nxt)
+                                if nxt not in blocking:
+                                    reached.append(nxt)
+                    frontier = reached
+                searches[start] = frozenset(seen)
+        return searches
 
 
-def _part_rows(session: MatchSession, part: QueryPart) -> list[dict]:
-    return [{n: t for n, t in zip(part.nodes, row) if t is not None}
-            for row in session.select(part.text, part.nodes)]
-
-
-def _join(session: MatchSession, rows: list[dict], parts: list[QueryPart], traversals: list[Traversal]) -> list[dict]:
-    """Extend ``rows`` by every part (on shared nodes, or on a traverse's nearest pairs) and keep
-    the rows that satisfy every traverse. A part that is one class's instances is a set test."""
-    pending, checks = list(parts), list(traversals)
-    bound = set(rows[0]) if rows else set()
+def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: list[QueryPart],
+          traversals: list[Traversal]) -> tuple[list[Row], list[str]]:
+    """Extend ``rows`` (over ``columns``) by every part (on shared nodes, or on a traverse's nearest
+    pairs) and keep the rows that satisfy every traverse: (rows, their columns; no rows when a part
+    or traverse could not be joined). A part that is one class's instances is a set test."""
+    pending, checks, columns = list(parts), list(traversals), list(columns)
     while rows and (pending or checks):
+        bound = set(columns)
         check = next((t for t in checks if t.subject in bound and t.object in bound), None)
         if check is not None:
-            nearest, subject, obj = session.nearest, check.subject, check.object
-            rows = [r for r in rows if r[obj] in nearest(check, r[subject], True)]
+            subject, obj = columns.index(check.subject), columns.index(check.object)
+            nearest = session.nearest(check, (r[subject] for r in rows), True)
+            rows = [r for r in rows if r[obj] in nearest[r[subject]]]
             checks.remove(check)
             continue
         part = next((p for p in pending if bound & set(p.nodes)), None)
@@ -178,42 +257,44 @@ def _join(session: MatchSession, rows: list[dict], parts: list[QueryPart], trave
                 part = next(p for p in pending if far in p.nodes)
         part = part or pending[0]
         pending.remove(part)
-        shared = sorted(bound & set(part.nodes))
-        if part.text is None:  # one class's instances
-            node, instances = part.nodes[0], session.instances(part.classes)
-            if via is not None:
-                near, forward = (via.subject, True) if via.subject in bound else (via.object, False)
-                rows = [{**r, node: partner} for r in rows
-                        for partner in session.nearest(via, r[near], forward) if partner in instances]
-            elif shared:
-                rows = [r for r in rows if r.get(node) in instances]
-            else:
-                rows = [{**r, node: x} for r in rows for x in instances]
-        else:
-            index: dict[tuple, list[dict]] = defaultdict(list)
-            if via is None:
-                for row in _part_rows(session, part):
-                    index[tuple(row.get(n) for n in shared)].append(row)
-                rows = [{**r, **f} for r in rows for f in index.get(tuple(r.get(n) for n in shared), ())]
-            else:
-                near, forward = (via.subject, True) if via.subject in bound else (via.object, False)
-                for row in _part_rows(session, part):
-                    index[(row.get(far),) + tuple(row.get(n) for n in shared)].append(row)
-                rows = [
-                    {**r, **f}
-                    for r in rows for partner in session.nearest(via, r[near], forward)
-                    for f in index.get((partner,) + tuple(r.get(n) for n in shared), ())
-                ]
         if via is not None:
             checks.remove(via)
-        bound |= set(part.nodes)
-    return rows if not checks and not pending else []
+            near, forward = (via.subject, True) if via.subject in bound else (via.object, False)
+            start = columns.index(near)
+            nearest = session.nearest(via, (r[start] for r in rows), forward)
+        shared = sorted(bound & set(part.nodes))
+        if part.text is None:  # one class's instances
+            node, instances = part.nodes[0], session.instance_terms(part.classes)
+            if via is not None:
+                partners = {s: [(p,) for p in nearest[s] if p in instances] for s in {r[start] for r in rows}}
+                rows = [r + p for r in rows for p in partners[r[start]]]
+            elif shared:
+                column = columns.index(node)
+                rows = [r for r in rows if r[column] in instances]
+            else:
+                rows = [r + (x,) for r in rows for x in instances]
+        else:
+            key = _getter([part.nodes.index(n) for n in shared])
+            row_key = _getter([columns.index(n) for n in shared])
+            extension = _columns([i for i, n in enumerate(part.nodes) if n not in bound])
+            index: dict[object, list[Row]] = defaultdict(list)
+            if via is None:
+                for part_row in session.part_rows(part):
+                    index[key(part_row)].append(extension(part_row))
+                rows = [r + e for r in rows for e in index.get(row_key(r), ())]
+            else:
+                partner = part.nodes.index(far)
+                for part_row in session.part_rows(part):
+                    index[(part_row[partner], key(part_row))].append(extension(part_row))
+                rows = [r + e for r in rows for p in nearest[r[start]] for e in index.get((p, row_key(r)), ())]
+        columns += [n for n in part.nodes if n not in bound]
+    return (rows, columns) if not checks and not pending else ([], columns)
 
 
 @contextmanager
 def _cyclic_gc_paused() -> Iterator[None]:
-    """Pause the cyclic garbage collector: a join allocates millions of tuples, dicts and sets (none
-    in a reference cycle), and every collection of the oldest generation re-scans them all; at 1M
+    """Pause the cyclic garbage collector: a join allocates millions of tuples and sets (none in a
+    reference cycle), and every collection of the oldest generation re-scans them all; at 1M
     triples that was a third of the matching time. Reference counting still frees everything."""
     was_enabled = gc.isenabled()
     gc.disable()
@@ -232,8 +313,8 @@ def match_signature(
 
     :param store: a :class:`~service.store.GraphStore`, a backend, or a bare pyoxigraph ``Store``.
     :param default_graph: the graphs the pattern is matched in (model + inferred + ontologies).
-    :param session: share edges, instances and searches with other signatures matched in the same
-        graph state (its store and graphs are used; a new one otherwise).
+    :param session: share edges, instances, part rows and searches with other signatures matched in
+        the same graph state (its store and graphs are used; a new one otherwise).
     """
     session = session or MatchSession(store, default_graph)
     compiled = compiled or session.compiled(signature)
@@ -244,31 +325,45 @@ def match_signature(
 def _matches(signature: Signature, compiled: CompiledQuery, session: MatchSession) -> list[Match]:
     """The required parts joined, each optional block with a traverse left-joined, as sorted matches."""
     required = [p for p in compiled.parts if p.block is None]
-    rows = _join(session, [{}], required, [t for t in compiled.traversals if t.block is None])
+    rows, columns = _join(session, [()], [], required, [t for t in compiled.traversals if t.block is None])
     for number in range(len(compiled.blocks)):
-        numbered = [{**r, _ROW: i} for i, r in enumerate(rows)]
-        extended = _join(session, numbered, [p for p in compiled.parts if p.block == number],
-                         [t for t in compiled.traversals if t.block == number])
-        joined = {r.pop(_ROW) for r in extended}
-        rows = extended + [r for i, r in enumerate(rows) if i not in joined]
+        width = len(columns)
+        extended, block_columns = _join(
+            session, [r + (i,) for i, r in enumerate(rows)], columns + [_ROW],
+            [p for p in compiled.parts if p.block == number], [t for t in compiled.traversals if t.block == number])
+        joined = {r[width] for r in extended}
+        unbound = (_UNBOUND,) * (len(block_columns) - width - 1)
+        rows = [r[:width] + r[width + 1:] for r in extended] + [r + unbound for i, r in enumerate(rows) if i not in joined]
+        columns += block_columns[width + 1:]
+    return _as_matches(signature, session, rows, columns)
+
+
+def _as_matches(signature: Signature, session: MatchSession, rows: list[Row], columns: list[str]) -> list[Match]:
+    """The distinct matches the rows (over ``columns``) give, sorted by their values (None last)."""
     node_ids = list(signature.nodes)
-    fixed = {n: node.iri for n, node in signature.nodes.items() if node.iri}
-    literal_nodes = [n for n, node in signature.nodes.items() if node.literal or node.any]
-    text: dict = {}
-    seen: set[tuple] = set()
-    values: list[tuple] = []
-    literals: list[dict] = []
-    for row in rows:
-        key = tuple(
-            fixed[n] if n in fixed else None if t is None else text.get(t) or text.setdefault(t, _value(t))
-            for n, t in ((n, row.get(n)) for n in node_ids)
-        )
-        if key not in seen:
-            seen.add(key)
-            values.append(key)
-            literals.append({n: row[n] for n in literal_nodes if isinstance(row.get(n), ox.Literal)})
-    order = sorted(range(len(values)), key=lambda i: tuple((v is None, v or "") for v in values[i]))
-    return [Match(zip(node_ids, values[i]), literals=literals[i]) for i in order]
+    found = [n for n in node_ids if not signature.nodes[n].iri and n in columns]
+    others = [n for n in node_ids if n not in found]
+    constants = tuple(signature.nodes[n].iri or None for n in others)  # fixed IRIs; None: never bound
+    in_node_order = _columns([found.index(n) if n in found else len(found) + others.index(n) for n in node_ids])
+    value = session.values.__getitem__
+    distinct = dict.fromkeys(map(_columns([columns.index(n) for n in found]), rows))
+    values = [in_node_order(tuple(map(value, terms)) + constants) for terms in distinct]
+    literal_columns = [(n, i) for i, n in enumerate(found) if signature.nodes[n].literal or signature.nodes[n].any]
+    literals: dict[tuple, dict[str, ox.Literal]] = {}
+    for terms, bound in zip(distinct, values) if literal_columns else ():
+        if bound not in literals:
+            literals[bound] = {n: session.literals[terms[i]] for n, i in literal_columns if _is_literal(terms[i])}
+    nullable = {j for j in range(len(node_ids)) if None in map(itemgetter(j), values)}
+    if nullable:
+        order = sorted(set(values), key=lambda bound: tuple(
+            (v is None, v or "") if j in nullable else v for j, v in enumerate(bound)))
+    else:
+        order = sorted(set(values))
+    matches = list(map(Match, map(zip, repeat(node_ids), order)))
+    for match, bound in zip(matches, order) if literals else ():
+        if literals[bound]:
+            match.literals = literals[bound]
+    return matches
 
 
 def missing_class_report(store, signature: Signature, default_graph: Sequence[ox.NamedNode] | None) -> list[str]:

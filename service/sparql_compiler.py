@@ -141,7 +141,10 @@ class _Writer:
               blocks: list[list[PatternTriple]], block_nodes: list[set[str]]) -> list[str]:
         """``triples`` ordered outward from ``nodes[0]`` so each step joins on a bound variable,
         then the other ``nodes``' restrictions (only those in ``restricted``), then the OPTIONAL
-        ``blocks`` (each restricting its ``block_nodes``)."""
+        ``blocks`` (each restricting its ``block_nodes``). With ``subclasses`` (a matcher's part) a
+        block first repeats the restrictions of the restricted nodes it hangs on: that changes no
+        row, but Oxigraph then evaluates the block from those nodes' instances instead of from all
+        of its triples' matches (PowerMeter's part at 1M triples: 0.4 s → 0.1 s)."""
         lines: list[str] = []
         placed: set[str] = set()
 
@@ -165,6 +168,10 @@ class _Writer:
         for block, own in zip(blocks, block_nodes):
             inner: list[str] = []
             done: set[str] = set()
+            if self.subclasses is not None:  # the block starts from the nodes it hangs on: see group's docstring
+                hooks = dict.fromkeys(n for t in block for n in (t.subject, t.object) if n not in own and n in restricted)
+                for node_id in hooks:
+                    inner += self.class_restriction(node_id)
             for triple in block:
                 inner += self.triple(triple)
                 for node_id in (triple.subject, triple.object):

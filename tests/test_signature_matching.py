@@ -199,3 +199,21 @@ def test_can_appear_is_a_boolean_of_effects_only(value, kind):
         data["splice"] = {"node": "a", "input": "value_in"}
     with pytest.raises(ValueError, match="can_appear"):
         signature_from_dict(data)
+
+
+def test_typed_literals_and_blank_nodes_come_back_as_the_store_holds_them():
+    # the matcher reads Oxigraph's TSV results, which write numbers and booleans bare
+    signature = signature_from_dict({
+        "id": "Value", "modeled_nodes": ["fan"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"fan": {"classes": [X + "Fan"]}, "value": {"any": True}},
+        "triples": [{"subject": "fan", "predicate": X + "value", "object": "value"}],
+    })
+    store = _store('x:f a x:Fan ; x:value 42, -0.5, 1.5e3, true, "07"^^<http://www.w3.org/2001/XMLSchema#integer>, '
+                   '"tab\\there", [ x:label "a node" ] .')
+    held = {q.object for q in store.quads_for_pattern(None, ox.NamedNode(X + "value"), None)}
+    found = match_signature(store, signature)
+    assert {m.literals.get("value") or ox.BlankNode(m["value"][2:]) for m in found} == held
+    assert sorted(m["value"] for m in found if "value" in m.literals) == sorted(
+        t.value for t in held if isinstance(t, ox.Literal))
+    assert {t.datatype.value.rsplit("#")[-1] for t in held if isinstance(t, ox.Literal)} == {
+        "integer", "decimal", "double", "boolean", "string"}
