@@ -80,7 +80,7 @@ from .namespaces import PREFIXES
 from .resources import queries_dir, signatures_dir
 from .settings import Settings
 from .signature import load_signature_library
-from .store import EmbeddedBackend, GraphStore, ModelLoadError, bind_values, drain, rdf_format
+from .store import EmbeddedBackend, GraphStore, ModelLoadError, drain, query_bound, rdf_format
 
 __all__ = ["create_app", "ApiError", "MeasurementUploads", "query_form", "negotiate"]
 
@@ -326,6 +326,7 @@ class _Query:
     media_type: str
     default_graph: list[ox.NamedNode] | None = None
     union_default_graph: bool = False
+    substitutions: dict[str, ox.NamedNode | ox.Literal] | None = None  # a named query's parameters
 
 
 def _solutions_bytes(variables: list[str], rows: list[tuple], fmt: ox.QueryResultsFormat) -> bytes:
@@ -345,7 +346,7 @@ def _native_answer(store: ox.Store, query: _Query, max_rows: int):
     (pyoxigraph results are unsendable: dropping one on another thread raises)."""
     kwargs = {"use_default_graph_as_union": True} if query.union_default_graph else (
         {"default_graph": query.default_graph} if query.default_graph else {})
-    result = store.query(query.text, **kwargs)
+    result = query_bound(store, query.text, query.substitutions, **kwargs)
     try:
         if isinstance(result, ox.QueryBoolean):
             return bool(result)
@@ -364,7 +365,7 @@ def _execute(store: GraphStore, query: _Query, max_rows: int) -> bytes:
         answer = _native_answer(backend.store, query, max_rows)
     else:
         default_graph = backend.graphs() if query.union_default_graph else query.default_graph
-        result = backend.query(query.text, default_graph=default_graph)
+        result = backend.query(query.text, substitutions=query.substitutions, default_graph=default_graph)
         if isinstance(result, bool):
             answer = result
         elif query.form == "SELECT":
@@ -652,8 +653,9 @@ async def run_named_query(
     if dataset is not None:
         _require_model(service.store, dataset)
         default_graph = service.store.matching_dataset(dataset)
-    query = _prepare(bind_values(described["text"], bindings), request.headers.get("accept"), [], False)
-    return await _answer(service, _Query(query.text, query.form, query.media_type, default_graph))
+    query = _prepare(described["text"], request.headers.get("accept"), [], False)
+    return await _answer(service, _Query(query.text, query.form, query.media_type, default_graph,
+                                         substitutions=bindings or None))
 
 
 # ====================================================================== routes: jobs

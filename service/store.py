@@ -225,6 +225,22 @@ def bind_values(sparql: str, substitutions: Mapping[str, Term] | None) -> str:
     return sparql[: match.end()] + block + sparql[match.end():]
 
 
+def query_bound(store: ox.Store, sparql: str, substitutions: Mapping[str, Term] | None, **kwargs):
+    """``store.query`` with ``substitutions`` bound (the lazy result; read it with :func:`drain`).
+
+    Variables the query projects are bound by Oxigraph's own substitution (SEP-0007: the constant
+    replaces the variable in every pattern, so the indexes are used: 15 ms against 0.5 s for
+    ``calibrated-parameters.rq`` over 1,000 buildings' results, where a ``VALUES`` join evaluates
+    the patterns for every model first); others by :func:`bind_values`.
+    """
+    if substitutions:
+        try:
+            return store.query(sparql, substitutions={ox.Variable(k): v for k, v in substitutions.items()}, **kwargs)
+        except RuntimeError:  # a variable the query does not project: SEP-0007 cannot bind it
+            pass
+    return store.query(bind_values(sparql, substitutions), **kwargs)
+
+
 def insert_data_update(graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> str:
     """``DROP SILENT GRAPH <g>; INSERT DATA { GRAPH <g> { … } }``: one update request, one transaction."""
     body = "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in triples)
@@ -246,7 +262,7 @@ class EmbeddedBackend:
         kwargs = {}
         if default_graph is not None:
             kwargs["default_graph"] = list(default_graph)
-        return _rows(self.store.query(bind_values(sparql, substitutions), **kwargs))
+        return _rows(query_bound(self.store, sparql, substitutions, **kwargs))
 
     def update(self, sparql):
         self.store.update(sparql)
