@@ -2,7 +2,8 @@
 
 The paper's Sec. 4 (Bjørnskov, Jradi & Wetter): θ and the discrepancy hyperparameters of every target
 are sampled together from the posterior of :class:`~service.koh_likelihood.KennedyOHaganLikelihood`
-with :class:`~service.parallel_tempering.ParallelTemperingSampler`, started around a
+with :class:`~service.parallel_tempering.ParallelTemperingSampler` (differential-evolution and
+stretch moves, :func:`default_moves`), started around a
 :class:`~service.point_calibration.PointCalibrator` estimate with the shape of its Laplace covariance
 (:meth:`~service.koh_likelihood.KennedyOHaganLikelihood.initial_ensemble`; saves most of the burn-in).
 
@@ -28,6 +29,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import emcee
 import numpy as np
 from sklearn.base import BaseEstimator, clone
 from sklearn.utils import check_random_state
@@ -41,7 +43,7 @@ from .metrics import TargetMetrics, target_metrics
 from .parallel_tempering import ParallelTemperingSampler, geometric_betas
 from .point_calibration import PointCalibrator
 
-__all__ = ["BayesianCalibrator", "PosteriorPredictive"]
+__all__ = ["BayesianCalibrator", "PosteriorPredictive", "default_moves"]
 
 _DRAW_CHUNK = 8
 
@@ -90,6 +92,16 @@ class PosteriorPredictive:
         }
 
 
+def default_moves() -> list[tuple[emcee.moves.RedBlueMove, float]]:
+    """Differential evolution (Ter Braak 2006; Nelson et al. 2013) 80 % of the steps, the stretch
+    move 20 %. The KOH posterior of a building model is long and narrow along the directions the
+    data confound (a PI loop's gain and integral time, a coil's two conductances), where the stretch
+    move, scaling along a line through another walker, mixes slowly: on the case study's acceptance
+    run (29 dimensions, 60 walkers) the chain's IAT fell from 507 steps (stretch alone, not
+    converged in 6,000 steps) to 82 (converged in 1,800 steps, 6× less wall time)."""
+    return [(emcee.moves.DEMove(), 0.8), (emcee.moves.StretchMove(), 0.2)]
+
+
 class BayesianCalibrator(BaseEstimator):
     """Kennedy–O'Hagan calibration by parallel-tempering ensemble MCMC (scikit-learn style).
 
@@ -106,6 +118,8 @@ class BayesianCalibrator(BaseEstimator):
     :param hyperparameter_bounds: priors of the GP hyperparameters (default :class:`HyperparameterBounds`).
     :param max_points_per_target: measured points per target in the GP.
     :param adapt_ladder: adapt the temperatures (Vousden et al. 2016).
+    :param moves: the ensemble proposal (:class:`~service.parallel_tempering.ParallelTemperingSampler`);
+        None: :func:`default_moves`.
     :param point_calibrator: an unfitted :class:`PointCalibrator` for the start (default 2 starts).
     :param progress: show a rich progress bar.
 
@@ -132,6 +146,7 @@ class BayesianCalibrator(BaseEstimator):
         hyperparameter_bounds: HyperparameterBounds | None = None,
         max_points_per_target: int = 144,
         adapt_ladder: bool = True,
+        moves=None,
         point_calibrator: PointCalibrator | None = None,
         progress: bool = True,
     ) -> None:
@@ -147,6 +162,7 @@ class BayesianCalibrator(BaseEstimator):
         self.hyperparameter_bounds = hyperparameter_bounds
         self.max_points_per_target = max_points_per_target
         self.adapt_ladder = adapt_ladder
+        self.moves = moves
         self.point_calibrator = point_calibrator
         self.progress = progress
 
@@ -183,7 +199,8 @@ class BayesianCalibrator(BaseEstimator):
             sampler = ParallelTemperingSampler(
                 likelihood.evaluate, n_walkers, likelihood.n_dim,
                 betas=geometric_betas(self.n_temperatures, likelihood.n_dim, self.max_temperature),
-                adapt_ladder=self.adapt_ladder, random_state=rng.randint(2**31 - 1),
+                adapt_ladder=self.adapt_ladder, moves=self.moves if self.moves is not None else default_moves(),
+                random_state=rng.randint(2**31 - 1),
             )
             residual_std = {key: float(np.nanstd(start.residuals_[key])) for key in problem.target_keys}
             initial = likelihood.initial_ensemble(start.theta_, residual_std, n_walkers, rng, start.covariance_)

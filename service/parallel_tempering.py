@@ -2,8 +2,10 @@
 
 emcee 3 has no parallel tempering and ptemcee / eryn do not run on numpy 2.4, so this module stacks
 ``n_temperatures`` affine-invariant ensembles (Goodman & Weare 2010) and exchanges walkers between
-neighbouring temperatures (Earl & Deem 2005). What emcee gives is kept: the stretch proposal
-(:meth:`emcee.moves.StretchMove.get_proposal`), the chain storage of the β = 1 ensemble
+neighbouring temperatures (Earl & Deem 2005). What emcee gives is kept: its red–blue proposals
+(:meth:`emcee.moves.RedBlueMove.get_proposal`: the stretch move by default, or a weighted mixture as
+emcee's ``moves=[(move, weight), …]``, e.g. differential evolution for correlated posteriors), the
+chain storage of the β = 1 ensemble
 (:class:`emcee.backends.Backend` with :class:`emcee.State`) and the integrated autocorrelation time
 (:func:`emcee.autocorr.integrated_time`). The red–blue update is written here instead of calling
 ``EnsembleSampler`` per temperature, so that each half-step evaluates the proposals of *all*
@@ -78,7 +80,10 @@ class ParallelTemperingSampler:
     :param betas: inverse temperatures, 1 first then decreasing (default :func:`geometric_betas`).
     :param adapt_ladder: adapt the intermediate temperatures (Vousden et al. 2016).
     :param adaptation_lag: t₀; ``adaptation_time``: ν (ptemcee's defaults).
-    :param stretch_scale: the stretch move's ``a``.
+    :param stretch_scale: the stretch move's ``a`` (when ``moves`` is None).
+    :param moves: an :class:`emcee.moves.RedBlueMove` splitting the ensemble in two (stretch,
+        differential evolution, walk), or ``[(move, weight), …]`` drawn per step with probability ∝
+        weight (emcee's convention); None: the stretch move.
     :param random_state: seed, ``numpy.random.RandomState`` or None; a seeded run is reproducible.
 
     After :meth:`run`: ``backend`` (the β = 1 chain), ``betas``, ``acceptance_fraction``
@@ -96,6 +101,7 @@ class ParallelTemperingSampler:
         adaptation_lag: float = 10000.0,
         adaptation_time: float = 100.0,
         stretch_scale: float = 2.0,
+        moves: emcee.moves.RedBlueMove | list[tuple[emcee.moves.RedBlueMove, float]] | None = None,
         random_state: int | np.random.RandomState | None = None,
     ) -> None:
         if n_walkers % 2 or n_walkers < 2 * n_dim:
@@ -110,6 +116,7 @@ class ParallelTemperingSampler:
         self.adaptation_lag = adaptation_lag
         self.adaptation_time = adaptation_time
         self.stretch_scale = stretch_scale
+        self.moves = moves
         self.random_state = random_state
 
     @property
@@ -128,7 +135,10 @@ class ParallelTemperingSampler:
         return np.where(np.isfinite(log_prior) & np.isfinite(log_likelihood), value, -np.inf)
 
     def _step(self) -> np.ndarray:
-        """One red–blue stretch update of every temperature; returns ``accepted bool[T, W]``."""
+        """One red–blue update of every temperature (one move for all); returns ``accepted bool[T, W]``."""
+        move = self._moves[0] if len(self._moves) == 1 else self._moves[
+            self._random.choice(len(self._moves), p=self._move_weights)]
+        move.setup(self.coords[0])  # as emcee's RedBlueMove.propose does (DE sets its γ₀ from n_dim)
         split = np.arange(self.n_walkers) % 2
         self._random.shuffle(split)
         accepted = np.zeros((self.n_temperatures, self.n_walkers), dtype=bool)
@@ -136,7 +146,7 @@ class ParallelTemperingSampler:
             moving = np.flatnonzero(split == half)
             others = np.flatnonzero(split != half)
             proposals = [
-                self._move.get_proposal(self.coords[t, moving], [self.coords[t, others]], self._random)
+                move.get_proposal(self.coords[t, moving], [self.coords[t, others]], self._random)
                 for t in range(self.n_temperatures)
             ]
             q = np.stack([p[0] for p in proposals])
@@ -196,7 +206,17 @@ class ParallelTemperingSampler:
         :raises ValueError: for a wrong shape or a walker with zero posterior probability.
         """
         self._random = check_random_state(self.random_state)
-        self._move = emcee.moves.StretchMove(a=self.stretch_scale)
+        moves = self.moves if self.moves is not None else emcee.moves.StretchMove(a=self.stretch_scale)
+        pairs = moves if isinstance(moves, (list, tuple)) else [(moves, 1.0)]
+        self._moves = [move for move, _ in pairs]
+        weights = np.array([weight for _, weight in pairs], dtype=float)
+        if not self._moves or np.any(weights <= 0.0):
+            raise ValueError(f"moves {moves!r}: need at least one move and positive weights")
+        split_in_more = [type(m).__name__ for m in self._moves if getattr(m, "nsplits", 2) != 2]
+        if split_in_more:
+            raise ValueError(f"moves {', '.join(split_in_more)} split the ensemble in more than two; "
+                             "this sampler's red–blue update takes two-way moves (stretch, DE, walk)")
+        self._move_weights = weights / weights.sum()
         initial = np.asarray(initial, dtype=float)
         shape = (self.n_temperatures, self.n_walkers, self.n_dim)
         if initial.shape == shape[1:]:

@@ -105,3 +105,20 @@ def test_bad_set_up_is_refused():
         sampler.run(start, 10)
     with pytest.raises(ValueError, match=r"initial has shape \(3, 2\), expected \(8, 2\)"):
         sampler.run(np.zeros((3, 2)), 10)
+
+
+def test_a_differential_evolution_mixture_samples_the_same_correlated_gaussian():
+    import emcee
+
+    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.StretchMove(), 0.2)]
+    sampler = ParallelTemperingSampler(gaussian, 8, 2, betas=geometric_betas(3, 2), moves=moves, random_state=4)
+    rng = np.random.default_rng(4)
+    convergence = sampler.run(MEAN + 0.1 * rng.standard_normal((8, 2)), 5000)
+    assert convergence.converged
+    samples = sampler.backend.get_chain(discard=convergence.burn_in, thin=convergence.thin, flat=True)
+    np.testing.assert_allclose(samples.mean(axis=0), MEAN, atol=0.15)
+    np.testing.assert_allclose(np.cov(samples.T), COVARIANCE, atol=0.15)
+    with pytest.raises(ValueError, match="positive weights"):
+        ParallelTemperingSampler(gaussian, 8, 2, moves=[(emcee.moves.DEMove(), 0.0)]).run(np.zeros((8, 2)) + MEAN, 10)
+    with pytest.raises(ValueError, match="DESnookerMove split the ensemble in more than two"):
+        ParallelTemperingSampler(gaussian, 8, 2, moves=emcee.moves.DESnookerMove()).run(np.zeros((8, 2)) + MEAN, 10)
