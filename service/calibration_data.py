@@ -43,7 +43,8 @@ def series_specs(model: AssembledModel) -> dict[str, SeriesSpec]:
     specs = {}
     for component in model.boundary_inputs + model.targets:
         link = model.measurement(component)
-        specs[link.node] = SeriesSpec(link.node, link.series_id, link.unit, _device_unit(model, component))
+        specs[link.node] = SeriesSpec(link.node, link.series_id, link.unit, _device_unit(model, component),
+                                      holds_values=model.components[component].signature.holds_values)
     return specs
 
 

@@ -199,6 +199,13 @@ def calibrate_command(
     console.print(table)
     for window, metrics in record.metrics.items():
         _print_metrics(f"Metrics, {window} window", metrics)
+    _print_data_warnings(record.diagnostics.get("warnings", []))
+
+
+def _print_data_warnings(warnings: list[str]) -> None:
+    """What reading the data and assembling the model noticed (frozen points, gaps, unused columns)."""
+    for warning in warnings:
+        console.print(f"[yellow]data: {warning}[/yellow]")
 
 
 def _plot_run(outcome, path: Path) -> Path:
@@ -214,6 +221,7 @@ def _plot_run(outcome, path: Path) -> Path:
 
 
 def _print_diagnosis(report: DiagnosisReport) -> None:
+    _print_data_warnings(report.data_warnings)
     table = Table(title="Test window: model vs measurements")
     for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
         table.add_column(column)

@@ -103,6 +103,7 @@ class DiagnosisReport:
     test_timestamps: np.ndarray | None = field(default=None, repr=False)
     test_observed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     failure_ratio: float = 2.0
+    data_warnings: list[str] = field(default_factory=list)  # reading the data and assembling: frozen points, gaps
 
     @property
     def significant(self) -> list[EffectEvidence]:
@@ -117,6 +118,7 @@ class DiagnosisReport:
             "effects_tested": self.effects_tested,
             "nothing_significant_missing": not self.significant if self.effects_tested else None,
             "not_applicable": self.not_applicable, "residual_dependence": self.residual_dependence,
+            "data_warnings": self.data_warnings,
         }
 
 
@@ -444,7 +446,7 @@ def diagnose(
         regimes=regimes, regime_rule_accuracy=base.regimes.rule_accuracy, episodes=episodes,
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, base_test_prediction=predicted,
         effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice], test_observed=observed,
-        failure_ratio=failure_ratio,
+        failure_ratio=failure_ratio, data_warnings=list(base.record.diagnostics.get("warnings", [])),
     )
     report.summary = _summary(report)
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))

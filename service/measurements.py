@@ -11,7 +11,9 @@ consumes them (:mod:`service.units`).
 
 **Checks**, all reported at once in one :class:`MeasurementError` naming the column and the line:
 non-numeric cells, unparseable, duplicate or unsorted time stamps, columns missing for a boundary
-input or a target. Columns no device claims are listed in ``warnings`` (an error with ``strict``).
+input or a target. Columns no device claims are listed in ``warnings`` (an error with ``strict``),
+and so are frozen points: a sensor whose value holds exactly for 12 hours or more
+(:func:`frozen_spans`; not for devices whose signature says ``holds_values``, schedules and commands).
 
 **Regular step.** The step is the median spacing of the time stamps. An irregular file is resampled
 to that step by linear interpolation, with a warning. Gaps (missing values or missing rows) of up to
@@ -30,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .units import UnitError, convert
+from .units import UnitError, convert, unit_label
 
 __all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "write_csv",
-           "write_comparison_csv"]
+           "write_comparison_csv", "frozen_spans"]
 
 _MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
 _BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S")
@@ -52,13 +54,15 @@ class MeasurementError(ValueError):
 class SeriesSpec:
     """What the model needs from a column: the device ``node`` IRI, the names a column may carry
     (``series_id``), the QUDT ``unit`` the values are in, the ``port_unit`` the model wants, and
-    whether the model cannot run without it (``required``)."""
+    whether the model cannot run without it (``required``); ``holds_values``: it may hold one value
+    for days (a schedule, a command), so no frozen-point warning."""
 
     node: str
     series_id: str | None
     unit: str | None
     port_unit: str
     required: bool = True
+    holds_values: bool = False
 
     def names(self) -> set[str]:
         local = self.node.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
@@ -164,10 +168,12 @@ def read_measurements(
     *,
     max_gap_steps: int = 5,
     strict: bool = False,
+    frozen_after_s: float = 12 * 3600.0,
 ) -> MeasuredData:
     """Read and check a measurement CSV (see the module docstring).
 
     :param specs: node IRI → what the model needs from it.
+    :param frozen_after_s: a sensor's value held exactly for this long is reported (:func:`frozen_spans`).
     :raises MeasurementError: every problem found, with column and line.
     """
     path = Path(path)
@@ -248,6 +254,10 @@ def read_measurements(
             problems.append(str(exc))
     if problems:
         raise MeasurementError(source, problems)
+    for node, column in claimed.items():
+        if not specs[node].holds_values:
+            warnings += [f"column {header[column]!r}: {text}" for text in frozen_spans(
+                stamps, values[node], specs[node].unit or "", min_span_s=frozen_after_s)]
 
     step_s = float(np.median(np.diff(stamps).astype(np.int64)))
     regular = np.all(np.diff(stamps).astype(np.int64) == step_s)
@@ -285,6 +295,28 @@ def read_measurements(
         columns={n: header[c] for n, c in claimed.items()}, warnings=tuple(warnings),
         source_units={n: specs[n].unit for n in converted},
     )
+
+
+def frozen_spans(stamps: np.ndarray, values: np.ndarray, unit: str, *, min_span_s: float) -> list[str]:
+    """One sentence per span where ``values`` (in ``unit``, at ``stamps`` datetime64) hold exactly
+    one non-zero value for at least ``min_span_s`` seconds: a frozen point (a BMS that keeps the
+    last reading of a failed sensor or a lost connection; a live sensor's reading flickers by its
+    resolution at least). Zero is exempt: a flow or power meter reads a true zero with the fan off."""
+    finite = np.isfinite(values)
+    index = np.flatnonzero(finite)
+    if index.size < 2:
+        return []
+    kept = values[index]
+    starts = np.flatnonzero(np.r_[True, kept[1:] != kept[:-1]])
+    stops = np.r_[starts[1:], kept.size]
+    found = []
+    for start, stop in zip(starts, stops):
+        first, last = stamps[index[start]], stamps[index[stop - 1]]
+        span_s = float((last - first) / np.timedelta64(1, "s"))
+        if span_s >= min_span_s and kept[start] != 0.0:
+            found.append(f"holds {kept[start]:g} {unit_label(unit)} exactly from {str(first)[:16]} to {str(last)[:16]} "
+                         f"({span_s / 86400.0:.1f} days): a frozen point? The model takes it as measured")
+    return found
 
 
 def write_csv(path: Path, timestamps: np.ndarray, columns: Mapping[str, np.ndarray], *, decimals: int = 4) -> None:

@@ -157,6 +157,7 @@ class Signature:
     source_file: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     can_appear: bool = True  # effects: may appear from one day to the next (a fault), else a property
+    holds_values: bool = False  # measuring devices whose series may hold one value for days (schedules, commands)
 
     @property
     def iri(self) -> str:
@@ -172,7 +173,7 @@ def signature_iri(signature_id: str) -> str:
 
 _TOP_KEYS = {
     "id", "label", "comment", "kind", "model", "fmu", "complexity", "modeled_nodes", "nodes",
-    "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear",
+    "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values",
 }
 
 
@@ -307,12 +308,15 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     can_appear = data.get("can_appear", True)
     if not isinstance(can_appear, bool) or ("can_appear" in data and kind != "effect"):
         raise _fail(path, "can_appear", "effects only, true or false")
+    holds_values = data.get("holds_values", False)
+    if not isinstance(holds_values, bool) or ("holds_values" in data and kind != "component"):
+        raise _fail(path, "holds_values", "components only, true or false")
     return Signature(
         id=sig_id, label=str(data.get("label", sig_id)), kind=kind, nodes=nodes,
         triples=tuple(triples), modeled_nodes=modeled, inputs=inputs, outputs=outputs,
         parameters=tuple(parameters), model=model, fmu=fmu_path, complexity=complexity,
         comment=str(data.get("comment", "")), splice=splice, source_file=path,
-        extra=dict(data.get("extra", {})), can_appear=can_appear,
+        extra=dict(data.get("extra", {})), can_appear=can_appear, holds_values=holds_values,
     )
 
 

@@ -91,6 +91,9 @@ def test_a_winter_week_compared_fails_at_the_mixed_air_with_the_fan_off(store):
     assert "sf spd cmd ≤" in worst["rule"] and worst["share"] > 0.2, worst
     mat_episodes = report.episodes[AHU7 + "mat_sensor"]
     assert mat_episodes[0]["start"].startswith("2025-01-06T00:00"), mat_episodes[0]
+    # the data file's outdoor air temperature freezes at 70 °F from 9 January: said, for the sensor only
+    frozen = [w for w in report.data_warnings if "frozen point" in w]
+    assert len(frozen) == 1 and frozen[0].startswith("column 'OAT (°F)': holds 70 °F exactly from 2025-01-09"), frozen
 
 
 def test_the_cli_points_an_incomplete_brick_model_to_its_report(tmp_path):

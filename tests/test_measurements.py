@@ -1,5 +1,7 @@
 """The measured-data contract: time formats, column matching, units, gaps, clear errors."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -107,3 +109,26 @@ def test_comparison_csv_writes_the_files_units_and_reads_back(tmp_path):
         write_comparison_csv(out, data, {"urn:other": np.zeros(3)})
     with pytest.raises(ValueError, match=r"shape \(2,\), the data 3 steps"):
         write_comparison_csv(out, data, {"https://example.org/x#sat": np.zeros(2)})
+
+
+def test_a_frozen_sensor_is_reported_but_a_held_command_or_a_zero_is_not(tmp_path):
+    """Outdoor air frozen at 70.0 °F for two days (the school AHU's BMS did this), a valve command
+    held at 40 % and a flow meter at 0 for as long: only the sensor is reported, once, in °F."""
+    hours = np.arange(0, 96)
+    sat = 50.0 + 10.0 * np.sin(hours / 5.0)
+    sat[24:72] = 70.0
+    specs = {
+        **SPECS,
+        "https://example.org/x#valve": replace(SPECS["https://example.org/x#valve"], holds_values=True),
+        "https://example.org/x#flow": SeriesSpec("https://example.org/x#flow", None,
+                                                 "http://qudt.org/vocab/unit/M3-PER-SEC", "m3/s"),
+    }
+    rows = "\n".join(f"2026-01-{1 + h // 24:02d} {h % 24:02d}:00,{sat[h]:.3f},40,{0.0 if 24 <= h < 72 else 1.2 + 0.01 * np.sin(h):.4f}"
+                     for h in hours)
+    data = read_measurements(_write(tmp_path, f"time,SAT,valve,flow\n{rows}\n"), specs)
+    frozen = [w for w in data.warnings if "frozen" in w]
+    assert frozen == ["column 'SAT': holds 70 °F exactly from 2026-01-02T00:00 to 2026-01-03T23:00 (2.0 days): "
+                      "a frozen point? The model takes it as measured"]
+    held = replace(specs["https://example.org/x#valve"], holds_values=False)
+    assert any(w.startswith("column 'valve': holds 40 %") for w in read_measurements(
+        _write(tmp_path, f"time,SAT,valve,flow\n{rows}\n"), {**specs, held.node: held}).warnings)
