@@ -37,14 +37,15 @@ def main() -> None:
     baseline.extend(ox.Quad(t.subject, t.predicate, t.object) for t in triples)
     load_s = time.perf_counter() - start
 
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), time.process_time()
     derived = inferred_triples(triples, ontology)
-    align_s = time.perf_counter() - start
+    align_s, align_cpu_s = time.perf_counter() - start, time.process_time() - start_cpu
     fluid = sum(1 for t in derived if t.predicate.value == "https://w3id.org/fso#suppliesFluidTo")
     print(f"Brick campus: {n_units} units, {len(triples)} triples (Turtle parse {parse_s:.2f} s)")
     print(f"baseline: plain load into an in-memory store {load_s:.2f} s")
     print(f"alignment: {len(derived)} triples derived ({fluid} fso:suppliesFluidTo) in {align_s:.2f} s "
-          f"= {align_s / load_s:.1f}x the plain load; goal < 10 s: {'met' if align_s < 10 else 'NOT met'}")
+          f"(CPU {align_cpu_s:.2f} s: on a busy machine the steadier figure) = {align_s / load_s:.1f}x the plain load; "
+          f"goal < 10 s: {'met' if align_s < 10 else 'NOT met'}")
 
 
 if __name__ == "__main__":
