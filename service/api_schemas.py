@@ -11,6 +11,7 @@ from typing import Literal
 from pydantic import BaseModel, Field, field_validator
 
 from .calibration_run import parse_window
+from .operating_filter import parse_condition
 from .store import GraphStore
 
 __all__ = [
@@ -102,6 +103,16 @@ def _check_window(value: str | None) -> str | None:
     return value
 
 
+_ONLY_WHEN = ("operating conditions COLUMN OP NUMBER in the column's unit, e.g. 'SF Spd Cmd (%) > 5': the "
+              "targets are compared only where all hold (README: operating filter)")
+
+
+def _check_conditions(value: list[str]) -> list[str]:
+    for condition in value:
+        parse_condition(condition)
+    return value
+
+
 class AssembleRequest(_ModelRequest):
     pass
 
@@ -112,8 +123,10 @@ class CalibrateRequest(_ModelRequest):
     test: str | None = Field(default=None, description="test window START/END")
     method: Literal["point", "bayes"] = "point"
     seed: int = 0
+    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
 
     _windows = field_validator("train", "test")(_check_window)
+    _conditions = field_validator("only_when")(_check_conditions)
 
 
 class DiagnoseRequest(_ModelRequest):
@@ -121,8 +134,10 @@ class DiagnoseRequest(_ModelRequest):
     train: str = Field(description="training window START/END")
     test: str = Field(description="test window START/END")
     seed: int = 0
+    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
 
     _windows = field_validator("train", "test")(_check_window)
+    _conditions = field_validator("only_when")(_check_conditions)
 
 
 class AddEffectRequest(_ModelRequest):

@@ -81,6 +81,9 @@ class ModelData:
     model: AssembledModel
     data: MeasuredData
     substeps: int = 1
+    #: ``ndarray[n_steps]`` of bool: the steps where targets are compared (an operating filter,
+    #: :mod:`service.operating_filter`); None: every step.
+    compared: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         check_mapped_parameters(self.model)
@@ -100,8 +103,9 @@ class ModelData:
     def observed(self, window: slice) -> dict[str, np.ndarray]:
         """Target node → observed series in ``window``: NaN where not measured, and NaN where a
         boundary input is missing (a gap longer than the interpolation limit: the simulator holds
-        the input's last value there, so the model is not compared with the measurement)."""
-        inputs_measured = np.ones(self.data.n_steps, dtype=bool)[window]
+        the input's last value there, so the model is not compared with the measurement), and
+        NaN outside the operating filter (``compared``)."""
+        inputs_measured = (np.ones(self.data.n_steps, dtype=bool) if self.compared is None else self.compared)[window]
         for component in self.model.boundary_inputs:
             inputs_measured &= np.isfinite(self.data.series[self.node_of[component]][window])
         return {self.node_of[c]: np.where(inputs_measured, self.data.series[self.node_of[c]][window], np.nan)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import os
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -32,6 +32,7 @@ from .calibration_data import ModelData, read_model_data
 from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
 from .metrics import TargetMetrics, target_metrics
+from .operating_filter import operating_mask
 from .point_calibration import PointCalibrator
 from .regime_breakdown import RegimeBreakdown, regime_breakdown
 from .simulator import loop_substeps
@@ -137,8 +138,12 @@ def calibrate(
     bayes_settings: dict | None = None,
     progress: bool = False,
     on_progress: Callable[[dict], None] | None = None,
+    only_when: Sequence[str] = (),
 ) -> CalibrationOutcome:
     """Calibrate ``model_name`` against the CSV at ``data_path`` and store the run.
+
+    :param only_when: operating conditions (``"SF Spd Cmd (%) > 5"``, :mod:`service.operating_filter`):
+        the targets are compared only at the steps where all hold.
 
     :raises ValueError: a bad window, a target without measurements, NaN-only series, an unknown
         method; nothing is written to the store then.
@@ -150,12 +155,14 @@ def calibrate(
     model = assemble(store, model_name)
     data = read_model_data(model, data_path)
     substeps = substeps or loop_substeps(model, data.step_s)
-    md = ModelData(model, data, substeps)
+    md = ModelData(model, data, substeps, operating_mask(data, only_when) if only_when else None)
     train_slice = data.window(*train)
     test_slice = data.window(*test) if test is not None else None
     problem = md.problem(train_slice)
     n_par = problem.n_parameters
     settings = {"substeps": substeps, "step_s": data.step_s}
+    if only_when:
+        settings["only_when"] = list(only_when)
     diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes)}
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None

@@ -48,6 +48,9 @@ MemoryOption = Annotated[bool, typer.Option("--memory", help="Use a throw-away i
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")]
 NameOption = Annotated[str | None, typer.Option("--name", help="Model name in the store (default: from the file name).")]
 SeedOption = Annotated[int, typer.Option("--seed", help="Random seed (runs are reproducible).")]
+OnlyWhenOption = Annotated[list[str] | None, typer.Option(
+    "--only-when", help="Compare only at steps where COLUMN OP NUMBER holds, in the column's unit "
+                        "(e.g. 'SF Spd Cmd (%) > 5'); repeat for several (all must hold).")]
 USER_ERRORS = (ModelLoadError, AssemblyError, SignatureError, MeasurementError, FileNotFoundError, ValueError, KeyError)
 
 
@@ -170,6 +173,7 @@ def calibrate_command(
     name: NameOption = None,
     seed: SeedOption = 0,
     plots: Annotated[Path | None, typer.Option(help="Folder for measured-vs-model plots.")] = None,
+    only_when: OnlyWhenOption = None,
     as_json: JsonOption = False,
     store: StoreOption = Path("graphtwin-data"),
     memory: MemoryOption = False,
@@ -180,7 +184,7 @@ def calibrate_command(
         model_name = _load(graph_store, model, name)
         outcome = calibrate(graph_store, model_name, data, train=parse_window(train),
                             test=parse_window(test) if test else None, method=method, seed=seed,
-                            progress=not as_json)
+                            progress=not as_json, only_when=only_when or ())
     except USER_ERRORS as exc:
         raise fail(str(exc)) from None
     record = outcome.record
@@ -320,12 +324,13 @@ def _save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
     ]
 
 
-def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects) -> None:
+def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects,
+                  only_when) -> None:
     graph_store = open_store(store, memory)
     try:
         model_name = _load(graph_store, model, name)
         report = diagnose(graph_store, model_name, data, train=parse_window(train), test=parse_window(test),
-                          seed=seed, rank_effects=rank_effects,
+                          seed=seed, rank_effects=rank_effects, only_when=only_when or (),
                           on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
     except USER_ERRORS as exc:
         raise fail(str(exc)) from None
@@ -351,10 +356,12 @@ def _diagnosis_command(rank_effects: bool, doc: str):
         seed: SeedOption = 0,
         as_json: JsonOption = False,
         plots: PlotsOption = Path("graphtwin-plots"),
+        only_when: OnlyWhenOption = None,
         store: StoreOption = Path("graphtwin-data"),
         memory: MemoryOption = False,
     ) -> None:
-        _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=rank_effects)
+        _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=rank_effects,
+                      only_when=only_when)
 
     command.__doc__ = doc
     return command

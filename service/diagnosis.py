@@ -33,7 +33,7 @@ The result, :class:`DiagnosisReport`, prints as the CLI contract's JSON and is w
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -372,14 +372,17 @@ def diagnose(
     workers: int | None = None,
     on_progress: Callable[[str], None] | None = None,
     rank_effects: bool = True,
+    only_when: Sequence[str] = (),
 ) -> DiagnosisReport:
     """Calibrate on ``train``, compare on ``test``, locate the failures and rank the missing effects
     (``rank_effects=False``: compare and locate only, ``graphtwin compare``; the failing sensors'
-    residual dependence is then always reported)."""
+    residual dependence is then always reported). ``only_when``: operating conditions, the targets
+    compared only where all hold (:mod:`service.operating_filter`)."""
     say = on_progress or (lambda message: None)
     library = library or load_signature_library(signatures_dir())
     say("calibrating the base model")
-    base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps)
+    base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps,
+                     only_when=only_when)
     md, model = base.model_data, base.model
     substeps = md.substeps
     data = md.data
@@ -407,8 +410,9 @@ def diagnose(
     localization = [dict(loc.to_dict(), text=loc.describe()) for loc in locations]
 
     regimes = base.regimes.rows()
-    scaled = [np.nanmean([r["rmse"][k] / sensors[k]["noise"] for k in r["rmse"]]) if r["share"] > 0 else np.nan
-              for r in regimes]
+    scaled = [np.array([r["rmse"][k] / sensors[k]["noise"] for k in r["rmse"]]) for r in regimes]
+    scaled = [float(np.nanmean(s)) if r["share"] > 0 and np.isfinite(s).any() else np.nan
+              for r, s in zip(regimes, scaled)]
     for row in regimes:
         row["worst"] = False
     if np.isfinite(scaled).any():

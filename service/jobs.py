@@ -637,20 +637,20 @@ def _result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:
 
 
 def calibrate_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
-    """``{"model", "measurements", "train", "test", "method", "seed"}`` (windows as ``START/END``):
+    """``{"model", "measurements", "train", "test", "method", "seed", "only_when"}`` (windows as ``START/END``):
     :func:`service.calibration_run.calibrate` on the uploaded CSV ``context.measurements(id)``."""
     model = params["model"]
     data = context.measurements(params["measurements"])
     context.report(f"calibrating ({params.get('method', 'point')})")
     outcome = calibrate(store, model, data, train=parse_window(params.get("train") or "/"),
                         test=_window(params.get("test")), method=params.get("method", "point"),
-                        seed=int(params.get("seed", 0)))
+                        seed=int(params.get("seed", 0)), only_when=params.get("only_when") or ())
     context.report("calibrated; writing the run")
     return JobResult(outcome.record.to_dict(), _result_links(store, model, outcome.record.run_id))
 
 
 def diagnose_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
-    """``{"model", "measurements", "train", "test", "seed"}``: :func:`service.diagnosis.diagnose`,
+    """``{"model", "measurements", "train", "test", "seed", "only_when"}``: :func:`service.diagnosis.diagnose`,
     its phases reported as progress (a cancel stops it at the next phase). One worker process: the
     job already runs beside the server's other work (or in a pool process, or on a Dask worker)."""
     from .diagnosis import diagnose  # the effect catalog machinery loads only when a diagnosis runs
@@ -658,7 +658,8 @@ def diagnose_job(store: GraphStore, params: dict, context: JobContext) -> JobRes
     model = params["model"]
     data = context.measurements(params["measurements"])
     report = diagnose(store, model, data, train=parse_window(params["train"]), test=parse_window(params["test"]),
-                      seed=int(params.get("seed", 0)), on_progress=context.report, workers=1)
+                      seed=int(params.get("seed", 0)), on_progress=context.report, workers=1,
+                      only_when=params.get("only_when") or ())
     links = _result_links(store, model, report.run_id)
     links["diagnosis_graph"] = store.run_graph(f"{report.run_id}-diagnosis").value
     return JobResult(report.to_dict(), links)

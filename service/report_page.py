@@ -50,6 +50,7 @@ from .calibration_triples import run_iri
 from .error_history import error_history
 from .flow_path_localization import FlowTopology
 from .namespaces import GTR
+from .operating_filter import operating_mask
 from .store import GraphStore
 from .units import unit_label
 
@@ -276,7 +277,8 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
                          "its series cannot be recomputed")
     model = assemble(store, run.model)
     data = read_model_data(model, data_path)
-    md = ModelData(model, data, int(run.settings["substeps"]))
+    only_when = run.settings.get("only_when", [])
+    md = ModelData(model, data, int(run.settings["substeps"]), operating_mask(data, only_when) if only_when else None)
     missing = [ref.key for ref in model.estimated_parameters if ref.key not in run.estimates]
     if missing:
         raise ValueError(f"run {run.run_id} stores no estimate of {', '.join(missing)}")

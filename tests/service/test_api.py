@@ -282,6 +282,9 @@ def test_job_requests_for_unknown_things_are_refused(client, auth, case_csv):
     effect = client.post("/jobs/add-effect", json={"model": "case", "effect": "Nope", "target": EX + "supply_fan"}, headers=auth)
     assert effect.status_code == 422 and "FanMotorHeat" in effect.json()["detail"]
     assert client.post("/jobs/diagnose", json={"model": "case", "measurements": upload, "train": "/"}, headers=auth).status_code == 422
+    condition = client.post("/jobs/calibrate", headers=auth, json={
+        "model": "case", "measurements": upload, "only_when": ["fan speed = 1"]})
+    assert condition.status_code == 422 and "expected COLUMN OP NUMBER" in condition.json()["detail"]
     assert client.get("/jobs").json()["count"] == 0
 
 
@@ -365,7 +368,8 @@ def test_concurrent_queries_during_a_calibration_never_see_half_a_run(client, au
     upload = _upload_csv(client, auth, case_csv.read_text()).json()["id"]
     n_estimates = len(assemble(store, "case").estimated_parameters)
     job = client.post("/jobs/calibrate", headers=auth, json={
-        "model": "case", "measurements": upload, "train": "/2026-01-12T15:50", "test": "2026-01-12T16:00/"}).json()
+        "model": "case", "measurements": upload, "train": "/2026-01-12T15:50", "test": "2026-01-12T16:00/",
+        "only_when": ["supply_air_flow > 0"]}).json()
     done = threading.Event()
     statuses, seen = [], []
     lock = threading.Lock()
@@ -393,6 +397,7 @@ def test_concurrent_queries_during_a_calibration_never_see_half_a_run(client, au
         for thread in threads:
             thread.join(30)
     assert finished["status"] == "succeeded", finished
+    assert finished["result"]["settings"]["only_when"] == ["supply_air_flow > 0"]  # the filter is the run's provenance
     assert len(statuses) >= 40 and set(statuses) == {200}
     assert seen and all(pair == (1, n_estimates) for pair in seen), set(seen)
     parameters = _rows(client.get("/queries/calibrated-parameters", params={"model": "case"}))
