@@ -164,6 +164,7 @@ class _CandidateJob:
     train_theta: dict[str, float] = field(default_factory=dict)
     train_unidentified: frozenset[str] = frozenset()
     onset_windows: tuple[list[slice], slice] | None = None
+    compared: np.ndarray | None = None  # the operating filter's steps (ModelData.compared)
 
 
 def _split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]:
@@ -297,7 +298,7 @@ def _host_columns(job: _CandidateJob) -> list[int]:
 
 def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    md = ModelData(job.model, job.data, job.substeps)
+    md = ModelData(job.model, job.data, job.substeps, job.compared)
     refs = job.model.estimated_parameters
     effect_columns = [j for j, r in enumerate(refs) if r.key not in job.base_theta]
     theta0 = np.array([job.base_theta.get(r.key, np.nan) for r in refs])
@@ -479,7 +480,7 @@ def _rank_catalog(store, model_name, library, base, *, seed, refit_max_nfev, wor
     jobs = [
         _CandidateJob(signature, node, cand_model, data, substeps, fit_windows, run_window, evaluation, base_theta,
                       2.0 * refit.cost_, fraction, scales, base_evaluation, seed, refit_max_nfev, train_theta,
-                      unidentified, ([train_slice], slice(test_slice.start, evaluation.start)))
+                      unidentified, ([train_slice], slice(test_slice.start, evaluation.start)), md.compared)
         for signature, node, cand_model in candidates
     ]
     workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
