@@ -98,9 +98,11 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
     rows = 2 if rules else 1
     fig, axes = plt.subplots(rows, len(sensors), figsize=(2.8 * len(sensors), 3.2 * rows), squeeze=False)
     colours = plt.get_cmap("tab10")
+    base = versions[0].split("+", 1)[0]
+    ticks = [("base" if v == base else v.removeprefix(base)).replace("+", "\n+").strip("\n") for v in versions]
     for ax, sensor in zip(axes[0], sensors):
         ax.bar(range(len(versions)), history.rmse[sensor], color=[colours(i) for i in range(len(versions))])
-        ax.set_xticks(range(len(versions)), [v.replace("+", "\n+") for v in versions], fontsize=7)
+        ax.set_xticks(range(len(versions)), ticks, fontsize=7)
         ax.set_title(_short(sensor), fontsize=8)
         ax.set_ylabel(f"test RMSE [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
     if rules:
@@ -112,8 +114,9 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
                        color=colours(i), label=version)
             ax.set_xticks(range(len(rules)), [f"regime {j}" for j in range(len(rules))], fontsize=7)
             ax.set_ylabel(f"RMSE per regime [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
-        axes[1][0].legend(fontsize=7)
-    fig.tight_layout()
+        handles, labels = axes[1][0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.05 if rules else 0, 1, 1))
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
