@@ -207,7 +207,8 @@ def _components(nodes: list[str], triples: list[PatternTriple]) -> list[list[str
     return list(groups.values())
 
 
-def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[str]] | None = None) -> CompiledQuery:
+def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[str]] | None = None,
+                      instance_counts: Mapping[str, int] | None = None) -> CompiledQuery:
     """Compile ``signature``'s pattern (see the module docstring).
 
     :param subclasses: the subclasses of each class the signature names, as read from the store
@@ -215,6 +216,10 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
         by ``rdf:type`` over that list, which Oxigraph answers from its index, where the
         ``rdf:type/rdfs:subClassOf*`` path is evaluated row by row (100x slower on a campus). The
         whole query (:attr:`CompiledQuery.text`) keeps the path.
+    :param instance_counts: node id → how many instances its classes have (an estimate will do):
+        each part's query then starts from its restricted node with the fewest, as Oxigraph
+        evaluates a group's triples in the written order (MixingBox's outdoor-sensor part at 1M
+        triples: 0.25 s from the 40k temperature sensors, 0.03 s from the 3k ``outdoors``).
     :raises ValueError: a class, predicate or fixed IRI is not a valid IRI (named in the message).
     """
     writer = _Writer(signature)
@@ -268,7 +273,8 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
             parts.append(QueryPart((component[0],), None, node.classes))
             continue
         bound = component + [n for b in mine for n in order if n in owns[b]]
-        lines = part_writer.group(triples, component, set(component), [blocks[b] for b in mine], [owns[b] for b in mine])
+        lines = part_writer.group(triples, _fewest_first(component, set(component), instance_counts), set(component),
+                                  [blocks[b] for b in mine], [owns[b] for b in mine])
         parts.append(QueryPart(tuple(n for n in bound if not signature.nodes[n].iri),
                                writer.select(bound, lines, f"signature {signature.id}: part {len(parts) + 1}")))
     for number, index in enumerate(matcher_blocks):
@@ -281,7 +287,8 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
             if not triples and len(component) == 1 and node.classes:
                 parts.append(QueryPart((component[0],), None, node.classes, number))
                 continue
-            lines = part_writer.group(triples, component, set(component) & owns[index], [], [])
+            restricted = set(component) & owns[index]
+            lines = part_writer.group(triples, _fewest_first(component, restricted, instance_counts), restricted, [], [])
             parts.append(QueryPart(tuple(n for n in component if not signature.nodes[n].iri),
                                    writer.select(component, lines, f"signature {signature.id}: part {len(parts) + 1}"),
                                    block=number))
@@ -295,6 +302,16 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
         signature.id, text, variables, tuple(traversals), tuple(parts),
         tuple(tuple(n for n in order if n in owns[index]) for index in matcher_blocks),
     )
+
+
+def _fewest_first(nodes: list[str], restricted: set[str], instance_counts: Mapping[str, int] | None) -> list[str]:
+    """``nodes`` with the restricted one of fewest instances first (the earliest on a tie; ``nodes``
+    unchanged without counts): the node a part's query starts from."""
+    counted = [n for n in nodes if n in restricted and instance_counts and n in instance_counts]
+    if not counted:
+        return nodes
+    start = min(counted, key=instance_counts.__getitem__)
+    return [start] + [n for n in nodes if n != start]
 
 
 def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -> Traversal:

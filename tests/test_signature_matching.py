@@ -217,3 +217,19 @@ def test_typed_literals_and_blank_nodes_come_back_as_the_store_holds_them():
         t.value for t in held if isinstance(t, ox.Literal))
     assert {t.datatype.value.rsplit("#")[-1] for t in held if isinstance(t, ox.Literal)} == {
         "integer", "decimal", "double", "boolean", "string"}
+
+
+def test_a_part_query_starts_from_its_node_with_fewest_instances():
+    # Oxigraph evaluates a part's triples in the written order: from the one room, not the three sensors
+    signature = signature_from_dict({
+        "id": "InRoom", "modeled_nodes": ["sensor"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"sensor": {"classes": [X + "Sensor"]}, "room": {"classes": [X + "Room"]}},
+        "triples": [{"subject": "sensor", "predicate": X + "in", "object": "room"}],
+    })
+    store = _store("x:s1 a x:Sensor ; x:in x:r . x:s2 a x:Sensor ; x:in x:r . x:s3 a x:Sensor . x:r a x:Room .")
+    session = MatchSession(store)
+    [part] = session.compiled(signature).parts
+    assert next(line.strip() for line in part.text.splitlines() if line.strip().startswith("?")) == (
+        "?room rdf:type ?room__class .")
+    assert session.compiled(signature).text == compile_signature(signature).text
+    assert _pairs(match_signature(store, signature, session=session), "room", "sensor") == [("r", "s1"), ("r", "s2")]
