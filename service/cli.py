@@ -374,6 +374,38 @@ app.command("compare")(_diagnosis_command(
            "without testing the effect catalog: the diagnosis' first two steps, in seconds."))
 
 
+@app.command("compare-strategies")
+def compare_strategies_command(
+    model: Annotated[Path, typer.Argument(help="Building model file.")],
+    data: Annotated[Path, typer.Argument(help="Measurement CSV.")],
+    train: Annotated[str, typer.Option(help="Training window START/END.")] = "/",
+    test: Annotated[str | None, typer.Option(help="Test window START/END.")] = None,
+    folds: Annotated[int, typer.Option(help="Held-out blocks of the training window for cross-validation.")] = 3,
+    name: NameOption = None,
+    seed: SeedOption = 0,
+    as_json: JsonOption = False,
+    store: StoreOption = Path("graphtwin-data"),
+    memory: MemoryOption = False,
+) -> None:
+    """Joint against successive (regime by regime, Morris-planned) point calibration on TRAIN: RMSE
+    and R² per operating regime and a blocked cross-validation, so you see which converges better.
+    Nothing is written to the store."""
+    from .successive_calibration import compare_calibration_strategies
+
+    graph_store = open_store(store, memory)
+    try:
+        model_name = _load(graph_store, model, name)
+        comparison = compare_calibration_strategies(graph_store, model_name, data, train=parse_window(train),
+                                                    test=parse_window(test) if test else None, n_folds=folds,
+                                                    seed=seed)
+    except USER_ERRORS as exc:
+        raise fail(str(exc)) from None
+    if as_json:
+        console.print_json(json.dumps(comparison.to_dict(), default=str))
+        return
+    console.print(comparison.table(), markup=False, highlight=False)
+
+
 @app.command("add-effect")
 def add_effect_command(
     model: Annotated[Path, typer.Argument(help="Building model file.")],

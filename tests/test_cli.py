@@ -107,3 +107,20 @@ def test_compare_locates_a_hidden_leak_without_testing_the_catalog_and_saves_its
     pngs = sorted(plots.glob("*.png"))
     assert [p.name.rsplit("-", 1)[1] for p in pngs] == ["residuals.png", "test.png"]
     assert all(imread(p).shape[0] > 200 for p in pngs)
+
+
+def test_compare_strategies_prints_both_fits_per_regime_and_their_cross_validation(tmp_path):
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "--seed", "1",
+                               "-o", str(data)]).exit_code == 0
+    result = runner.invoke(app, ["compare-strategies", str(CASE_STUDY), str(data), "--folds", "2", "--memory", "--json"])
+    assert result.exit_code == 0, result.output
+    comparison = json.loads(result.output)
+    assert set(comparison["strategies"]) == {"joint", "successive"} and comparison["better"] in (
+        "joint", "successive", "tie")
+    assert all(len(s["cv"]) == 2 for s in comparison["strategies"].values())
+    assert comparison["plan"] and comparison["rules"]
+    text = runner.invoke(app, ["compare-strategies", str(CASE_STUDY), str(data), "--folds", "2", "--memory"])
+    assert text.exit_code == 0 and "better on held-out data:" in text.output and "joint | successive" in text.output
+    short = runner.invoke(app, ["compare-strategies", str(CASE_STUDY), str(data), "--folds", "30", "--memory"])
+    assert short.exit_code == 2 and "30 folds" in short.output
