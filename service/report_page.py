@@ -635,6 +635,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
     facts = "".join(f"<dt>{html.escape(k)}</dt><dd>{html.escape(v)}</dd>" for k, v in [
         ("model", f"{run.model} (version {run.version})"), ("method", run.method), ("data", run.data_source),
         *[(f"{name} window", f"{start} – {end}") for name, (start, end) in windows],
+        *([("compared only where", " and ".join(run.settings["only_when"]))] if run.settings.get("only_when") else []),
         ("finished", run.ended), ("run graph", store.run_graph(run.run_id).value),
         ("diagnosis", diagnosis.iri if diagnosis else "none"),
     ])

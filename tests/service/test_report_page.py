@@ -368,3 +368,13 @@ def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_version
     assert imread(plot).shape[0] > imread(plot).shape[1] / len(history.rmse)  # two rows of panels
     missing = CliRunner().invoke(cli, ["history", "nothing", "--store", str(folder)])
     assert missing.exit_code == 2 and "no calibration with a test window" in missing.output
+
+
+def test_a_run_with_an_operating_filter_says_so_and_reproduces_its_metrics(case):
+    run = calibrate(case.store, "case", case.data, train=TRAIN, test=TEST, seed=0,
+                    only_when=["supply_air_flow > 0.9"])
+    page = report_html(case.store, run.record.run_id, locate_data=data_file_locator(case.data))
+    assert "<dt>compared only where</dt><dd>supply_air_flow &gt; 0.9</dd>" in page
+    series = recompute_series(case.store, read_run(case.store, run.record.run_id), case.data)
+    for sensor, metrics in run.record.metrics["test"].items():  # the filtered steps are left out again
+        assert series.rmse[sensor] == pytest.approx(metrics.rmse, rel=1e-6), sensor
