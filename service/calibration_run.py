@@ -155,7 +155,7 @@ def calibrate(
     model = assemble(store, model_name)
     data = read_model_data(model, data_path)
     substeps = substeps or loop_substeps(model, data.step_s)
-    md = ModelData(model, data, substeps, operating_mask(data, only_when) if only_when else None)
+    md = ModelData(model, data, substeps, operating_mask(data, only_when))
     train_slice = data.window(*train)
     test_slice = data.window(*test) if test is not None else None
     problem = md.problem(train_slice)

@@ -113,17 +113,10 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
                 value = getattr(metrics, attribute)
                 if not math.isfinite(value):
                     continue
-                node = ox.NamedNode(f"{run.value}/metric/{window}/{_local(sensor)}/{attribute}")
-                t += [
-                    ox.Triple(node, RDF.type, GT.Metric),
-                    ox.Triple(node, PROV.wasGeneratedBy, run),
-                    ox.Triple(node, GT.onSensor, ox.NamedNode(sensor)),
-                    ox.Triple(node, GT.window, ox.Literal(window)),
-                    ox.Triple(node, GT.metricName, ox.Literal(attribute)),
-                    ox.Triple(node, GT.value, _double(value)),
-                    ox.Triple(node, GT.unit, ox.Literal("%" if attribute.endswith("percent") else
-                                                         "1" if attribute in ("r2", "lag1_autocorrelation") else metrics.unit)),
-                ]
+                unit = ("%" if attribute.endswith("percent") else
+                        "1" if attribute in ("r2", "lag1_autocorrelation") else metrics.unit)
+                t += _metric_triples(ox.NamedNode(f"{run.value}/metric/{window}/{_local(sensor)}/{attribute}"),
+                                     run, sensor, window, attribute, value, unit)
     units = {sensor: m.unit for sensor, m in record.metrics.get("test", {}).items()}
     for row in record.regimes:
         regime = ox.NamedNode(f"{run.value}/regime/{row['regime']}")
@@ -135,11 +128,23 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
             if not math.isfinite(value):
                 continue
             node = ox.NamedNode(f"{run.value}/metric/test/{_local(sensor)}/rmse/regime/{row['regime']}")
-            t += [ox.Triple(node, RDF.type, GT.Metric), ox.Triple(node, PROV.wasGeneratedBy, run),
-                  ox.Triple(node, GT.onSensor, ox.NamedNode(sensor)), ox.Triple(node, GT.window, ox.Literal("test")),
-                  ox.Triple(node, GT.metricName, ox.Literal("rmse")), ox.Triple(node, GT.value, _double(value)),
-                  ox.Triple(node, GT.unit, ox.Literal(units.get(sensor, ""))), ox.Triple(node, GT.inRegime, regime)]
+            t += _metric_triples(node, run, sensor, "test", "rmse", value, units.get(sensor, ""))
+            t.append(ox.Triple(node, GT.inRegime, regime))
     return t
+
+
+def _metric_triples(node: ox.NamedNode, run: ox.NamedNode, sensor: str, window: str, name: str, value: float,
+                    unit: str) -> list[ox.Triple]:
+    """One gt:Metric: ``name`` = ``value`` [``unit``] of ``sensor`` on ``window``, made by ``run``."""
+    return [
+        ox.Triple(node, RDF.type, GT.Metric),
+        ox.Triple(node, PROV.wasGeneratedBy, run),
+        ox.Triple(node, GT.onSensor, ox.NamedNode(sensor)),
+        ox.Triple(node, GT.window, ox.Literal(window)),
+        ox.Triple(node, GT.metricName, ox.Literal(name)),
+        ox.Triple(node, GT.value, _double(value)),
+        ox.Triple(node, GT.unit, ox.Literal(unit)),
+    ]
 
 
 def _component_slug(iri: str) -> str:

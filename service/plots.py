@@ -32,6 +32,11 @@ def _save_time_panels(fig, axes, path: Path, title: str, legend_columns: int) ->
         axes[0, 0].set_title(title)
     fig.autofmt_xdate()
     fig.tight_layout()
+    return _save(fig, path)
+
+
+def _save(fig, path: Path) -> Path:
+    """``fig`` as a PNG at ``path``, closed."""
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -117,7 +122,4 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
         handles, labels = axes[1][0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.05 if rules else 0, 1, 1))
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)

@@ -24,11 +24,21 @@ from .calibration_data import ModelData
 from .operating_regimes import OperatingRegimes, per_regime_metrics
 from .units import unit_label
 
-__all__ = ["RegimeBreakdown", "regime_breakdown"]
+__all__ = ["RegimeBreakdown", "regime_breakdown", "fit_boundary_regimes"]
 
 
-def _short(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+def fit_boundary_regimes(md: ModelData, window: slice, *, seed: int = 0,
+                         **options) -> tuple[OperatingRegimes, np.ndarray]:
+    """:class:`OperatingRegimes` fitted on ``md``'s boundary inputs over ``window`` (named by the
+    device's local name, in the data's units; ``options`` go to the estimator), and those inputs
+    over the whole data, ``ndarray[n_data_steps, n_inputs]``, to label any steps with."""
+    data = md.data
+    nodes = [md.node_of[c] for c in md.model.boundary_inputs]
+    features = np.column_stack([data.series[n] for n in nodes])
+    names = [n.replace("#", "/").rsplit("/", 1)[-1].replace("_", " ") for n in nodes]
+    regimes = OperatingRegimes(random_state=seed, **options).fit(
+        features[window], names, feature_units=[unit_label(data.units[n]) for n in nodes], step_s=data.step_s)
+    return regimes, features
 
 
 def _rmse(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -39,13 +49,12 @@ def _rmse(y: np.ndarray, yhat: np.ndarray) -> float:
 class RegimeBreakdown:
     """``rules[i]``, ``shares[i]`` (of the test window's labelled steps) and ``rmse[i]`` (target node
     → RMSE in its unit) of regime ``i``; ``rule_accuracy`` is the rule tree's cross-validated
-    accuracy; ``labels`` the regime of every test step (−1: not labelled)."""
+    accuracy."""
 
     rules: list[str]
     shares: list[float]
     rmse: list[dict[str, float]]
     rule_accuracy: float
-    labels: np.ndarray
 
     def rows(self) -> list[dict]:
         """One dict per regime: ``{"regime", "rule", "share", "rmse": {node: value}}``."""
@@ -60,14 +69,8 @@ def regime_breakdown(md: ModelData, test: slice, observed: Mapping[str, np.ndarr
     :param observed: target node → ``ndarray[n_test]`` measured (NaN: not compared).
     :param predicted: target node → ``ndarray[n_test]`` model prediction on the same steps.
     """
-    data = md.data
-    nodes = [md.node_of[c] for c in md.model.boundary_inputs]
-    signals = np.column_stack([data.series[n] for n in nodes])
-    regimes = OperatingRegimes(random_state=seed).fit(
-        signals, [_short(n).replace("_", " ") for n in nodes],
-        feature_units=[unit_label(data.units[n]) for n in nodes], step_s=data.step_s,
-    )
-    labels = regimes.predict(signals[test])
+    regimes, features = fit_boundary_regimes(md, slice(None), seed=seed)
+    labels = regimes.predict(features[test])
     labelled = labels >= 0
     shares = [float(np.mean(labels[labelled] == r)) if labelled.any() else 0.0 for r in range(regimes.n_regimes_)]
     rmse: list[dict[str, float]] = [{} for _ in range(regimes.n_regimes_)]
@@ -75,4 +78,4 @@ def regime_breakdown(md: ModelData, test: slice, observed: Mapping[str, np.ndarr
         for row in per_regime_metrics(labels, observed[node], predicted[node], {"rmse": _rmse},
                                       n_regimes=regimes.n_regimes_):
             rmse[row["regime"]][node] = row["rmse"]
-    return RegimeBreakdown(list(regimes.rules_), shares, rmse, float(regimes.rule_accuracy_), labels)
+    return RegimeBreakdown(list(regimes.rules_), shares, rmse, float(regimes.rule_accuracy_))

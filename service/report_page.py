@@ -277,8 +277,7 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
                          "its series cannot be recomputed")
     model = assemble(store, run.model)
     data = read_model_data(model, data_path)
-    only_when = run.settings.get("only_when", [])
-    md = ModelData(model, data, int(run.settings["substeps"]), operating_mask(data, only_when) if only_when else None)
+    md = ModelData(model, data, int(run.settings["substeps"]), operating_mask(data, run.settings.get("only_when", [])))
     missing = [ref.key for ref in model.estimated_parameters if ref.key not in run.estimates]
     if missing:
         raise ValueError(f"run {run.run_id} stores no estimate of {', '.join(missing)}")

@@ -46,6 +46,7 @@ from .calibration_run import Window, predict_test
 from .metrics import target_metrics
 from .operating_regimes import OperatingRegimes, per_regime_metrics
 from .point_calibration import PointCalibrator
+from .regime_breakdown import fit_boundary_regimes
 from .regime_sensitivity import RegimeSensitivity, calibration_morris_by_regime, successive_calibration_plan
 from .simulator import loop_substeps
 from .store import GraphStore
@@ -219,12 +220,7 @@ def boundary_regimes(model_data: ModelData, window: slice, *, seed: int = 0,
     """Operating regimes from the model's boundary inputs on ``window`` (names and units as
     the diagnosis uses them), and their labels for every step of the data (−1 where an input is
     missing). ``options`` go to :class:`OperatingRegimes`."""
-    data = model_data.data
-    nodes = [model_data.node_of[c] for c in model_data.model.boundary_inputs]
-    features = np.column_stack([data.series[n] for n in nodes])
-    names = [n.replace("#", "/").rsplit("/", 1)[-1].replace("_", " ") for n in nodes]
-    regimes = OperatingRegimes(random_state=seed, **options).fit(
-        features[window], names, feature_units=[unit_label(data.units[n]) for n in nodes], step_s=data.step_s)
+    regimes, features = fit_boundary_regimes(model_data, window, seed=seed, **options)
     return regimes, regimes.predict(features)
 
 
