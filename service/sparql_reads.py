@@ -1,0 +1,184 @@
+"""Which triples a SPARQL query can read: the predicates of its patterns and the objects each can
+take, so that a rule engine re-runs a query only when a triple it could match was added
+(:func:`service.alignment.inferred_triples`).
+
+The answer over-approximates and never misses: a predicate given by a variable or a negated property
+set reads every triple; a pattern reads the objects it can take — the IRI or literal it names, or the
+constants a variable is restricted to by a ``VALUES`` block or a ``FILTER(?v IN (…))`` conjunct of its
+own group or an enclosing one (``?x a ?class`` with ``VALUES ?class {…}`` reads those classes only);
+a ``VALUES`` row with ``UNDEF``, a variable no group restricts, and a predicate inside a property path
+read any object. Restrictions reach nested groups (``OPTIONAL``, ``UNION``, ``MINUS``, ``EXISTS``),
+whose rows are joined with or substituted by the group's, but not sub-selects, whose variables are
+their own. Subjects are not looked at. Queries are parsed with rdflib's SPARQL parser (parsing only;
+Oxigraph evaluates them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from functools import lru_cache
+
+from rdflib import Literal, URIRef, Variable
+from rdflib.paths import AlternativePath, InvPath, MulPath, NegatedPath, Path, SequencePath
+from rdflib.plugins.sparql import prepareQuery
+from rdflib.plugins.sparql.parserutils import CompValue
+
+__all__ = ["QueryReads", "query_reads"]
+
+#: variable → the constants it is restricted to (no entry: unrestricted).
+_Restrictions = Mapping[Variable, frozenset[URIRef | Literal]]
+
+
+@dataclass(frozen=True)
+class QueryReads:
+    """The triples a query can match: for each predicate it names, the objects its patterns can take
+    (``None``: any object); ``any_predicate`` when a pattern's predicate is open."""
+
+    objects: Mapping[str, frozenset[str] | None]
+    any_predicate: bool = False
+
+    def may_read(self, added: Mapping[str, Iterable[str]]) -> bool:
+        """Whether any of the triples ``added`` (predicate IRI → the IRIs or lexical forms of their
+        objects) can take part in the query's answer."""
+        if self.any_predicate:
+            return bool(added)
+        for predicate, objects in added.items():
+            if predicate in self.objects:
+                read = self.objects[predicate]
+                if read is None or not read.isdisjoint(objects):
+                    return True
+        return False
+
+
+@lru_cache(maxsize=None)
+def query_reads(text: str) -> QueryReads:
+    """What the SPARQL query ``text`` can read (module docstring).
+
+    :raises pyparsing.ParseException: when ``text`` is not SPARQL rdflib can parse.
+    """
+    collector = _Collector()
+    collector.walk(prepareQuery(text).algebra["p"], {})
+    objects = {p: None if o is None else frozenset(o) for p, o in collector.objects.items()}
+    return QueryReads(objects, collector.any_predicate)
+
+
+class _Collector:
+    def __init__(self) -> None:
+        self.objects: dict[str, set[str] | None] = {}
+        self.any_predicate = False
+
+    def _read(self, predicate: str, objects: Iterable[str] | None) -> None:
+        if predicate in self.objects and self.objects[predicate] is None:
+            return
+        if objects is None:
+            self.objects[predicate] = None
+        else:
+            self.objects.setdefault(predicate, set()).update(objects)
+
+    def walk(self, node: object, inherited: _Restrictions) -> None:
+        if isinstance(node, list | tuple):
+            for item in node:
+                self.walk(item, inherited)
+            return
+        if not isinstance(node, CompValue):
+            return
+        if node.name in ("Project", "SelectQuery", "SubSelect") and inherited:
+            projected = set(node.get("PV") or ())
+            inherited = {v: c for v, c in inherited.items() if v in projected}
+        restrictions = _merge(inherited, _provided(node))
+        if node.name == "BGP":
+            for triple in node["triples"]:
+                self._pattern(triple, restrictions)
+        for key, child in node.items():
+            if node.name == "LeftJoin" and key == "p2":
+                # OPTIONAL { P FILTER(e) }: rdflib makes e the left join's condition
+                self.walk(child, _merge(restrictions, _in_conjuncts(node.get("expr"))))
+                continue
+            if key in ("graph", "_evalfn"):
+                # (NOT) EXISTS: rdflib keeps the translated pattern as an attribute, the parse tree
+                # (without its filters) as the item
+                child = vars(node).get(key, child)
+            if key not in ("_vars", "triples", "_evalfn"):
+                self.walk(child, restrictions)
+
+    def _pattern(self, triple: Iterable, restrictions: _Restrictions) -> None:
+        _subject, predicate, obj = triple
+        if isinstance(predicate, Variable):
+            self.any_predicate = True
+        elif isinstance(predicate, Path):
+            self._path(predicate)
+        elif isinstance(obj, URIRef | Literal):
+            self._read(str(predicate), [str(obj)])
+        elif isinstance(obj, Variable) and obj in restrictions:
+            self._read(str(predicate), [str(c) for c in restrictions[obj]])
+        else:
+            self._read(str(predicate), None)
+
+    def _path(self, path: Path | URIRef) -> None:
+        """A property path reads any object of each predicate in it."""
+        if isinstance(path, NegatedPath):
+            self.any_predicate = True
+        elif isinstance(path, SequencePath | AlternativePath):
+            for arg in path.args:
+                self._path(arg)
+        elif isinstance(path, InvPath):
+            self._path(path.arg)
+        elif isinstance(path, MulPath):
+            self._path(path.path)
+        elif isinstance(path, URIRef):
+            self._read(str(path), None)
+        else:
+            self.any_predicate = True
+
+
+def _merge(outer: _Restrictions, inner: _Restrictions) -> _Restrictions:
+    """Both restrictions hold: intersect where both restrict a variable."""
+    merged = dict(outer)
+    for var, constants in inner.items():
+        merged[var] = merged[var] & constants if var in merged else constants
+    return merged
+
+
+def _provided(node: CompValue) -> _Restrictions:
+    """Restrictions that hold on every row of ``node``: its ``VALUES`` tables and ``IN`` filter
+    conjuncts, through joins, the left side of ``OPTIONAL``/``MINUS``, and both sides of ``UNION``."""
+    name = node.name
+    if name == "ToMultiSet" and node["p"].name == "values":
+        return _values_table([row for row in node["p"]["res"]])
+    if name == "Join":
+        return _merge(_provided(node["p1"]), _provided(node["p2"]))
+    if name in ("LeftJoin", "Minus"):
+        return _provided(node["p1"])
+    if name == "Union":
+        left, right = _provided(node["p1"]), _provided(node["p2"])
+        return {v: left[v] | right[v] for v in left.keys() & right.keys()}
+    if name == "Filter":
+        return _merge(_provided(node["p"]), _in_conjuncts(node["expr"]))
+    if name in ("Extend", "Distinct", "Reduced", "OrderBy", "Slice"):
+        return _provided(node["p"])
+    return {}
+
+
+def _values_table(rows: list[Mapping[Variable, object]]) -> _Restrictions:
+    """The variables every row binds to a constant, with the constants (a row with ``UNDEF`` frees its variable)."""
+    if not rows:
+        return {}
+    variables = set.intersection(*(set(row) for row in rows))
+    return {v: frozenset(row[v] for row in rows) for v in variables
+            if all(isinstance(row[v], URIRef | Literal) for row in rows)}
+
+
+def _in_conjuncts(expr: object) -> _Restrictions:
+    """``?v IN (constant, …)`` conjuncts of a filter expression."""
+    if not isinstance(expr, CompValue):
+        return {}
+    if expr.name == "ConditionalAndExpression":
+        restrictions = _in_conjuncts(expr["expr"])
+        for other in expr.get("other") or ():
+            restrictions = _merge(restrictions, _in_conjuncts(other))
+        return restrictions
+    if (expr.name == "RelationalExpression" and expr.get("op") == "IN" and isinstance(expr["expr"], Variable)
+            and all(isinstance(c, URIRef | Literal) for c in expr["other"])):
+        return {expr["expr"]: frozenset(expr["other"])}
+    return {}

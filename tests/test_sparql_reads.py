@@ -1,0 +1,60 @@
+"""What a SPARQL query can read (service.sparql_reads): the over-approximation the alignment rules'
+scheduler relies on — it may say "reads" too often, never too rarely."""
+
+import pytest
+
+from service.sparql_reads import QueryReads, query_reads
+
+RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
+EX = "http://example.org/"
+PREFIX = f"PREFIX ex: <{EX}> "
+
+
+def reads(where: str) -> QueryReads:
+    return query_reads(PREFIX + "CONSTRUCT { ?x ex:out ?y } WHERE { " + where + " }")
+
+
+def typed(*classes: str) -> dict[str, set[str]]:
+    return {RDF_TYPE: {EX + c for c in classes}}
+
+
+def test_a_class_named_or_restricted_by_values_or_in_is_all_a_type_pattern_reads():
+    for where in ("?x a ex:A", "?x a ?c . VALUES ?c { ex:A ex:B }", "?x a ?c . FILTER(?c IN (ex:A, ex:B) && BOUND(?x))"):
+        r = reads(where)
+        assert r.may_read(typed("A")) and not r.may_read(typed("C")), where
+        assert not r.may_read({EX + "p": {EX + "A"}}), where
+
+
+@pytest.mark.parametrize("where", [
+    "?x a ?c",
+    "?x a ?c . VALUES ?c { ex:A UNDEF }",  # UNDEF frees the variable
+    "{ ?x a ?c . VALUES ?c { ex:A } } UNION { ?y a ?c }",  # a branch's VALUES does not bind the other branch
+    "?x a ?c . FILTER(?c IN (ex:A) || BOUND(?y))",  # a disjunction restricts nothing
+    "?x a ?c . VALUES ?c { ex:A } { SELECT ?x WHERE { ?x a ?c } }",  # a sub-select's ?c is its own
+    "?x a/ex:p ?c",  # rdf:type inside a path reads any class
+])
+def test_an_unrestricted_class_reads_every_class(where):
+    assert reads(where).may_read(typed("C"))
+
+
+def test_restrictions_reach_nested_groups_and_filters_inside_them_count():
+    assert not reads("VALUES ?c { ex:A } ?x ex:p ?y . FILTER NOT EXISTS { ?y a ?c }").may_read(typed("C"))
+    assert not reads("?x ex:p ?y . FILTER EXISTS { ?y a ?c . FILTER(?c IN (ex:A)) }").may_read(typed("C"))
+    assert not reads("?x ex:p ?y . OPTIONAL { ?y a ?c . FILTER(?c IN (ex:A)) }").may_read(typed("C"))
+    assert not reads("?x ex:p ?y . MINUS { ?y a ?c . VALUES ?c { ex:A } }").may_read(typed("C"))
+    assert reads("?x ex:p ?y . OPTIONAL { ?y a ?c . FILTER(?c IN (ex:A)) }").may_read(typed("A"))
+
+
+def test_literal_objects_restrict_like_iris():
+    r = reads('VALUES ?rule { "02.rq" "03.rq" } ?x ex:derivedBy ?rule')
+    assert r.may_read({EX + "derivedBy": {"03.rq"}})
+    assert not r.may_read({EX + "derivedBy": {"04.rq"}})
+
+
+def test_predicates_in_paths_read_any_object_and_open_predicates_read_everything():
+    r = reads("?x (ex:p|^ex:q)+/ex:r ?y")
+    assert all(r.may_read({EX + p: {EX + "anything"}}) for p in "pqr")
+    assert not r.may_read({EX + "s": {EX + "anything"}})
+    for where in ("?x ?p ?y", "?x !(ex:p) ?y"):
+        assert reads(where).may_read({EX + "s": {EX + "anything"}}), where
+    assert not reads("?x ?p ?y").may_read({})  # nothing added, nothing to read
