@@ -26,18 +26,11 @@ import os
 
 import numpy as np
 import pytest
-from case_study import CASE_STUDY, EX
+from case_study import EX
+from case_study_truth import STRUCTURALLY_UNIDENTIFIABLE, CaseStudyTruth, identifiable
 
-from service.assembly import assemble
-from service.bayesian_calibration import BayesianCalibrator
-from service.calibration_data import ModelData, read_model_data
-from service.calibration_run import continuation, fit_point
+from service.calibration_run import fit_point
 from service.metrics import target_metrics
-from service.resources import signatures_dir
-from service.signature import load_signature_library
-from service.simulator import loop_substeps
-from service.store import GraphStore
-from service.synthetic_data import generate_synthetic_data
 
 #: The Bayesian runs go to convergence (20 × IAT) on the real case study: minutes each on one core,
 #: beyond the CI budget; they run when GRAPHTWIN_ACCEPTANCE=1 (the point-calibration checks always run).
@@ -45,54 +38,6 @@ bayesian_acceptance = pytest.mark.skipif(
     os.environ.get("GRAPHTWIN_ACCEPTANCE") != "1",
     reason="Bayesian case-study acceptance runs PT-MCMC to convergence (minutes per run): set GRAPHTWIN_ACCEPTANCE=1",
 )
-TRAIN = ("2026-01-12", "2026-01-12T23:59")
-TEST = ("2026-01-13", None)
-#: Settings of the Bayesian runs: ``graphtwin calibrate --method bayes`` (4 temperatures, 60 walkers,
-#: IAT checked every 100 steps, the default moves), capped at 6,000 steps (they converge in about
-#: 2,000: 3–4 minutes each on one core).
-BAYES = dict(n_temperatures=4, max_steps=6000, check_interval=100, random_state=0, progress=False)
-STRUCTURALLY_UNIDENTIFIABLE = ("supply_fan#c1", "supply_fan#c2", "supply_fan#c3", "supply_fan#c4",
-                               "heating_coil_air_side#loop_flow_coefficient")
-
-
-class CaseStudyTruth:
-    """Synthetic data of the case study (optionally with a hidden effect), the model bound to it,
-    the training problem and the continuation problem (training start to test end)."""
-
-    def __init__(self, folder, hidden_effect: str | None = None):
-        store = GraphStore.embedded(None)
-        store.load_model("case", CASE_STUDY)
-        path = folder / f"case-{hidden_effect}.csv"
-        self.truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
-                                             seed=3, n_days=2.0, hidden_effect=hidden_effect)
-        model = assemble(store, "case")
-        data = read_model_data(model, path)
-        self.md = ModelData(model, data, loop_substeps(model, data.step_s))
-        self.train = data.window(*TRAIN)
-        self.test = data.window(*TEST)
-        self.problem = self.md.problem(self.train)
-        self.names = self.problem.parameter_names
-        self.true_theta = np.array([self.truth.theta.get(k, np.nan) for k in self.names])
-
-    def short(self, key: str) -> str:
-        return key.rsplit("/", 1)[-1]
-
-    def bayes(self) -> tuple[BayesianCalibrator, dict]:
-        """Bayesian fit on the training day and test-window metrics of its posterior predictive."""
-        fit = BayesianCalibrator(**BAYES).fit(self.problem)
-        joined = continuation(self.train, self.test)
-        offset = self.test.start - joined.start
-        predictive = fit.predict(self.md.problem(joined, target_scales=self.problem.target_scales, warmup_s=0.0))
-        observed = self.md.observed(self.test)
-        metrics = {
-            node: target_metrics(
-                observed[node], predictive.median[node][offset:], n_parameters=self.problem.n_parameters,
-                intervals={level: tuple(b[offset:] for b in predictive.interval(node, level)) for level in (0.68, 0.9)},
-                unit=self.problem.units[node], target=node,
-            )
-            for node in observed
-        }
-        return fit, metrics
 
 
 @pytest.fixture(scope="module")
@@ -115,14 +60,6 @@ def exact_bayes(exact):
 def fan_heat(tmp_path_factory):
     """The truth has fan motor heat in the air stream (f = 0.8, about 1 K); the model lacks it."""
     return CaseStudyTruth(tmp_path_factory.mktemp("fan_heat"), hidden_effect="FanMotorHeat")
-
-
-def identifiable(point, problem) -> list[int]:
-    """Indices of the parameters the point fit identifies to within ±5 % (95 % interval; module docstring)."""
-    return [
-        j for j, name in enumerate(problem.parameter_names)
-        if point.identifiability_[name].identified and 1.96 * point.standard_errors_[j] <= 0.05 * abs(point.theta_[j])
-    ]
 
 
 def test_point_calibration_recovers_the_identifiable_parameters_within_5_percent(exact, exact_point):

@@ -1,0 +1,76 @@
+"""The ventilation case study with a known truth (issue 4's acceptance): synthetic data, the model
+bound to it, training and test windows, the Bayesian fit and its test-window metrics. Shared by
+``test_bayesian_acceptance.py`` and ``coverage_study.py``."""
+
+from __future__ import annotations
+
+import numpy as np
+from case_study import CASE_STUDY
+
+from service.assembly import assemble
+from service.bayesian_calibration import BayesianCalibrator
+from service.calibration_data import ModelData, read_model_data
+from service.calibration_run import continuation
+from service.metrics import target_metrics
+from service.resources import signatures_dir
+from service.signature import load_signature_library
+from service.simulator import loop_substeps
+from service.store import GraphStore
+from service.synthetic_data import generate_synthetic_data
+
+TRAIN = ("2026-01-12", "2026-01-12T23:59")
+TEST = ("2026-01-13", None)
+#: Settings of the Bayesian runs: ``graphtwin calibrate --method bayes`` (4 temperatures, 60 walkers,
+#: IAT checked every 100 steps, the default moves), capped at 6,000 steps (they converge in about
+#: 2,000: 3–4 minutes each on one core).
+BAYES = dict(n_temperatures=4, max_steps=6000, check_interval=100, random_state=0, progress=False)
+STRUCTURALLY_UNIDENTIFIABLE = ("supply_fan#c1", "supply_fan#c2", "supply_fan#c3", "supply_fan#c4",
+                               "heating_coil_air_side#loop_flow_coefficient")
+
+
+class CaseStudyTruth:
+    """Synthetic data of the case study (optionally with a hidden effect), the model bound to it,
+    the training problem and the continuation problem (training start to test end)."""
+
+    def __init__(self, folder, hidden_effect: str | None = None, seed: int = 3):
+        store = GraphStore.embedded(None)
+        store.load_model("case", CASE_STUDY)
+        path = folder / f"case-{hidden_effect}-{seed}.csv"
+        self.truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
+                                             seed=seed, n_days=2.0, hidden_effect=hidden_effect)
+        model = assemble(store, "case")
+        data = read_model_data(model, path)
+        self.md = ModelData(model, data, loop_substeps(model, data.step_s))
+        self.train = data.window(*TRAIN)
+        self.test = data.window(*TEST)
+        self.problem = self.md.problem(self.train)
+        self.names = self.problem.parameter_names
+        self.true_theta = np.array([self.truth.theta.get(k, np.nan) for k in self.names])
+
+    def short(self, key: str) -> str:
+        return key.rsplit("/", 1)[-1]
+
+    def bayes(self) -> tuple[BayesianCalibrator, dict]:
+        """Bayesian fit on the training day and test-window metrics of its posterior predictive."""
+        fit = BayesianCalibrator(**BAYES).fit(self.problem)
+        joined = continuation(self.train, self.test)
+        offset = self.test.start - joined.start
+        predictive = fit.predict(self.md.problem(joined, target_scales=self.problem.target_scales, warmup_s=0.0))
+        observed = self.md.observed(self.test)
+        metrics = {
+            node: target_metrics(
+                observed[node], predictive.median[node][offset:], n_parameters=self.problem.n_parameters,
+                intervals={level: tuple(b[offset:] for b in predictive.interval(node, level)) for level in (0.68, 0.9)},
+                unit=self.problem.units[node], target=node,
+            )
+            for node in observed
+        }
+        return fit, metrics
+
+
+def identifiable(point, problem) -> list[int]:
+    """Indices of the parameters the point fit identifies to within ±5 % (95 % interval; module docstring)."""
+    return [
+        j for j, name in enumerate(problem.parameter_names)
+        if point.identifiability_[name].identified and 1.96 * point.standard_errors_[j] <= 0.05 * abs(point.theta_[j])
+    ]
