@@ -19,7 +19,7 @@ from brick_campus import campus_turtle, units_for_triples
 
 from service.alignment import inferred_triples
 from service.resources import ontologies_dir
-from service.store import parse_rdf
+from service.store import parse_rdf, skolemize
 
 
 def main() -> None:
@@ -28,9 +28,11 @@ def main() -> None:
     args = parser.parse_args()
     n_units = units_for_triples(args.triples)
     start = time.perf_counter()
-    triples = parse_rdf(campus_turtle(n_units).encode(), ox.RdfFormat.TURTLE, "campus")
+    # blank nodes (the time-series references) become IRIs first, as GraphStore.load_model does
+    triples = skolemize(parse_rdf(campus_turtle(n_units).encode(), ox.RdfFormat.TURTLE, "campus"), "urn:campus/genid/")
     parse_s = time.perf_counter() - start
-    ontology = [t for p in sorted(ontologies_dir().glob("*.ttl")) for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))]
+    ontology = skolemize([t for p in sorted(ontologies_dir().glob("*.ttl"))
+                          for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))], "urn:ontology/genid/")
 
     start = time.perf_counter()
     baseline = ox.Store()
@@ -41,7 +43,7 @@ def main() -> None:
     derived = inferred_triples(triples, ontology)
     align_s, align_cpu_s = time.perf_counter() - start, time.process_time() - start_cpu
     fluid = sum(1 for t in derived if t.predicate.value == "https://w3id.org/fso#suppliesFluidTo")
-    print(f"Brick campus: {n_units} units, {len(triples)} triples (Turtle parse {parse_s:.2f} s)")
+    print(f"Brick campus: {n_units} units, {len(triples)} triples (Turtle parse and blank nodes to IRIs {parse_s:.2f} s)")
     print(f"baseline: plain load into an in-memory store {load_s:.2f} s")
     print(f"alignment: {len(derived)} triples derived ({fluid} fso:suppliesFluidTo) in {align_s:.2f} s "
           f"(CPU {align_cpu_s:.2f} s: on a busy machine the steadier figure) = {align_s / load_s:.1f}x the plain load; "
