@@ -1,11 +1,12 @@
 """Synthetic measurements from a known truth, optionally with an effect the base model lacks.
 
-The truth is the assembled case-study model plus (optionally) one effect from the catalog at one
+The truth is the assembled model (the case study, or any model) plus (optionally) one catalog effect at one
 building node, with parameters drawn reproducibly inside the priors: each estimated parameter is
 moved from its default 25 % of the way towards a seeded random bound (a truth the calibration must
 find, not the defaults it starts from), and the hidden effect's parameters take the values its
 signature gives under ``[extra.synthetic_truth]`` (strong enough to matter, physically plausible).
-The simulation runs on :func:`service.synthetic_operation.case_study_operation` boundary inputs;
+The simulation runs on :func:`service.synthetic_operation.case_study_operation` boundary inputs, or
+on the boundary inputs of a measurement file (real operation, a known truth: semi-synthetic data);
 Gaussian measurement noise is added to every target: 0.1 K on temperatures, 0.005 on positions,
 1 % of the mean on powers and flows (the accuracy of good building-automation sensors). Columns
 are written in each device's declared unit and named by its ``gt:timeSeriesId``.
@@ -13,13 +14,14 @@ are written in each device's declared unit and named by its ``gt:timeSeriesId``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .assembly import EffectRequest, assemble
-from .calibration_data import _device_unit
+from .calibration_data import _device_unit, read_model_data
 from .measurements import write_csv
 from .signature import Signature
 from .simulator import Simulator, loop_substeps
@@ -64,11 +66,15 @@ def applicable_nodes(store: GraphStore, model_name: str, signature: Signature) -
     return usable
 
 
-def _truth_theta(model, effect: Signature | None, rng: np.random.Generator) -> np.ndarray:
+def _truth_theta(model, effect: Signature | None, rng: np.random.Generator, given: Mapping[str, float]) -> np.ndarray:
     values = []
     truth = (effect.extra.get("synthetic_truth", {}) if effect is not None else {})
     for ref in model.estimated_parameters:
         spec = ref.spec
+        if ref.key in given:
+            values.append(float(given[ref.key]))
+            rng.random()  # the same draws for the others whatever is given
+            continue
         if effect is not None and f"/{effect.id}/" in ref.component and spec.name in truth:
             values.append(float(truth[spec.name]))
             continue
@@ -89,11 +95,19 @@ def generate_synthetic_data(
     n_days: float = 7.0,
     step_s: float = 600.0,
     substeps: int | None = None,
+    operation: Path | str | None = None,
+    truth: Mapping[str, float] | None = None,
 ) -> SyntheticTruth:
     """Write a measurement CSV for ``model_name`` (columns named by the devices' time-series ids).
 
     :param hidden_effect: effect signature id hidden in the truth; None for a truth without one.
     :param node: where to put it (the first applicable node when None).
+    :param operation: a measurement CSV of the model whose boundary inputs drive the truth (real
+        operation: its time grid and its boundary columns as measured; ``n_days`` and ``step_s`` are
+        then the file's). None: the case study's synthetic operation
+        (:func:`service.synthetic_operation.case_study_operation`), after a day's warm-up.
+    :param truth: parameter key → its value in the truth (a calibration's estimates, say); the
+        others are drawn as the module docstring says.
     :raises ValueError: an unknown effect, or one that does not apply to the model.
     """
     effect = None
@@ -113,16 +127,21 @@ def generate_synthetic_data(
         requests = [EffectRequest(hidden_effect, node)]
     model = assemble(store, model_name, library=library, extra_effects=requests)
     rng = np.random.default_rng(seed)
-    theta = _truth_theta(model, effect, rng)
-    warmup = int(round(WARMUP_S / step_s))
-    operation = case_study_operation(n_days=n_days + WARMUP_S / 86400.0, step_s=step_s, seed=seed,
-                                     start=str(np.datetime64(START) - np.timedelta64(int(WARMUP_S), "s")))
-    boundary = {}
-    for component in model.boundary_inputs:
-        link = model.measurement(component)
-        if link.series_id not in operation.series:
-            raise ValueError(f"the synthetic operation has no series for {link.node} ({link.series_id})")
-        boundary[component] = operation.series[link.series_id]
+    theta = _truth_theta(model, effect, rng, truth or {})
+    if operation is None:
+        warmup = int(round(WARMUP_S / step_s))
+        synthetic = case_study_operation(n_days=n_days + WARMUP_S / 86400.0, step_s=step_s, seed=seed,
+                                         start=str(np.datetime64(START) - np.timedelta64(int(WARMUP_S), "s")))
+        timestamps, boundary = synthetic.timestamps, {}
+        for component in model.boundary_inputs:
+            link = model.measurement(component)
+            if link.series_id not in synthetic.series:
+                raise ValueError(f"the synthetic operation has no series for {link.node} ({link.series_id})")
+            boundary[component] = synthetic.series[link.series_id]
+    else:
+        measured = read_model_data(model, operation)
+        warmup, timestamps, step_s = 0, measured.timestamps, measured.step_s
+        boundary = {c: measured.series[model.measurement(c).node] for c in model.boundary_inputs}
     result = Simulator(model, step_s, substeps or loop_substeps(model, step_s)).run(boundary, theta[None, :])
     boundary = {c: v[warmup:] for c, v in boundary.items()}
     columns = {}
@@ -132,10 +151,10 @@ def generate_synthetic_data(
         values = boundary.get(component)
         if values is None:
             clean = result.target(component)[0][warmup:]
-            sigma = NOISE_STD.get(unit, _RELATIVE_NOISE * float(np.mean(np.abs(clean))))
+            sigma = NOISE_STD.get(unit, _RELATIVE_NOISE * float(np.nanmean(np.abs(clean))))
             values = clean + rng.normal(0.0, sigma, clean.size)
         columns[link.series_id] = convert(values, unit, link.unit, where=link.node)
-    write_csv(output, operation.timestamps[warmup:], columns)
+    write_csv(output, timestamps[warmup:], columns)
     return SyntheticTruth(
         theta={ref.key: float(v) for ref, v in zip(model.estimated_parameters, theta)},
         effect=hidden_effect, node=node, path=Path(output),

@@ -1,8 +1,10 @@
-"""Mixing box: outdoor-air fraction 0 and 1, the damper characteristic, clipping."""
+"""Mixing box: outdoor-air fraction 0 and 1, the damper characteristic, clipping; the effect of a
+recirculated flow that does not follow the supply fan."""
 
 import numpy as np
 import pytest
 
+from service.effects.return_flow_off_fan_speed import ReturnFlowOffFanSpeed
 from service.mixing_box import MixingBox
 
 
@@ -41,3 +43,20 @@ def test_mixed_air_lies_between_the_two_streams(run_model):
                                         "outdoor_damper_position": rng.uniform(-0.1, 1.1, n)})[0]
     mixed = out["mixed_air_temperature"]
     assert np.all((mixed >= np.minimum(outdoor, ret) - 1e-12) & (mixed <= np.maximum(outdoor, ret) + 1e-12))
+
+
+def test_a_recirculated_flow_that_ignores_the_fan_speed_is_a_mass_balance(run_model, params_for):
+    """ReturnFlowOffFanSpeed at β = 1 is the mixing of a fixed recirculated flow into a supply flow
+    that scales with the fan: at full speed the damper law's fraction x, at speed s a recirculated
+    share (1 − x)/s; at β = 0 the base model; below x' = 0 the mixed air is the return air."""
+    x, ret, outdoor, nominal_kg_s = 0.3, 21.0, -2.0, 2.0
+    speed = np.array([1.0, 0.8, 0.5, 0.2])
+    supply, recirculated = speed * nominal_kg_s, (1 - x) * nominal_kg_s * np.ones(4)
+    by_mass_balance = np.where(recirculated < supply, (recirculated * ret + (supply - recirculated) * outdoor) / supply, ret)
+    inputs = {"value_in": np.full(4, ret + x * (outdoor - ret)), "outdoor_air_temperature": np.full(4, outdoor),
+              "return_air_temperature": np.full(4, ret), "fan_speed": speed}
+    fixed = run_model(ReturnFlowOffFanSpeed, params_for(ReturnFlowOffFanSpeed, n=4, recirculation_speed_exponent=1.0), inputs)[0]
+    np.testing.assert_allclose(fixed["value_out"], by_mass_balance, rtol=1e-12)
+    assert by_mass_balance[-1] == ret  # at 20 % speed the fixed recirculated flow exceeds the supply: no outdoor air
+    null = run_model(ReturnFlowOffFanSpeed, params_for(ReturnFlowOffFanSpeed, n=4, which="null"), inputs)[0]
+    np.testing.assert_array_equal(null["value_out"], inputs["value_in"])
