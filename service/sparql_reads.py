@@ -6,8 +6,8 @@ The answer over-approximates and never misses: a predicate given by a variable o
 set reads every triple; a pattern reads the objects it can take — the IRI or literal it names, or the
 constants a variable is restricted to by a ``VALUES`` block or a ``FILTER(?v IN (…))`` conjunct of its
 own group or an enclosing one (``?x a ?class`` with ``VALUES ?class {…}`` reads those classes only);
-a ``VALUES`` row with ``UNDEF``, a variable no group restricts, and a predicate inside a property path
-read any object. Restrictions reach nested groups (``OPTIONAL``, ``UNION``, ``MINUS``, ``EXISTS``),
+a ``VALUES`` row with ``UNDEF``, a variable no group restricts, a number (whose text is not canonical),
+and a predicate inside a property path read any object. Restrictions reach nested groups (``OPTIONAL``, ``UNION``, ``MINUS``, ``EXISTS``),
 whose rows are joined with or substituted by the group's, but not sub-selects, whose variables are
 their own. Subjects are not looked at. Queries are parsed with rdflib's SPARQL parser (parsing only;
 Oxigraph evaluates them).
@@ -19,7 +19,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 
-from rdflib import Literal, URIRef, Variable
+from rdflib import XSD, Literal, URIRef, Variable
 from rdflib.paths import AlternativePath, InvPath, MulPath, NegatedPath, Path, SequencePath
 from rdflib.plugins.sparql import prepareQuery
 from rdflib.plugins.sparql.parserutils import CompValue
@@ -108,7 +108,7 @@ class _Collector:
             self.any_predicate = True
         elif isinstance(predicate, Path):
             self._path(predicate)
-        elif isinstance(obj, URIRef | Literal):
+        elif _constant(obj):
             self._read(str(predicate), [str(obj)])
         elif isinstance(obj, Variable) and obj in restrictions:
             self._read(str(predicate), [str(c) for c in restrictions[obj]])
@@ -165,8 +165,7 @@ def _values_table(rows: list[Mapping[Variable, object]]) -> _Restrictions:
     if not rows:
         return {}
     variables = set.intersection(*(set(row) for row in rows))
-    return {v: frozenset(row[v] for row in rows) for v in variables
-            if all(isinstance(row[v], URIRef | Literal) for row in rows)}
+    return {v: frozenset(row[v] for row in rows) for v in variables if all(_constant(row[v]) for row in rows)}
 
 
 def _in_conjuncts(expr: object) -> _Restrictions:
@@ -179,6 +178,12 @@ def _in_conjuncts(expr: object) -> _Restrictions:
             restrictions = _merge(restrictions, _in_conjuncts(other))
         return restrictions
     if (expr.name == "RelationalExpression" and expr.get("op") == "IN" and isinstance(expr["expr"], Variable)
-            and all(isinstance(c, URIRef | Literal) for c in expr["other"])):
+            and all(_constant(c) for c in expr["other"])):
         return {expr["expr"]: frozenset(expr["other"])}
     return {}
+
+
+def _constant(term: object) -> bool:
+    """Whether a term restricts an object by its text: an IRI or a string literal (a number's text
+    is not canonical — ``1.0`` and ``1.00`` are one value — so it restricts nothing)."""
+    return isinstance(term, URIRef) or (isinstance(term, Literal) and term.datatype in (None, XSD.string))

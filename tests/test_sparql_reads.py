@@ -45,10 +45,12 @@ def test_restrictions_reach_nested_groups_and_filters_inside_them_count():
     assert reads("?x ex:p ?y . OPTIONAL { ?y a ?c . FILTER(?c IN (ex:A)) }").may_read(typed("A"))
 
 
-def test_literal_objects_restrict_like_iris():
+def test_string_literals_restrict_like_iris_but_numbers_do_not():
     r = reads('VALUES ?rule { "02.rq" "03.rq" } ?x ex:derivedBy ?rule')
     assert r.may_read({EX + "derivedBy": {"03.rq"}})
     assert not r.may_read({EX + "derivedBy": {"04.rq"}})
+    assert reads("?x ex:value 1.0").may_read({EX + "value": {"1.00"}})  # the same number, other text
+    assert reads("VALUES ?v { 1 2 } ?x ex:value ?v").may_read({EX + "value": {"01"}})
 
 
 def test_predicates_in_paths_read_any_object_and_open_predicates_read_everything():
