@@ -1,10 +1,12 @@
 """Alignment: canonical SAREF/FSO triples from v3 or v4 spellings, inferred device classes."""
 
 import pyoxigraph as ox
+import pytest
 
 from case_study import EX
 
 from service.namespaces import GT, RDF
+import service.alignment
 from service.alignment import inferred_triples
 from service.store import ONTOLOGY_GRAPH, GraphStore
 
@@ -77,3 +79,17 @@ def test_the_inferred_graph_holds_only_new_triples_and_is_a_fixpoint(case_store)
     ontology = case_store.graph_triples(ONTOLOGY_GRAPH)
     assert inferred and not set(inferred) & set(model)
     assert inferred_triples(model + inferred, ontology) == []
+
+
+def test_a_rule_that_keeps_minting_terms_is_stopped_with_a_clear_error(case_store, monkeypatch):
+    """A rule that reads what it writes and mints a new node each run never reaches a fixpoint: the
+    scheduler re-runs it (its own output wakes it) until the cap, then says so."""
+    minting = ("99-chain.rq", """PREFIX ex: <https://example.org/a#>
+        CONSTRUCT { ?next ex:follows ?x } WHERE {
+          { ?x a <https://saref.etsi.org/saref4bldg/Fan> } UNION { ?x ex:follows ?previous }
+          BIND(IRI(CONCAT(STR(?x), "+")) AS ?next) }""")
+    shipped = service.alignment.alignment_rules()
+    monkeypatch.setattr(service.alignment, "alignment_rules", lambda: shipped + (minting,))
+    model = case_store.graph_triples(case_store.model_graph("case"))
+    with pytest.raises(RuntimeError, match=r"alignment rules in .*alignment did not reach a fixpoint in 8 runs per rule"):
+        inferred_triples(model, case_store.graph_triples(ONTOLOGY_GRAPH))
