@@ -180,7 +180,7 @@ def test_on_the_units_own_operation_a_hidden_recirculation_effect_is_found(store
     data = tmp_path / "semi-synthetic.csv"
     generate_synthetic_data(store, "school-fixed", data, library=load_signature_library(signatures_dir()),
                             hidden_effect="ReturnFlowOffFanSpeed", seed=1, operation=SCHOOL / "AHU7.csv", truth=given)
-    report = diagnose(store, "school-fixed", data, seed=0, **FAN_ON_WINDOW)
+    report = diagnose(store, "school-fixed", data, seed=0, refit_max_nfev=20, **FAN_ON_WINDOW)
     assert report.sensors[AHU7 + "mat_sensor"]["fails"]
     best = report.effects[0]
     assert (best.effect, best.node, best.significant) == ("ReturnFlowOffFanSpeed", AHU7 + "ahu_7_mixing_section", True), \
