@@ -51,6 +51,10 @@ SeedOption = Annotated[int, typer.Option("--seed", help="Random seed (runs are r
 OnlyWhenOption = Annotated[list[str] | None, typer.Option(
     "--only-when", help="Compare only at steps where COLUMN OP NUMBER holds, in the column's unit "
                         "(e.g. 'SF Spd Cmd (%) > 5'); repeat for several (all must hold).")]
+ModelFileArgument = Annotated[Path, typer.Argument(help="Building model file.")]
+MeasurementsArgument = Annotated[Path, typer.Argument(help="Measurement CSV (README: data contract).")]
+TrainWindowOption = Annotated[str, typer.Option(help="Training window START/END (ISO; either side may be empty).")]
+TestWindowOption = Annotated[str | None, typer.Option(help="Test window START/END.")]
 USER_ERRORS = (ModelLoadError, AssemblyError, SignatureError, MeasurementError, FileNotFoundError, ValueError, KeyError)
 
 
@@ -86,7 +90,7 @@ def _load(store: GraphStore, model: Path, name: str | None) -> str:
 
 @app.command("assemble")
 def assemble_command(
-    model: Annotated[Path, typer.Argument(help="Building model file.")],
+    model: ModelFileArgument,
     name: NameOption = None,
     max_complexity: Annotated[int | None, typer.Option(help="Ignore signatures above this complexity.")] = None,
     as_json: JsonOption = False,
@@ -165,10 +169,10 @@ def _print_metrics(title: str, metrics: dict) -> None:
 
 @app.command("calibrate")
 def calibrate_command(
-    model: Annotated[Path, typer.Argument(help="Building model file.")],
-    data: Annotated[Path, typer.Argument(help="Measurement CSV (README: data contract).")],
-    train: Annotated[str, typer.Option(help="Training window START/END (ISO; either side may be empty).")] = "/",
-    test: Annotated[str | None, typer.Option(help="Test window START/END.")] = None,
+    model: ModelFileArgument,
+    data: MeasurementsArgument,
+    train: TrainWindowOption = "/",
+    test: TestWindowOption = None,
     method: Annotated[str, typer.Option(help="point (least squares) or bayes (KOH, PT-MCMC).")] = "point",
     name: NameOption = None,
     seed: SeedOption = 0,
@@ -261,7 +265,7 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
 
 @app.command("simulate")
 def simulate_command(
-    model: Annotated[Path, typer.Argument(help="Building model file.")],
+    model: ModelFileArgument,
     data: Annotated[Path, typer.Argument(help="Measurement CSV (boundary inputs; targets optional for comparison).")],
     params: Annotated[Path | None, typer.Option(help="JSON {parameter name or key: value}; others at their defaults.")] = None,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="CSV of measured and simulated series.")] = None,
@@ -348,10 +352,10 @@ def _diagnosis_command(rank_effects: bool, doc: str):
     """The ``diagnose`` (``rank_effects``) or ``compare`` command: the same options, the same report."""
 
     def command(
-        model: Annotated[Path, typer.Argument(help="Building model file.")],
-        data: Annotated[Path, typer.Argument(help="Measurement CSV.")],
-        train: Annotated[str, typer.Option(help="Training window START/END.")],
-        test: Annotated[str, typer.Option(help="Test window START/END (after the training start).")],
+        model: ModelFileArgument,
+        data: MeasurementsArgument,
+        train: TrainWindowOption,
+        test: TestWindowOption,
         name: NameOption = None,
         seed: SeedOption = 0,
         as_json: JsonOption = False,
@@ -376,10 +380,10 @@ app.command("compare")(_diagnosis_command(
 
 @app.command("compare-strategies")
 def compare_strategies_command(
-    model: Annotated[Path, typer.Argument(help="Building model file.")],
-    data: Annotated[Path, typer.Argument(help="Measurement CSV.")],
-    train: Annotated[str, typer.Option(help="Training window START/END.")] = "/",
-    test: Annotated[str | None, typer.Option(help="Test window START/END.")] = None,
+    model: ModelFileArgument,
+    data: MeasurementsArgument,
+    train: TrainWindowOption = "/",
+    test: TestWindowOption = None,
     folds: Annotated[int, typer.Option(help="Held-out blocks of the training window for cross-validation.")] = 3,
     name: NameOption = None,
     seed: SeedOption = 0,
@@ -408,7 +412,7 @@ def compare_strategies_command(
 
 @app.command("add-effect")
 def add_effect_command(
-    model: Annotated[Path, typer.Argument(help="Building model file.")],
+    model: ModelFileArgument,
     effect: Annotated[str, typer.Option(help="Effect signature id, e.g. FanMotorHeat.")],
     target: Annotated[str, typer.Option(help="IRI of the building node the effect applies to.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Where to write the new model (Turtle).")],
