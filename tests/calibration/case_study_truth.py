@@ -5,7 +5,7 @@ bound to it, training and test windows, the Bayesian fit and its test-window met
 from __future__ import annotations
 
 import numpy as np
-from case_study import CASE_STUDY
+from case_study import CASE_STUDY, EX
 
 from service.assembly import assemble
 from service.bayesian_calibration import BayesianCalibrator
@@ -47,6 +47,10 @@ class CaseStudyTruth:
         self.names = self.problem.parameter_names
         self.true_theta = np.array([self.truth.theta.get(k, np.nan) for k in self.names])
 
+    def inside_68(self, fit: BayesianCalibrator) -> np.ndarray:
+        """Per parameter: whether the truth lies inside the fit's 16–84 % posterior interval."""
+        return (fit.quantile16_ <= self.true_theta) & (self.true_theta <= fit.quantile84_)
+
     def short(self, key: str) -> str:
         return key.rsplit("/", 1)[-1]
 
@@ -74,3 +78,8 @@ def identifiable(point, problem) -> list[int]:
         j for j, name in enumerate(problem.parameter_names)
         if point.identifiability_[name].identified and 1.96 * point.standard_errors_[j] <= 0.05 * abs(point.theta_[j])
     ]
+
+
+def ace_at_90(metrics: dict) -> dict[str, float]:
+    """Sensor (local name) → the test window's ACE of the 90 % prediction interval."""
+    return {node.removeprefix(EX): next(c.ace for c in m.coverage if c.level == 0.9) for node, m in metrics.items()}

@@ -27,8 +27,7 @@ sys.path[:0] = [str(ROOT)]  # the package before the namespace tests/service
 sys.path.append(str(ROOT / "tests"))  # case_study
 
 import numpy as np  # noqa: E402
-from case_study import EX  # noqa: E402
-from case_study_truth import CaseStudyTruth, identifiable  # noqa: E402
+from case_study_truth import CaseStudyTruth, ace_at_90, identifiable  # noqa: E402
 
 from service.calibration_run import fit_point  # noqa: E402
 
@@ -45,11 +44,11 @@ def main() -> None:
             point, _ = fit_point(case.md, case.train, seed=0)
             chosen = identifiable(point, case.problem)
             fit, metrics = case.bayes()
-            inside = (fit.quantile16_ <= case.true_theta) & (case.true_theta <= fit.quantile84_)
+            inside = case.inside_68(fit)
             z = (fit.median_ - case.true_theta) / np.maximum((fit.quantile84_ - fit.quantile16_) / 2, 1e-300)
             inside_total += int(inside[chosen].sum())
             chosen_total += len(chosen)
-            ace = {node.removeprefix(EX): next(c.ace for c in m.coverage if c.level == 0.9) for node, m in metrics.items()}
+            ace = ace_at_90(metrics)
             for node, value in ace.items():
                 ace_all.setdefault(node, []).append(value)
             offsets = ", ".join(f"{case.short(case.names[j])} {z[j]:+.1f}σ" for j in chosen)

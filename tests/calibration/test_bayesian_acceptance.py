@@ -27,7 +27,7 @@ import os
 import numpy as np
 import pytest
 from case_study import EX
-from case_study_truth import STRUCTURALLY_UNIDENTIFIABLE, CaseStudyTruth, identifiable
+from case_study_truth import STRUCTURALLY_UNIDENTIFIABLE, CaseStudyTruth, ace_at_90, identifiable
 
 from service.calibration_run import fit_point
 from service.metrics import target_metrics
@@ -100,7 +100,7 @@ def test_bayesian_run_converges_by_the_20_iat_rule(exact_bayes):
 def test_bayesian_68_percent_intervals_contain_the_truth_for_80_percent_of_identifiable(exact, exact_point, exact_bayes):
     fit, _ = exact_bayes
     chosen = identifiable(exact_point, exact.problem)
-    inside = (fit.quantile16_ <= exact.true_theta) & (exact.true_theta <= fit.quantile84_)
+    inside = exact.inside_68(fit)
     report = {exact.short(exact.names[j]): (fit.quantile16_[j], exact.true_theta[j], fit.quantile84_[j]) for j in chosen}
     assert inside[chosen].mean() >= 0.8, report
 
@@ -125,7 +125,7 @@ def test_unidentifiable_parameters_have_wide_posteriors(exact, exact_point, exac
     "(144 test points: the coverage's own standard error is about 2.5 points)"))
 def test_test_window_ace_at_90_percent_within_5_percent(exact_bayes):
     _, metrics = exact_bayes
-    ace = {node.removeprefix(EX): next(c.ace for c in m.coverage if c.level == 0.9) for node, m in metrics.items()}
+    ace = ace_at_90(metrics)
     assert all(abs(value) <= 0.05 for value in ace.values()), ace
 
 
@@ -152,5 +152,5 @@ def test_structure_the_model_lacks_shows_in_the_point_fit_residuals(fan_heat, ex
 def test_the_discrepancy_absorbs_structure_the_model_lacks_and_intervals_stay_honest(fan_heat):
     fit, metrics = fan_heat.bayes()
     assert fit.converged_
-    ace = {n.removeprefix(EX): next(c.ace for c in m.coverage if c.level == 0.9) for n, m in metrics.items()}
+    ace = ace_at_90(metrics)
     assert all(abs(value) <= 0.05 for value in ace.values()), ace
