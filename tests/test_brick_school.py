@@ -44,6 +44,24 @@ def store():
     return store
 
 
+#: The winter week's days of the comparisons below; the condition that leaves the fan-off steps out.
+WINTER_DAYS = dict(train=("2025-01-02", "2025-01-03 23:59"), test=("2025-01-06", "2025-01-06 23:59"))
+FAN_ON = ["SF Spd Cmd (%) > 5"]
+FAN_ON_WINDOW = dict(**WINTER_DAYS, only_when=FAN_ON)
+
+
+@pytest.fixture(scope="module")
+def winter_comparison(store):
+    """``graphtwin compare`` of the base model on the winter days, every step compared."""
+    return diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", seed=0, rank_effects=False, **WINTER_DAYS)
+
+
+@pytest.fixture(scope="module")
+def fan_on_comparison(store):
+    """``graphtwin compare`` of the base model on the winter days, fan-off steps left out."""
+    return diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", seed=0, rank_effects=False, **FAN_ON_WINDOW)
+
+
 def test_the_file_as_it_is_lacks_a_fan_and_the_report_says_why(store):
     with pytest.raises(IncompleteModelError, match="ahu_7_supply_fan"):
         assemble(store, "school")
@@ -77,15 +95,14 @@ def test_with_what_the_report_names_the_unit_assembles_and_links_to_the_csv(stor
     assert brick_report(store, "school-fixed").points_without_unit == ()
 
 
-def test_a_winter_week_compared_fails_at_the_mixed_air_with_the_fan_off(store):
+def test_a_winter_week_compared_fails_at_the_mixed_air_with_the_fan_off(winter_comparison):
     """Calibrated on 2–3 January 2025 and compared on Monday 6 January: the model fails at the mixed
     and the supply air, the failure sits in the mixing section (the outdoor and return air sensors
     are boundary inputs the model matches by construction), and the worst regime is the fan off in
     the cold. With the fan off the preheat valve stands at 100 % and the mixed air sensor reads up
     to 94 °F: it sees still air warmed by the coil, not an air stream, which the mixing model cannot
     reproduce (the README records the full diagnosis)."""
-    report = diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", train=("2025-01-02", "2025-01-03 23:59"),
-                      test=("2025-01-06", "2025-01-06 23:59"), seed=0, rank_effects=False)
+    report = winter_comparison
     assert not report.effects_tested and report.effects == []
     assert {n.removeprefix(AHU7) for n, s in report.sensors.items() if s["fails"]} == {"mat_sensor", "sat_sensor"}
     assert report.sensors[AHU7 + "mat_sensor"]["rmse"] > 5.0
@@ -123,27 +140,20 @@ def test_the_cli_points_an_incomplete_brick_model_to_its_report(tmp_path):
     assert runner.invoke(app, ["assemble", str(fixed), "--memory"]).exit_code == 0
 
 
-def test_with_the_fan_off_left_out_the_supply_air_matches_and_the_mixed_air_error_falls(store):
+def test_with_the_fan_off_left_out_the_supply_air_matches_and_the_mixed_air_error_falls(store, winter_comparison,
+                                                                                    fan_on_comparison):
     """--only-when 'SF Spd Cmd (%) > 5': the nights with the fan off (still air by the preheat coil)
     are simulated but not compared. The supply air then matches within its noise and the mixed air
     error falls to a quarter (what is left: the mixing section in operation); the filter is recorded
     with the run, and a condition on a column the model does not read is refused by name."""
-    window = dict(train=("2025-01-02", "2025-01-03 23:59"), test=("2025-01-06", "2025-01-06 23:59"), seed=0,
-                  rank_effects=False)
-    everything = diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", **window)
-    running = diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", only_when=["SF Spd Cmd (%) > 5"], **window)
+    everything, running = winter_comparison, fan_on_comparison
     assert not running.sensors[AHU7 + "sat_sensor"]["fails"]
     assert running.sensors[AHU7 + "mat_sensor"]["rmse"] < 0.4 * everything.sensors[AHU7 + "mat_sensor"]["rmse"]
     settings = store.query("SELECT ?s WHERE { GRAPH ?g { ?run <https://w3id.org/graphtwin/ontology#settings> ?s } }",
                            substitutions={"run": ox.NamedNode(f"https://w3id.org/graphtwin/resource/run/{running.run_id}")})
     assert '"only_when": ["SF Spd Cmd (%) > 5"]' in settings[0]["s"].value
     with pytest.raises(ValueError, match=r"operating condition on 'Occupancy'.*known: .*SF Spd Cmd"):
-        diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", only_when=["Occupancy > 0"], **window)
-
-
-#: The winter week's days of the comparisons below, fan-off steps left out.
-FAN_ON_WINDOW = dict(train=("2025-01-02", "2025-01-03 23:59"), test=("2025-01-06", "2025-01-06 23:59"),
-                     only_when=["SF Spd Cmd (%) > 5"])
+        diagnose(store, "school-fixed", SCHOOL / "AHU7.csv", only_when=["Occupancy > 0"], **WINTER_DAYS)
 
 
 @pytest.fixture(scope="module")
@@ -155,16 +165,16 @@ def recirculation(store):
     return calibrate(store, "school-recirculation", SCHOOL / "AHU7.csv", **FAN_ON_WINDOW).record
 
 
-def test_recirculated_air_not_following_the_supply_fan_cuts_the_mixed_air_error(store, recirculation):
+def test_recirculated_air_not_following_the_supply_fan_cuts_the_mixed_air_error(fan_on_comparison, recirculation):
     """What the fan-on residual follows (the supply fan speed) is an effect of the catalog: this unit's
     return fan runs at a fixed 20 % while the supply fan varies, so the recirculated flow does not
     scale with the supply flow (ReturnFlowOffFanSpeed). Added to the model, calibrated on the same
     days, it cuts the mixed air test error by about a quarter (3.0 → 2.3 K; asserted: 15 %), the supply
     air's unchanged, with an exponent well off its null."""
-    base = calibrate(store, "school-fixed", SCHOOL / "AHU7.csv", **FAN_ON_WINDOW).record
-    mixed = AHU7 + "mat_sensor"
-    assert recirculation.metrics["test"][mixed].rmse < 0.85 * base.metrics["test"][mixed].rmse
-    assert recirculation.metrics["test"][AHU7 + "sat_sensor"].rmse < 1.1 * base.metrics["test"][AHU7 + "sat_sensor"].rmse
+    base = fan_on_comparison.sensors
+    mixed, supply = AHU7 + "mat_sensor", AHU7 + "sat_sensor"
+    assert recirculation.metrics["test"][mixed].rmse < 0.85 * base[mixed]["rmse"]
+    assert recirculation.metrics["test"][supply].rmse < 1.1 * base[supply]["rmse"]
     exponent = next(e for e in recirculation.estimates if e.name == "recirculation_speed_exponent")
     assert 0.2 < exponent.median < 1.5, exponent
 
