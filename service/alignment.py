@@ -12,9 +12,10 @@ the predicates of its patterns with the objects they can take, so ``VALUES ?rule
 ``gt:derivedByRule`` is not woken by every rule's provenance), the earliest such rule first, until
 none is left: a fixpoint (rules only add triples, so this terminates). On a 1M-triple Brick campus
 the 14 rules take 22 runs, the costly point-link and sensor-placement rules one each, where a
-confirming round of every rule after the last addition doubled the time. The order makes the rules stratified: a rule may test for the absence of a triple
-(``FILTER NOT EXISTS``) only when the triple is stated in the model or derived by a rule earlier in
-the order, so that its answer cannot change later. The Brick rules (``0N-brick-*.rq``, run first)
+confirming round of every rule after the last addition doubled the time. The order makes the rules
+stratified: a rule may test for the absence of a triple (``FILTER NOT EXISTS``) only when the triple
+is stated in the model or derived by a rule earlier in the order, so that its answer cannot change
+later. The Brick rules (``0N-brick-*.rq``, run first)
 use this: the sensor placement rule reads the flow edges and mixing boxes of the rules before it.
 
 The scratch store also holds, for every ``rdf:type`` triple of the model or derived, the types it
@@ -127,7 +128,8 @@ def inferred_triples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple]) 
     seen: set[ox.Triple] = set()  # derived or entailed
 
     def add(triples: Iterable[ox.Triple]) -> list[ox.Triple]:
-        """Add to the scratch store the triples neither stated nor seen; those added, in order."""
+        """Add to the scratch store the triples neither stated nor seen; those added, in order. (The
+        Python sets answer what asking the store would, without building a quad per triple.)"""
         fresh = []
         for t in triples:
             if t not in seen and t not in stated:
