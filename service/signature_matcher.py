@@ -30,16 +30,15 @@ term object hashes in Rust on every dict lookup). Terms become values only for t
 
 from __future__ import annotations
 
-import gc
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from itertools import repeat
 from operator import itemgetter
 from types import MappingProxyType
 
 import pyoxigraph as ox
 
+from .cyclic_gc import cyclic_gc_paused
 from .signature import Rule, Signature
 from .sparql_compiler import CompiledQuery, QueryPart, Traversal, compile_signature
 
@@ -314,20 +313,6 @@ def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: lis
     return (rows, columns) if not checks and not pending else ([], columns)
 
 
-@contextmanager
-def _cyclic_gc_paused() -> Iterator[None]:
-    """Pause the cyclic garbage collector: a join allocates millions of tuples and sets (none in a
-    reference cycle), and every collection of the oldest generation re-scans them all; at 1M
-    triples that was a third of the matching time. Reference counting still frees everything."""
-    was_enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was_enabled:
-            gc.enable()
-
-
 def match_signature(
     store, signature: Signature, *, default_graph: Sequence[ox.NamedNode] | None = None,
     compiled: CompiledQuery | None = None, session: MatchSession | None = None,
@@ -341,7 +326,7 @@ def match_signature(
     """
     session = session or MatchSession(store, default_graph)
     compiled = compiled or session.compiled(signature)
-    with _cyclic_gc_paused():
+    with cyclic_gc_paused():
         return _matches(signature, compiled, session)
 
 

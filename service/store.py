@@ -42,7 +42,7 @@ from typing import Protocol, runtime_checkable
 
 import pyoxigraph as ox
 
-from .alignment import inferred_triples
+from .alignment import inferred_ntriples, inferred_triples
 from .namespaces import GTR, graph_iri
 from .resources import ontologies_dir, queries_dir
 from .signature import Signature
@@ -241,9 +241,13 @@ def query_bound(store: ox.Store, sparql: str, substitutions: Mapping[str, Term] 
     return store.query(bind_values(sparql, substitutions), **kwargs)
 
 
-def insert_data_update(graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> str:
-    """``DROP SILENT GRAPH <g>; INSERT DATA { GRAPH <g> { … } }``: one update request, one transaction."""
-    body = "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in triples)
+def insert_data_update(graph: ox.NamedNode, triples: Iterable[ox.Triple] | bytes) -> str:
+    """``DROP SILENT GRAPH <g>; INSERT DATA { GRAPH <g> { … } }``: one update request, one transaction.
+    ``triples`` may be N-Triples text (bytes)."""
+    if isinstance(triples, bytes):
+        body = triples.decode()
+    else:
+        body = "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in triples)
     return f"DROP SILENT GRAPH {graph} ;\nINSERT DATA {{ GRAPH {graph} {{\n{body}\n}} }}"
 
 
@@ -439,7 +443,7 @@ class GraphStore:
         self.ensure_ontologies()
         self.write_graphs({
             self.model_graph(name): triples,
-            self.inferred_graph(name): inferred_triples(triples, self._ontology_triples),
+            self.inferred_graph(name): inferred_ntriples(triples, self._ontology_triples),
         })
         return len(triples)
 
@@ -500,8 +504,9 @@ class GraphStore:
         """Replace ``graph`` with ``triples`` in one transaction."""
         self.backend.replace_graph(graph, triples)
 
-    def write_graphs(self, graphs: Mapping[ox.NamedNode, Iterable[ox.Triple]]) -> None:
-        """Replace several graphs in one transaction (one SPARQL update request); blank nodes must
+    def write_graphs(self, graphs: Mapping[ox.NamedNode, Iterable[ox.Triple] | bytes]) -> None:
+        """Replace several graphs (triples, or N-Triples text) in one transaction (one SPARQL update
+        request); blank nodes must
         not be shared between them (``INSERT DATA`` renames blank nodes per block). An Oxigraph
         server accepts update bodies up to 1 MiB, which bounds a model loaded into a remote store."""
         self.backend.update(" ;\n".join(insert_data_update(g, triples) for g, triples in graphs.items()))

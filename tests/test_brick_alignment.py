@@ -11,11 +11,12 @@ import pyoxigraph as ox
 import pytest
 
 import service.alignment
-from service.alignment import alignment_rules, inferred_triples
+from service.alignment import alignment_rules, independent_parts, inferred_ntriples, inferred_triples
 from service.assembly import IncompleteModelError, assemble
 from service.resources import examples_dir, ontologies_dir
 from service.sparql_reads import QueryReads
-from service.store import GraphStore, parse_rdf
+from service.store import GraphStore, parse_rdf, skolemize
+from tests.bench.brick_campus import CAMPUS_NAMESPACE, campus_turtle
 
 BRICK_TTL = Path(__file__).resolve().parents[2] / "shared" / "ontologies" / "brick" / "Brick.ttl"
 BRICK = "https://brickschema.org/schema/Brick#"
@@ -185,3 +186,57 @@ def test_two_coils_at_one_path_position_are_both_fed_and_both_feed_the_next():
     assert feeds == {("ahu_mixing_section", "hw_cmd_coil"), ("ahu_mixing_section", "hw2_cmd_coil"),
                      ("hw_cmd_coil", "chw_cmd_coil"), ("hw2_cmd_coil", "chw_cmd_coil"),
                      ("chw_cmd_coil", "ahu_supply_fan"), ("ahu_supply_fan", "ahu_served_zone")}
+
+
+def _ontology() -> list[ox.Triple]:
+    return skolemize([t for p in sorted(ontologies_dir().glob("*.ttl"))
+                      for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))], "urn:ontology/genid/")
+
+
+def _campus(n_units: int, extra: str = "") -> list[ox.Triple]:
+    """A small Brick campus (tests/bench/brick_campus.py: every third unit described by its points
+    only), blank nodes as IRIs, with ``extra`` Turtle appended."""
+    text = campus_turtle(n_units, n_zones=2, points_only_every=3) + extra
+    return skolemize(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "campus"), "urn:campus/genid/")
+
+
+def test_a_campus_aligned_in_independent_parts_side_by_side_derives_what_it_derives_whole():
+    ontology, campus = _ontology(), _campus(6)
+    whole = inferred_triples(campus, ontology)
+    in_parts = inferred_triples(campus, ontology, part_triples=len(campus) // 5, workers=3)
+    assert len(in_parts) == len(set(in_parts)) and set(in_parts) == set(whole)
+    assert any(t.predicate.value == "https://w3id.org/fso#suppliesFluidTo" for t in whole)
+
+
+def _unit_of(line: bytes) -> str:
+    return re.match(rb"<" + re.escape(CAMPUS_NAMESPACE.encode()) + rb"(ahu\d+)#", line).group(1).decode()
+
+
+def test_units_linked_through_a_model_node_stay_in_one_part_and_classes_units_and_literals_link_nothing():
+    """Units that only share classes, QUDT units and literals are independent; a plant feeding two
+    units' coils joins them (and the alignment still derives what it derives whole)."""
+    plant = f"""
+<{CAMPUS_NAMESPACE}plant> a brick:Chiller ; rdfs:label "plant" ;
+    brick:feeds <{CAMPUS_NAMESPACE}ahu1#cooling_coil>, <{CAMPUS_NAMESPACE}ahu4#cooling_coil> ."""
+    ontology = _ontology()
+    for extra, together in (("", set()), (plant, {"ahu1", "ahu4"})):
+        campus = _campus(6, extra)
+        lines = ox.serialize(campus, format=ox.RdfFormat.N_TRIPLES).split(b"\n")[:-1]
+        vocabulary = service.alignment._Context.of(ontology).vocabulary
+        shared, parts = independent_parts(lines, vocabulary, part_triples=1)
+        units = [{_unit_of(line) for line in part if line.startswith(b"<" + CAMPUS_NAMESPACE.encode() + b"ahu")}
+                 for part in parts]
+        assert shared == []
+        assert sorted(u for part in units for u in part) == sorted(f"ahu{i}" for i in range(6))  # each unit once
+        assert [part for part in units if len(part) > 1] == ([together] if together else [])
+        whole = inferred_triples(campus, ontology)
+        assert set(inferred_triples(campus, ontology, part_triples=1, workers=2)) == set(whole)
+
+
+def test_the_n_triples_alignment_asks_for_blank_nodes_to_be_skolemised_first():
+    model = parse_rdf(POINTS_ONLY.encode(), ox.RdfFormat.TURTLE, "points")
+    with pytest.raises(ValueError, match="blank nodes"):
+        inferred_ntriples(model, _ontology())
+    derived = inferred_triples(model, _ontology())  # blank nodes aligned as IRIs and named back
+    series = {t.object.value for t in derived if t.predicate.value == GT + "timeSeriesId"}
+    assert "rat_column" in series and not any("alignment:blank-node" in str(t) for t in derived)

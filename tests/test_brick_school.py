@@ -77,7 +77,7 @@ def test_the_file_as_it_is_lacks_a_fan_and_the_report_says_why(store):
         rules.setdefault(a.rule, set()).add(a.about.removeprefix(AHU7))
     assert rules["04-brick-point-links.rq"] == {"oat_sensor", "rat_sensor", "mat_sensor", "sat_sensor",
                                                 "oa_damper_cmd", "clg_valve_cmd", "prht_valve_cmd"}
-    assert rules["06-brick-sensor-placement.rq"] == {"oat_sensor", "rat_sensor", "mat_sensor", "sat_sensor"}
+    assert rules["56-brick-sensor-placement.rq"] == {"oat_sensor", "rat_sensor", "mat_sensor", "sat_sensor"}
     assert rules["00-brick-ahu-equipment.rq"] == {"ahu_7"}
 
 
