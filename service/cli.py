@@ -441,28 +441,48 @@ def example_list() -> None:
 
 @example_app.command("generate")
 def example_generate(
-    name: Annotated[str, typer.Argument(help="Example model (see `graphtwin example list`).")],
+    name: Annotated[str, typer.Argument(help="Example model (see `graphtwin example list`) or a model file.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write.")],
     hidden_effect: Annotated[str | None, typer.Option(help="Effect hidden in the truth (none: a truth the base model can match).")] = None,
     node: Annotated[str | None, typer.Option(help="Where to hide it (default: the first node it applies to).")] = None,
     seed: SeedOption = 0,
-    days: Annotated[float, typer.Option(help="Length of the data, days.")] = 7.0,
+    days: Annotated[float, typer.Option(help="Length of the data, days (without --operation).")] = 7.0,
+    operation: Annotated[Path | None, typer.Option(help=(
+        "A measurement CSV of the model whose boundary inputs (and time grid) drive the truth: real "
+        "operation, known truth (semi-synthetic data)."))] = None,
+    truth_from: Annotated[Path | None, typer.Option(help=(
+        "JSON of a calibration (`graphtwin calibrate --json`): its medians are the truth's parameters "
+        "(the others drawn as without it)."))] = None,
 ) -> None:
-    """Synthetic measurements for an example model from a known truth."""
+    """Synthetic measurements for a model from a known truth, optionally with a hidden effect."""
     from .synthetic_data import generate_synthetic_data
 
-    path = examples_dir() / name / "model.ttl"
+    is_file = Path(name).is_file()
+    path = Path(name) if is_file else examples_dir() / name / "model.ttl"
     if not path.is_file():
-        raise fail(f"no example {name!r}; see `graphtwin example list`")
+        raise fail(f"no example or model file {name!r}; see `graphtwin example list`")
     store = GraphStore.embedded(None)
     try:
-        store.load_model(name, path)
-        truth = generate_synthetic_data(store, name, output, library=load_signature_library(signatures_dir()),
-                                        hidden_effect=hidden_effect, node=node, seed=seed, n_days=days)
+        truth = _medians(truth_from) if truth_from is not None else None
+        model_name = _load(store, path, None if is_file else name)
+        generated = generate_synthetic_data(
+            store, model_name, output, library=load_signature_library(signatures_dir()), hidden_effect=hidden_effect,
+            node=node, seed=seed, n_days=days, operation=operation, truth=truth)
     except USER_ERRORS as exc:
         raise fail(str(exc)) from None
-    where = f" at {truth.node}" if truth.node else ""
-    console.print(f"wrote {output} ({days:g} days) from a truth with {truth.effect or 'no hidden effect'}{where}")
+    where = f" at {generated.node}" if generated.node else ""
+    driven = f"the operation of {operation}" if operation is not None else f"{days:g} days of synthetic operation"
+    given = f", {len(truth)} parameters from {truth_from}" if truth else ""
+    console.print(f"wrote {output} ({driven}) from a truth with {generated.effect or 'no hidden effect'}{where}{given}")
+
+
+def _medians(calibration_json: Path) -> dict[str, float]:
+    """Parameter key → median, from the JSON ``graphtwin calibrate --json`` prints."""
+    try:
+        parameters = json.loads(calibration_json.read_text(encoding="utf-8"))["parameters"]
+        return {key: float(estimate["median"]) for key, estimate in parameters.items()}
+    except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{calibration_json}: not the JSON of `graphtwin calibrate --json` ({exc})") from None
 
 
 @app.command("query")

@@ -66,13 +66,23 @@ def applicable_nodes(store: GraphStore, model_name: str, signature: Signature) -
     return usable
 
 
-def _truth_theta(model, effect: Signature | None, rng: np.random.Generator, given: Mapping[str, float]) -> np.ndarray:
+def _component_part(key: str) -> str:
+    """A parameter key without its model: ``…/model/NAME/component/Fan/supply_fan#c1`` → ``Fan/supply_fan#c1`` (a run of the model loaded under another name gives the same)."""
+    return key.rsplit("/component/", 1)[-1]
+
+
+def _truth_theta(model, model_name: str, effect: Signature | None, rng: np.random.Generator,
+                 given: Mapping[str, float]) -> np.ndarray:
     values = []
     truth = (effect.extra.get("synthetic_truth", {}) if effect is not None else {})
+    given = {_component_part(key): value for key, value in given.items()}
+    unknown = sorted(given.keys() - {_component_part(ref.key) for ref in model.estimated_parameters})
+    if unknown:
+        raise ValueError(f"the truth names parameters model {model_name} does not estimate: {', '.join(unknown)}")
     for ref in model.estimated_parameters:
         spec = ref.spec
-        if ref.key in given:
-            values.append(float(given[ref.key]))
+        if _component_part(ref.key) in given:
+            values.append(float(given[_component_part(ref.key)]))
             rng.random()  # the same draws for the others whatever is given
             continue
         if effect is not None and f"/{effect.id}/" in ref.component and spec.name in truth:
@@ -106,9 +116,11 @@ def generate_synthetic_data(
         operation: its time grid and its boundary columns as measured; ``n_days`` and ``step_s`` are
         then the file's). None: the case study's synthetic operation
         (:func:`service.synthetic_operation.case_study_operation`), after a day's warm-up.
-    :param truth: parameter key → its value in the truth (a calibration's estimates, say); the
-        others are drawn as the module docstring says.
-    :raises ValueError: an unknown effect, or one that does not apply to the model.
+    :param truth: parameter key → its value in the truth (a calibration's estimates, say; keys are
+        matched without their model name, so a run of the same model under another name applies);
+        the others are drawn as the module docstring says.
+    :raises ValueError: an unknown effect, or one that does not apply to the model; a truth key that
+        is no estimated parameter of the model (with the effect).
     """
     effect = None
     requests = []
@@ -127,7 +139,7 @@ def generate_synthetic_data(
         requests = [EffectRequest(hidden_effect, node)]
     model = assemble(store, model_name, library=library, extra_effects=requests)
     rng = np.random.default_rng(seed)
-    theta = _truth_theta(model, effect, rng, truth or {})
+    theta = _truth_theta(model, model_name, effect, rng, truth or {})
     if operation is None:
         warmup = int(round(WARMUP_S / step_s))
         synthetic = case_study_operation(n_days=n_days + WARMUP_S / 86400.0, step_s=step_s, seed=seed,

@@ -68,6 +68,39 @@ def test_example_generate_writes_the_columns_the_model_needs(tmp_path):
     assert bad.exit_code == 2 and "CoilThermalMass" in bad.output
 
 
+def test_example_generate_drives_a_given_truth_with_a_measured_operation(tmp_path):
+    """Semi-synthetic data: the boundary columns and time grid of a measured file, the targets from a
+    truth whose parameters come from a calibration's JSON (keys of the model under another name)."""
+    operation = tmp_path / "operation.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "--seed", "3",
+                               "-o", str(operation)]).exit_code == 0
+    key = "https://w3id.org/graphtwin/resource/model/elsewhere/component/PIController/coil_outlet_air_temperature_controller#proportional_gain"
+    columns = {}
+    for gain in (0.004, 0.04):
+        run = tmp_path / f"run-{gain}.json"
+        run.write_text(json.dumps({"parameters": {key: {"median": gain, "quantile16": 0.0}}}))
+        output = tmp_path / f"semi-{gain}.csv"
+        result = runner.invoke(app, ["example", "generate", str(CASE_STUDY), "--operation", str(operation),
+                                     "--truth-from", str(run), "--hidden-effect", "FanMotorHeat", "-o", str(output)])
+        assert result.exit_code == 0, result.output
+        assert "1 parameters from" in result.output and "FanMotorHeat" in result.output
+        header, *rows = [line.split(",") for line in output.read_text().splitlines()]
+        columns[gain] = dict(zip(header, zip(*rows)))
+    measured_header, *measured_rows = [line.split(",") for line in operation.read_text().splitlines()]
+    measured = dict(zip(measured_header, zip(*measured_rows)))
+    for name in ("time", "supply_air_flow", "coil_outlet_air_temperature_setpoint", "fan_inlet_air_temperature",
+                 "supply_water_temperature"):
+        assert columns[0.004][name] == columns[0.04][name] == measured[name], name  # the measured operation
+    assert columns[0.004]["valve_position"] != columns[0.04]["valve_position"]  # the given gain drives the loop
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"parameters": {key.replace("proportional_gain", "proportional_gian"): {"median": 1.0}}}))
+    result = runner.invoke(app, ["example", "generate", str(CASE_STUDY), "--truth-from", str(bad), "-o", str(tmp_path / "x.csv")])
+    assert result.exit_code == 2 and "proportional_gian" in result.output
+    bad.write_text("{}")
+    result = runner.invoke(app, ["example", "generate", str(CASE_STUDY), "--truth-from", str(bad), "-o", str(tmp_path / "x.csv")])
+    assert result.exit_code == 2 and "calibrate --json" in result.output
+
+
 def test_simulate_writes_simulation_beside_measurements(tmp_path):
     data = tmp_path / "data.csv"
     assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
