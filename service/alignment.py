@@ -44,7 +44,6 @@ anchors in a subquery before the patterns that read from it.
 
 from __future__ import annotations
 
-import os
 import re
 from collections import defaultdict
 from collections.abc import Iterable
@@ -58,6 +57,7 @@ import pyoxigraph as ox
 from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
+from .cpu_count import usable_cpu_count
 from .cyclic_gc import cyclic_gc_paused
 from .resources import queries_dir
 from .sparql_reads import QueryReads, query_reads
@@ -156,7 +156,7 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
             return b"".join(line + b"\n" for line in _derived(text, context))
         shared, parts = independent_parts(lines, context.vocabulary, part_triples)
         head = b"".join(line + b"\n" for line in shared)
-        with ThreadPoolExecutor(workers or os.cpu_count()) as pool:
+        with ThreadPoolExecutor(workers or usable_cpu_count()) as pool:
             derived = dict.fromkeys(chain.from_iterable(pool.map(
                 lambda part: _derived(head + b"".join(line + b"\n" for line in part), context), parts)))
         stated = set(lines)  # a term one part mints may be stated in another

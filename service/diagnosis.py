@@ -45,6 +45,7 @@ from .assembly import EffectRequest, assemble
 from .calibration_data import ModelData
 from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR, CalibrationProblem
 from .calibration_run import Window, calibrate
+from .cpu_count import usable_cpu_count
 from .effect_ranking import (
     EffectEvidence, delta_bic, effective_sample_fraction, rank_evidence, score_test, weighted_test_error,
 )
@@ -483,7 +484,7 @@ def _rank_catalog(store, model_name, library, base, *, seed, refit_max_nfev, wor
                       unidentified, ([train_slice], slice(test_slice.start, evaluation.start)), md.compared)
         for signature, node, cand_model in candidates
     ]
-    workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
+    workers = workers if workers is not None else min(len(jobs), usable_cpu_count())
     if workers > 1 and len(jobs) > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             evidence = list(pool.map(_evaluate_candidate, jobs))
