@@ -137,7 +137,8 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
     N-Triples: every derived triple not already stated in either (each independent part's in the
     order its rules derived them, the parts in the order of the model).
 
-    :param workers: threads aligning independent parts side by side (default: one per CPU).
+    :param workers: threads aligning independent parts side by side (default: one per CPU this
+        process may run on).
     :param part_triples: the size the model's independent parts are packed into (see
         :func:`independent_parts`); a model smaller than two parts is aligned whole.
     :raises ValueError: when the model or the ontology holds a blank node (a load into the scratch
@@ -153,14 +154,18 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
     lines = text.split(b"\n")[:-1]
     with cyclic_gc_paused():
         if len(lines) < 2 * part_triples:
-            return b"".join(line + b"\n" for line in _derived(text, context))
+            return _ntriples(_derived(text, context))
         shared, parts = independent_parts(lines, context.vocabulary, part_triples)
-        head = b"".join(line + b"\n" for line in shared)
         with ThreadPoolExecutor(workers or usable_cpu_count()) as pool:
             derived = dict.fromkeys(chain.from_iterable(pool.map(
-                lambda part: _derived(head + b"".join(line + b"\n" for line in part), context), parts)))
+                lambda part: _derived(_ntriples(shared + part), context), parts)))
         stated = set(lines)  # a term one part mints may be stated in another
-        return b"".join(line + b"\n" for line in derived if line not in stated)
+        return _ntriples([line for line in derived if line not in stated])
+
+
+def _ntriples(lines: list[bytes]) -> bytes:
+    """N-Triples text of ``lines`` (each line ends with a newline)."""
+    return b"".join(line + b"\n" for line in lines)
 
 
 def inferred_triples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], **options) -> list[ox.Triple]:
@@ -281,7 +286,7 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
     the lines derived, in order. Triples are lines of N-Triples throughout — the store evaluates a
     rule and writes its result without Python's lock, and lines hash and compare at C speed."""
     scratch = ox.Store()
-    scratch.load(model_text + context.ontology, ox.RdfFormat.N_TRIPLES)
+    scratch.load(model_text + context.ontology, ox.RdfFormat.N_TRIPLES, lenient=True)  # Oxigraph wrote it
     known = set(model_text.split(b"\n"))  # stated, derived or entailed
     known |= context.ontology_lines
     derived: list[bytes] = []
@@ -293,7 +298,7 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
         known.update(fresh)
         entailed = [line for line in _entailed(fresh, context.type_lines) if line not in known]
         known.update(entailed)
-        scratch.load(b"\n".join(fresh + entailed), ox.RdfFormat.N_TRIPLES)
+        scratch.load(b"\n".join(fresh + entailed), ox.RdfFormat.N_TRIPLES, lenient=True)
         for line in fresh + entailed:
             _subject, predicate, obj = line.split(b" ", 2)
             added[predicate].add(obj[:-2])
