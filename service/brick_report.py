@@ -1,5 +1,5 @@
 """What graphtwin made of a Brick model: the Brick classes and relations the alignment rules
-(``queries/alignment/0N-brick-*.rq``) did not align, the assumptions they made where the model is
+(``queries/alignment/*-brick-*.rq``) did not align, the assumptions they made where the model is
 ambiguous, and the points they could not place or link to data. Nothing is dropped silently.
 
 Read from a loaded model (:meth:`service.store.GraphStore.load_model`): its own graph and its
@@ -24,12 +24,11 @@ from __future__ import annotations
 import difflib
 import re
 from dataclasses import asdict, dataclass
-from functools import lru_cache
 
 from rich.console import Console
 from rich.table import Table
 
-from .alignment import alignment_rules
+from .alignment import rule_terms
 from .store import ONTOLOGY_GRAPH, GraphStore
 
 __all__ = ["BRICK", "REC", "REF", "UnalignedClass", "UnreadRelation", "Assumption", "BrickReport",
@@ -154,16 +153,9 @@ class BrickReport:
         return asdict(self)
 
 
-@lru_cache(maxsize=1)
 def _rule_terms() -> frozenset[str]:
     """Every ``brick:`` / ``ref:`` / ``rec:`` term the alignment rules name (the relations they read)."""
-    expanded = set()
-    for _name, text in alignment_rules():
-        prefixes = dict(re.findall(r"PREFIX\s+(\w*):\s*<([^>]+)>", text))
-        for prefix, local in re.findall(r"\b(brick|ref|rec):([A-Za-z_][\w-]*)", text):
-            if prefix in prefixes:
-                expanded.add(prefixes[prefix] + local)
-    return frozenset(expanded)
+    return frozenset(t for t in rule_terms() if t.startswith((BRICK, REF, REC)))
 
 
 def _short(iri: str) -> str:
