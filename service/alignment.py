@@ -165,7 +165,7 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
 
 def _ntriples(lines: list[bytes]) -> bytes:
     """N-Triples text of ``lines`` (each line ends with a newline)."""
-    return b"".join(line + b"\n" for line in lines)
+    return b"\n".join(lines) + b"\n" if lines else b""
 
 
 def inferred_triples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], **options) -> list[ox.Triple]:
