@@ -37,6 +37,7 @@ from .measuring_device import MeasuringDevice
 from .namespaces import GTR, RDFS
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
+from .cyclic_gc import cyclic_gc_paused
 from .signature_matcher import MatchSession, match_signature, missing_class_report
 from .store import GraphStore
 from .units import convert
@@ -98,9 +99,10 @@ def assemble(
     depth = _class_depth(store, dataset)
     session = MatchSession(store, dataset)  # the graph does not change while assembling
     candidates = []
-    for signature in components:
-        for match in _best_match_per_anchor(match_signature(store, signature, session=session), signature):
-            candidates.append((signature, match))
+    with cyclic_gc_paused():  # one collection after the library, not one per signature
+        for signature in components:
+            for match in _best_match_per_anchor(match_signature(store, signature, session=session), signature):
+                candidates.append((signature, match))
     candidates.sort(key=lambda c: (
         -sum(depth(cls) for node in c[0].modeled_nodes for cls in c[0].nodes[node].classes),
         -c[0].complexity, -len(c[0].modeled_nodes), c[0].id, _modeled(c[0], c[1]),
