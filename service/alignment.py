@@ -16,9 +16,9 @@ confirming round of every rule after the last addition doubled the time. The ord
 stratified: a rule may test for the absence of a triple (``FILTER NOT EXISTS``) only when the triple
 is stated in the model or derived by a rule earlier in the order, so that its answer cannot change
 later. The Brick rules use this: the typing rules (``0N-brick-*.rq``) run first, the flow rules
-(``5N-brick-*.rq``) after the device classes of ``50`` (so that its sensor classes do not wake the
-flow-edge rule once more), and the sensor placement rule reads the flow edges and mixing boxes of
-the rule before it.
+(``5N-brick-*.rq``) after the device classes of ``50`` (whose entailed ``saref:Device`` types the
+flow-edge rule reads; either order re-runs one of the two once), and the sensor placement rule reads
+the flow edges and mixing boxes of the rule before it.
 
 A large model is cut into independent parts (:func:`independent_parts`: no rule joins across them)
 aligned side by side, one scratch store per part on a thread per CPU: Oxigraph evaluates a rule and
