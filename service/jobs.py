@@ -213,8 +213,8 @@ class JobResult:
 
 class DeferredWrites:
     """A :class:`~service.store.SparqlBackend` that reads ``backend`` and keeps whole-graph writes
-    until :meth:`commit` writes them in one update (one transaction): the drops, then one
-    ``INSERT DATA`` holding every written graph (blank nodes shared between graphs stay shared).
+    until :meth:`commit` writes them in one transaction (the backend's ``replace_graphs``: blank
+    nodes shared between graphs stay shared).
 
     Reads go to ``backend`` unchanged: a graph written here is not seen before the commit.
     """
@@ -231,6 +231,12 @@ class DeferredWrites:
 
     def replace_graph(self, graph, triples):
         self._graphs[graph] = list(triples)
+
+    def replace_graphs(self, graphs):
+        for graph, triples in graphs.items():
+            if isinstance(triples, bytes):
+                triples = [quad.triple for quad in ox.parse(triples, format=ox.RdfFormat.N_TRIPLES)]
+            self.replace_graph(graph, triples)
 
     def load_graph(self, graph, data, format, *, base_iri=None, source_name="<data>"):
         triples = parse_rdf(data, format, source_name, base_iri)
@@ -263,18 +269,10 @@ class DeferredWrites:
         self._graphs.update(graphs)
 
     def commit(self) -> None:
-        """Write every kept graph in one update; nothing to do when nothing was written."""
+        """Write every kept graph in one transaction; nothing to do when nothing was written."""
         if not self._graphs:
             return
-        drops = [f"DROP SILENT GRAPH {graph}" for graph in self._graphs]
-        blocks = [
-            f"GRAPH {graph} {{\n" + "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in triples) + "\n}"
-            for graph, triples in self._graphs.items() if triples
-        ]
-        update = " ;\n".join(drops)
-        if blocks:
-            update += " ;\nINSERT DATA {\n" + "\n".join(blocks) + "\n}"
-        self.backend.update(update)
+        self.backend.replace_graphs(self._graphs)
         self._graphs.clear()
 
 

@@ -11,7 +11,7 @@ W3C SPARQL 1.1 Protocol and Graph Store HTTP Protocol, with the Oxigraph server'
                     sent URL-encoded (``query=…&default-graph-uri=…``, protocol §2.1.2), see Dataset.
 ``update``          ``POST update_url``, body ``application/sparql-update``
 ``replace_graph``   one update ``DROP SILENT GRAPH <g> ; INSERT DATA { GRAPH <g> { … } }``
-                    (:func:`service.store.insert_data_update`)
+(``replace_graphs``) (:func:`service.store.insert_data_update`), several graphs in one request
 ``load_graph``      parse locally (:func:`service.store.parse_rdf`), then as ``replace_graph``
 ``drop_graph``      one update ``DROP SILENT GRAPH <g>``
 ``graphs``          ``SELECT DISTINCT ?g WHERE { GRAPH ?g { } }``
@@ -205,7 +205,11 @@ class SparqlEndpointBackend:
     def replace_graph(self, graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> None:
         """Replace ``graph`` by ``triples`` (none: remove it) in one update request, atomically for
         readers (module docstring)."""
-        self.update(insert_data_update(graph, triples))
+        self.replace_graphs({graph: triples})
+
+    def replace_graphs(self, graphs: Mapping[ox.NamedNode, Iterable[ox.Triple] | bytes]) -> None:
+        """Replace several graphs (triples or N-Triples text; none: remove it) in one update request."""
+        self.update(insert_data_update(graphs))
 
     def load_graph(self, graph: ox.NamedNode, data: bytes, format: ox.RdfFormat, *,
                    base_iri: str | None = None, source_name: str = "<data>") -> int:

@@ -3,7 +3,7 @@
 import pyoxigraph as ox
 import pytest
 
-from service.store import ONTOLOGY_GRAPH, GraphStore, ModelLoadError, bind_values
+from service.store import ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, bind_values
 
 from case_study import CASE_STUDY, EX
 
@@ -62,6 +62,29 @@ def test_json_ld_and_n_triples_load_the_same_triples(tmp_path):
 def test_replacing_a_model_swaps_it_whole(case_store):
     case_store.load_model("case", b"<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
     assert case_store.backend.triple_count(case_store.model_graph("case")) == 1
+
+
+def test_several_graphs_are_replaced_together_and_staging_leaves_nothing_behind(tmp_path):
+    """A first write loads the graphs directly; replacing existing ones stages and moves them in one
+    update. Either way a blank node shared between graphs stays one node, a graph given no triples
+    is removed, other graphs are untouched, and a staging graph a crash left is removed on reopen."""
+    g1, g2, other = (ox.NamedNode(f"https://example.org/g/{n}") for n in ("one", "two", "other"))
+    p = ox.NamedNode("https://example.org/p")
+    backend = EmbeddedBackend(tmp_path / "store")
+    backend.replace_graph(other, [ox.Triple(p, p, ox.Literal("kept"))])
+    for version in ("first", "second"):
+        shared = ox.BlankNode()
+        text = ox.serialize([ox.Triple(shared, p, ox.Literal(version + " two"))], format=ox.RdfFormat.N_TRIPLES)
+        backend.replace_graphs({g1: [ox.Triple(shared, p, ox.Literal(version + " one"))], g2: text})
+        rows = backend.query(f"SELECT ?x WHERE {{ GRAPH {g1} {{ ?x ?p ?one }} GRAPH {g2} {{ ?x ?p ?two }} }}")
+        assert len(rows) == 1 and backend.triple_count(g1) == backend.triple_count(g2) == 1, version
+        assert {t.object.value for t in backend.query(f"CONSTRUCT {{ ?s ?p ?o }} WHERE {{ GRAPH {g1} {{ ?s ?p ?o }} }}")} == {version + " one"}
+    backend.replace_graphs({g1: [], g2: [ox.Triple(p, p, p)]})
+    assert backend.graphs() == sorted([g2, other], key=lambda g: g.value) and backend.triple_count(other) == 1
+    backend.store.add(ox.Quad(p, p, p, ox.NamedNode(STAGING + "crashed/0")))  # as a crash mid-write leaves it
+    backend.store.flush()
+    del backend
+    assert EmbeddedBackend(tmp_path / "store").graphs() == sorted([g2, other], key=lambda g: g.value)
 
 
 def test_on_disk_store_keeps_models_across_reopen(tmp_path):

@@ -28,7 +28,9 @@ def _triple(subject, value) -> ox.Triple:
 
 
 class CountingBackend(EmbeddedBackend):
-    """An in-memory backend that counts SPARQL updates (one per transaction)."""
+    """An in-memory backend that counts its writes that readers see at once: SPARQL updates and
+    graph replacements (a replacement of existing graphs stages its data first, then moves it into
+    place in one update: one write)."""
 
     def __init__(self):
         super().__init__(None)
@@ -37,6 +39,11 @@ class CountingBackend(EmbeddedBackend):
     def update(self, sparql):
         self.updates += 1
         super().update(sparql)
+
+    def replace_graphs(self, graphs):
+        before = self.updates
+        super().replace_graphs(graphs)
+        self.updates = before + 1
 
 
 def _wait(runner: JobRunner, job_id: str, timeout_s: float = 20.0) -> JobRecord:
