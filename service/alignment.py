@@ -58,6 +58,7 @@ import pyoxigraph as ox
 from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
+from .blank_nodes import skolemize
 from .cpu_count import usable_cpu_count
 from .cyclic_gc import cyclic_gc_paused
 from .resources import queries_dir
@@ -173,10 +174,12 @@ def _ntriples(lines: list[bytes]) -> bytes:
 def inferred_triples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], **options) -> list[ox.Triple]:
     """:func:`inferred_ntriples` as triples (``options`` as there); blank nodes are allowed: they
     are aligned as IRIs and named back."""
-    blank: dict[ox.NamedNode, ox.BlankNode] = {}
-    model, ontology = _skolemized(list(model), blank), _skolemized(list(ontology), blank)
+    names: dict[ox.BlankNode, ox.NamedNode] = {}
+    model, ontology = (skolemize(triples, _BLANK_NODE_NAMESPACE, names) for triples in (model, ontology))
     triples = [t.triple for t in ox.parse(inferred_ntriples(model, ontology, **options), format=ox.RdfFormat.N_TRIPLES)]
-    if blank:
+    if names:
+        blank = {iri: node for node, iri in names.items()}
+
         def named_back(term):
             return blank.get(term, term)
 
@@ -238,29 +241,13 @@ def _namespace(iri: str) -> str:
     return iri[: max(iri.rfind("#"), iri.rfind("/")) + 1]
 
 
-def _skolemized(triples: list[ox.Triple], blank: dict[ox.NamedNode, ox.BlankNode]) -> list[ox.Triple]:
-    """``triples`` with each blank node replaced by an IRI, recorded in ``blank`` (IRI → blank node)."""
-    if not any(isinstance(term, ox.BlankNode) for t in triples for term in (t.subject, t.object)):
-        return triples
-    iris = {node: iri for iri, node in blank.items()}
-
-    def iri(term):
-        if isinstance(term, ox.BlankNode):
-            if term not in iris:
-                iris[term] = ox.NamedNode(f"{_BLANK_NODE_NAMESPACE}{len(iris)}")
-                blank[iris[term]] = term
-            return iris[term]
-        return term
-
-    return [ox.Triple(iri(t.subject), t.predicate, iri(t.object)) for t in triples]
-
-
 @dataclass(frozen=True)
 class _Context:
     """What every part's alignment shares (read-only, so threads share it): the ontology as N-Triples
     and as lines; for each class (N-Triples) the lines `` <rdf:type> <super> .`` of its rule-named
-    superclasses (each line without its subject); what each rule reads, and the predicates (N-Triples) some rule reads only some
-    objects of; the rules' texts; the vocabulary prefixes of :func:`independent_parts`."""
+    superclasses (each line without its subject); what each rule reads, and the predicates
+    (N-Triples) some rule reads only some objects of; the rules' texts; the vocabulary prefixes of
+    :func:`independent_parts`."""
 
     ontology: bytes
     ontology_lines: frozenset[bytes]
@@ -289,7 +276,8 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
     rule and writes its result without Python's lock, and lines hash and compare at C speed."""
     scratch = ox.Store()
     scratch.load(model_text + context.ontology, ox.RdfFormat.N_TRIPLES, lenient=True)  # Oxigraph wrote it
-    known = set(model_text.split(b"\n"))  # stated, derived or entailed
+    stated = model_text.split(b"\n")
+    known = set(stated)  # stated, derived or entailed
     known |= context.ontology_lines
     derived: list[bytes] = []
 
@@ -307,7 +295,7 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
         return fresh
 
     added: defaultdict[bytes, set[bytes]] = defaultdict(set)
-    add(b"\n".join(_entailed(model_text.split(b"\n"), context.type_lines)))
+    add(b"\n".join(_entailed(stated, context.type_lines)))
     texts = context.rules
     # A rule's answer is a function of what it reads, so it need not run again until a triple it could
     # read was added (by any rule, itself included) since its last run.

@@ -47,6 +47,7 @@ from typing import Protocol, runtime_checkable
 import pyoxigraph as ox
 
 from .alignment import inferred_ntriples, inferred_triples
+from .blank_nodes import skolemize
 from .namespaces import GTR, graph_iri
 from .resources import ontologies_dir, queries_dir
 from .signature import Signature
@@ -115,23 +116,6 @@ def parse_rdf(data: bytes, fmt: ox.RdfFormat, source_name: str, base_iri: str | 
     except (ValueError, UnicodeDecodeError) as exc:
         raise ModelLoadError(source_name, str(exc)) from None
     return [ox.Triple(q.subject, q.predicate, q.object) for q in quads]
-
-
-def skolemize(triples: Iterable[ox.Triple], prefix: str) -> list[ox.Triple]:
-    """Replace every blank node by the IRI ``prefix + n`` (n = 0, 1, … in order of first appearance).
-
-    The order of a parse is deterministic, so the same document always gives the same IRIs.
-    """
-    names: dict[ox.BlankNode, ox.NamedNode] = {}
-
-    def iri(term):
-        if isinstance(term, ox.BlankNode):
-            if term not in names:
-                names[term] = ox.NamedNode(f"{prefix}{len(names)}")
-            return names[term]
-        return term
-
-    return [ox.Triple(iri(t.subject), t.predicate, iri(t.object)) for t in triples]
 
 
 @runtime_checkable
@@ -255,11 +239,15 @@ def insert_data_update(graphs: Mapping[ox.NamedNode, Iterable[ox.Triple] | bytes
     blank node shared between its graph blocks). Each graph is triples or N-Triples text (bytes)."""
     blocks = []
     for graph, triples in graphs.items():
-        text = triples if isinstance(triples, bytes) else ox.serialize(list(triples), format=ox.RdfFormat.N_TRIPLES)
-        if text:
+        if text := _ntriples_text(triples):
             blocks.append(f"GRAPH {graph} {{\n{text.decode()}}}")
     update = " ;\n".join(f"DROP SILENT GRAPH {graph}" for graph in graphs)
     return update + (" ;\nINSERT DATA {\n" + "\n".join(blocks) + "\n}" if blocks else "")
+
+
+def _ntriples_text(triples: Iterable[ox.Triple] | bytes) -> bytes:
+    """``triples`` as N-Triples text (bytes are taken to be that already)."""
+    return triples if isinstance(triples, bytes) else ox.serialize(list(triples), format=ox.RdfFormat.N_TRIPLES)
 
 
 def _nquads(graphs: Mapping[ox.NamedNode, bytes]) -> bytes:
@@ -302,10 +290,8 @@ class EmbeddedBackend:
         """One N-Quads load (a transaction) when none of ``graphs`` exists yet; else the load into
         staging graphs, then one update that moves them into place. Either is several times faster
         than parsing the same triples as ``INSERT DATA``."""
-        texts = {g: t if isinstance(t, bytes) else ox.serialize(list(t), format=ox.RdfFormat.N_TRIPLES)
-                 for g, t in graphs.items()}
-        existing = [g for g in texts if self.store.contains_named_graph(g)]
-        if not existing:
+        texts = {g: _ntriples_text(t) for g, t in graphs.items()}
+        if not any(self.store.contains_named_graph(g) for g in texts):
             self.store.load(_nquads(texts), ox.RdfFormat.N_QUADS, lenient=True)  # Oxigraph wrote the lines
             return
         run = uuid.uuid4().hex

@@ -67,7 +67,8 @@ def applicable_nodes(store: GraphStore, model_name: str, signature: Signature) -
 
 
 def _component_part(key: str) -> str:
-    """A parameter key without its model: ``…/model/NAME/component/Fan/supply_fan#c1`` → ``Fan/supply_fan#c1`` (a run of the model loaded under another name gives the same)."""
+    """A parameter key without its model: ``…/model/NAME/component/Fan/supply_fan#c1`` →
+    ``Fan/supply_fan#c1`` (a run of the model loaded under another name gives the same)."""
     return key.rsplit("/component/", 1)[-1]
 
 
@@ -80,9 +81,9 @@ def _truth_theta(model, model_name: str, effect: Signature | None, rng: np.rando
     if unknown:
         raise ValueError(f"the truth names parameters model {model_name} does not estimate: {', '.join(unknown)}")
     for ref in model.estimated_parameters:
-        spec = ref.spec
-        if _component_part(ref.key) in given:
-            values.append(float(given[_component_part(ref.key)]))
+        spec, part = ref.spec, _component_part(ref.key)
+        if part in given:
+            values.append(float(given[part]))
             rng.random()  # the same draws for the others whatever is given
             continue
         if effect is not None and f"/{effect.id}/" in ref.component and spec.name in truth:

@@ -56,6 +56,11 @@ def _nodes(model, iris):
     return sorted(model.components[i].node.removeprefix(EX) for i in iris)
 
 
+def _ontology() -> list[ox.Triple]:
+    return skolemize([t for p in sorted(ontologies_dir().glob("*.ttl"))
+                      for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))], "urn:ontology/genid/")
+
+
 def test_a_unit_described_by_its_points_gets_the_equipment_they_imply(store):
     model = assemble(store, "points")
     chosen = {c.node.removeprefix(EX): c.signature.id for c in model.components.values()}
@@ -115,8 +120,7 @@ def test_a_unit_without_a_fan_command_is_incomplete_and_says_so():
 
 
 def test_the_rules_reach_their_fixpoint_in_one_pass_and_leave_saref_models_alone(store):
-    ontology = [t for p in sorted(ontologies_dir().glob("*.ttl"))
-                for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))]
+    ontology = _ontology()
     model = store.graph_triples(store.model_graph("points"))
     derived = inferred_triples(model, ontology)
     assert derived and inferred_triples(model + derived, ontology) == []
@@ -129,8 +133,7 @@ def test_the_rules_reach_their_fixpoint_in_one_pass_and_leave_saref_models_alone
 def test_re_running_only_the_rules_whose_reads_changed_reaches_the_same_fixpoint(store, example, monkeypatch):
     """The scheduler skips a rule until a triple it could read was added; with every rule re-run after
     every addition (the reads analysis switched off) the derived triples are the same."""
-    ontology = [t for p in sorted(ontologies_dir().glob("*.ttl"))
-                for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))]
+    ontology = _ontology()
     model = (store.graph_triples(store.model_graph("points")) if example == "points" else
              parse_rdf((examples_dir() / example / "model.ttl").read_bytes(), ox.RdfFormat.TURTLE, example))
     scheduled = inferred_triples(model, ontology)
@@ -177,8 +180,7 @@ def test_two_coils_at_one_path_position_are_both_fed_and_both_feed_the_next():
     two heating coils (position 1) sit side by side between the mixing section and the cooling coil."""
     model = parse_rdf(POINTS_ONLY.replace(":fan_cmd a", ':hw2_cmd a brick:Valve_Command ; brick:isPointOf :ahu ; '
                                           'rdfs:label "Htg Valve 2" .\n:fan_cmd a').encode(), ox.RdfFormat.TURTLE, "two")
-    ontology = [t for p in sorted(ontologies_dir().glob("*.ttl"))
-                for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))]
+    ontology = _ontology()
     derived = inferred_triples(model, ontology)
     placed = {t.subject for t in derived if t.predicate.value == GT + "assumedPathPosition"}
     feeds = {(t.subject.value.removeprefix(EX), t.object.value.removeprefix(EX)) for t in derived
@@ -186,11 +188,6 @@ def test_two_coils_at_one_path_position_are_both_fed_and_both_feed_the_next():
     assert feeds == {("ahu_mixing_section", "hw_cmd_coil"), ("ahu_mixing_section", "hw2_cmd_coil"),
                      ("hw_cmd_coil", "chw_cmd_coil"), ("hw2_cmd_coil", "chw_cmd_coil"),
                      ("chw_cmd_coil", "ahu_supply_fan"), ("ahu_supply_fan", "ahu_served_zone")}
-
-
-def _ontology() -> list[ox.Triple]:
-    return skolemize([t for p in sorted(ontologies_dir().glob("*.ttl"))
-                      for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))], "urn:ontology/genid/")
 
 
 def _campus(n_units: int, extra: str = "") -> list[ox.Triple]:
