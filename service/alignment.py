@@ -12,22 +12,27 @@ the predicates of its patterns with the objects they can take, so ``VALUES ?rule
 ``gt:derivedByRule`` is not woken by every rule's provenance), the earliest such rule first, until
 none is left: a fixpoint (rules only add triples and mint IRIs from the nodes they read — never
 blank nodes, which a CONSTRUCT makes anew on every run — so this terminates). On a Brick campus the 14
-rules take about 25 runs, the costly point-link and sensor-placement rules one each, where a
-confirming round of every rule after the last addition doubled the time. The order makes the rules
+rules take 23 runs, the costly point-link and sensor-placement rules one each, where a confirming
+round of every rule after the last addition doubled the time. The order makes the rules
 stratified: a rule may test for the absence of a triple (``FILTER NOT EXISTS``) only when the triple
 is stated in the model or derived by a rule earlier in the order, so that its answer cannot change
 later. The Brick rules use this: the typing rules (``0N-brick-*.rq``) run first, the flow rules
 (``5N-brick-*.rq``) after the device classes of ``50`` (whose entailed ``saref:Device`` types the
-flow-edge rule reads; either order re-runs one of the two once), and the sensor placement rule reads
-the flow edges and mixing boxes of the rule before it.
+flow-edge rule reads), and the sensor placement rule reads the flow edges and mixing boxes of the
+rule before it. A rule that names the classes it reads (``?property a saref:Temperature``, not
+``?property a ?class . ?class rdfs:subClassOf* …``) is woken by those types only: rule 50 so runs once,
+where reading every type it ran four times a part.
 
 A large model is cut into independent parts (:func:`independent_parts`: no rule joins across them)
 aligned side by side, one scratch store per part on a thread per CPU: Oxigraph evaluates a rule and
 writes its result without holding Python's lock, and triples stay N-Triples lines from the model to
 the result (they hash and compare at C speed; a term object per triple cost more than the rules).
+A part's result is sorted on its thread by who owns each line's subject (:class:`_PartResult`): the
+few lines about a node another part owns — one both mint, or one the other states — are settled
+after, so the parts' texts are joined as they are.
 
 The scratch store also holds, for every ``rdf:type`` triple of the model or derived, the types it
-entails by ``rdfs:subClassOf`` in the ontology — only those a rule names (:func:`rule_terms`), so a
+entails by ``rdfs:subClassOf`` in the ontology and the model — only those a rule names (:func:`rule_terms`), so a
 rule writes ``?point a brick:Temperature_Sensor`` and matches every official subclass without a
 property path (``a/rdfs:subClassOf*`` per node made the Brick rules minutes long at 10⁴ triples).
 These entailed triples are not part of the result: the store's queries see the hierarchy in the
@@ -47,11 +52,12 @@ from __future__ import annotations
 
 import re
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
 from itertools import chain
+from typing import NamedTuple
 
 import numpy as np
 import pyoxigraph as ox
@@ -64,13 +70,14 @@ from .cyclic_gc import cyclic_gc_paused
 from .resources import queries_dir
 from .sparql_reads import QueryReads, query_reads
 
-__all__ = ["MAX_ROUNDS", "PART_TRIPLES", "alignment_rules", "independent_parts", "inferred_ntriples", "inferred_triples", "rule_terms"]
+__all__ = ["MAX_ROUNDS", "PART_TRIPLES", "ModelParts", "alignment_rules", "independent_parts", "inferred_ntriples", "inferred_triples", "rule_terms"]
 
 _RDF_TYPE = ox.NamedNode("http://www.w3.org/1999/02/22-rdf-syntax-ns#type")
 _TYPE = str(_RDF_TYPE).encode()
 _TYPE_INFIX = b" %s " % _TYPE
 _BLANK_NODE_NAMESPACE = "urn:graphtwin:alignment:blank-node:"
 _SUBCLASS_OF = ox.NamedNode("http://www.w3.org/2000/01/rdf-schema#subClassOf")
+_SUBCLASS_INFIX = b" %s " % str(_SUBCLASS_OF).encode()
 _SCHEMA_PREDICATES = (b"<http://www.w3.org/2002/07/owl#", *(b"<http://www.w3.org/2000/01/rdf-schema#%s>" % p for p in (
     b"subClassOf", b"subPropertyOf", b"domain", b"range")))
 _QUDT_NAMESPACE = "http://qudt.org/vocab/"
@@ -136,9 +143,9 @@ def _named_superclasses(ontology: Iterable[ox.Triple]) -> dict[ox.NamedNode, tup
 
 def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], *,
                       workers: int | None = None, part_triples: int = PART_TRIPLES) -> bytes:
-    """What the alignment rules derive from ``model`` with the ``ontology`` class hierarchy, as
-    N-Triples: every derived triple not already stated in either (each independent part's in the
-    order its rules derived them, the parts in the order of the model).
+    """What the alignment rules derive from ``model`` with the class hierarchy of the ``ontology``
+    and of the model's own ``rdfs:subClassOf`` triples, as N-Triples: every derived triple not
+    already stated in either (an independent part's together, the parts in the order of the model).
 
     :param workers: threads aligning independent parts side by side (default: one per CPU this
         process may run on).
@@ -151,19 +158,62 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
         rule (a rule that keeps minting new terms).
     """
     text = ox.serialize(model, format=ox.RdfFormat.N_TRIPLES)
-    context = _Context.of(list(ontology))
+    lines = text.split(b"\n")[:-1]
+    model_subclasses = ox.parse(b"\n".join(line for line in lines if _SUBCLASS_INFIX in line), format=ox.RdfFormat.N_TRIPLES)
+    context = _Context.of(list(ontology), [t.triple for t in model_subclasses])
     if _has_blank_node(text) or _has_blank_node(context.ontology):
         raise ValueError("the alignment needs a model and ontology without blank nodes: skolemise them first")
-    lines = text.split(b"\n")[:-1]
     with cyclic_gc_paused():
         if len(lines) < 2 * part_triples:
             return _ntriples(_derived(text, context))
-        shared, parts = independent_parts(lines, context.vocabulary, part_triples)
+        model_parts = independent_parts(lines, context.vocabulary, part_triples)
+        minted: dict[bytes, int] = {}
         with ThreadPoolExecutor(workers or usable_cpu_count()) as pool:
-            derived = dict.fromkeys(chain.from_iterable(pool.map(
-                lambda part: _derived(_ntriples(shared + part), context), parts)))
-        stated = set(lines)  # a term one part mints may be stated in another
-        return _ntriples([line for line in derived if line not in stated])
+            results = list(pool.map(lambda k: _PartResult.of(model_parts, k, minted, _derived(
+                _ntriples(model_parts.shared + model_parts.parts[k]), context)), range(len(model_parts.parts))))
+        return b"".join([*(result.text for result in results), _ntriples(_uncontested(model_parts, minted, results))])
+
+
+class _PartResult(NamedTuple):
+    """What one part derived: the lines about nodes it owns (``owned``, and as N-Triples ``text``) and
+    the ``contested`` ones, about a node another part owns, which that part may state or derive too.
+
+    A part owns the nodes its triples link (:attr:`ModelParts.node_part`) and the nodes its rules
+    mint — or name outside the model, such as classes and vocabulary — before any other part does."""
+
+    owned: list[bytes]
+    text: bytes
+    contested: list[bytes]
+
+    @classmethod
+    def of(cls, model_parts: ModelParts, k: int, minted: dict[bytes, int], derived: list[bytes]) -> _PartResult:
+        """Part ``k``'s ``derived`` lines sorted by their subject's owner; ``minted``: the owner of
+        every subject outside the model so far, shared by the parts' threads (``dict.setdefault`` is
+        atomic under Python's lock). Run on the part's thread, where the lines are fresh in the cache
+        (a pass over a million of them afterwards costs a cache miss each)."""
+        owned, contested = [], []
+        node_ids, node_part, claim = model_parts.node_ids, model_parts.node_part, minted.setdefault
+        for line in derived:
+            subject = line[: line.index(b" ")]
+            node = node_ids.get(subject)
+            owner = claim(subject, k) if node is None else node_part[node]
+            (owned if owner == k else contested).append(line)
+        return cls(owned, _ntriples(owned), contested)
+
+
+def _uncontested(model_parts: ModelParts, minted: dict[bytes, int], results: list[_PartResult]) -> list[bytes]:
+    """The contested lines that the owner of their subject neither states nor derives, each once."""
+    kept: dict[bytes, None] = {}
+    known_of: dict[int, set[bytes]] = {}
+    for line in chain.from_iterable(result.contested for result in results):
+        subject = line[: line.index(b" ")]
+        node = model_parts.node_ids.get(subject)
+        owner = minted[subject] if node is None else model_parts.node_part[node]
+        if owner not in known_of:
+            known_of[owner] = set(model_parts.parts[owner]) | set(results[owner].owned)
+        if line not in known_of[owner]:
+            kept.setdefault(line)
+    return list(kept)
 
 
 def _ntriples(lines: list[bytes]) -> bytes:
@@ -187,47 +237,67 @@ def inferred_triples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], 
     return triples
 
 
-def independent_parts(lines: list[bytes], vocabulary: tuple[bytes, ...],
-                      part_triples: int) -> tuple[list[bytes], list[list[bytes]]]:
-    """``(shared, parts)`` of a model's N-Triples ``lines``: the model cut where no rule can join
-    across, so that each part aligned with ``shared`` derives what the whole model derives about it.
+@dataclass(frozen=True)
+class ModelParts:
+    """A model cut into independent parts (:func:`independent_parts`)."""
+
+    #: the model's own schema, which every part needs (N-Triples lines)
+    shared: list[bytes]
+    #: the other lines, part by part
+    parts: list[list[bytes]]
+    #: node (an N-Triples term) → its index in :attr:`node_part`, for every node that links triples
+    node_ids: dict[bytes, int]
+    #: node index → the part whose triples name it
+    node_part: list[int]
+
+
+def independent_parts(lines: list[bytes], vocabulary: tuple[bytes, ...], part_triples: int) -> ModelParts:
+    """A model's N-Triples ``lines`` cut where no rule can join across, so that each part aligned
+    with the shared lines derives what the whole model derives about it.
 
     The rules join model resources only through model resources: a node links the triples that name
     it unless it is a literal, a class (the object of ``rdf:type``), or ``vocabulary`` (IRIs starting
     with one of those N-Triples prefixes: the namespaces of the classes and properties the ontology
     declares, and QUDT's). The parts are the connected components of the model's triples under that
     linking, packed in model order into parts of at least ``part_triples`` triples (a component is
-    never split: a campus whose units share a plant is one component). ``shared``: the model's own
+    never split: a campus whose units share a plant is one component). Shared: the model's own
     schema — triples whose predicate is OWL's or ``rdfs:subClassOf``, ``subPropertyOf``, ``domain``
     or ``range``, or whose subject is a class or vocabulary — that every part needs, as it needs the
     ontology.
     """
-    triples = [line.split(b" ", 2) for line in lines]
-    classes = {o[:-2] for _s, p, o in triples if p == _TYPE}
-    schema = [p.startswith(_SCHEMA_PREDICATES) or s in classes or s.startswith(vocabulary) for s, p, _o in triples]
-    shared = [line for line, is_schema in zip(lines, schema, strict=True) if is_schema]
-    body = [(line, t) for line, t, is_schema in zip(lines, triples, schema, strict=True) if not is_schema]
-    ids: dict[bytes, int] = {}
-    subject_ids = [ids.setdefault(s, len(ids)) for _line, (s, _p, _o) in body]
-    links = [(i, ids.setdefault(o[:-2], len(ids))) for i, (_line, (_s, p, o)) in zip(subject_ids, body, strict=True)
-             if p != _TYPE and not o.startswith(b'"') and not o.startswith(vocabulary)]
-    starts, ends = np.array(links, dtype=np.int64).reshape(-1, 2).T
-    adjacency = coo_array((np.ones(len(starts), dtype=np.int8), (starts, ends)), shape=(len(ids), len(ids)))
-    _count, component = connected_components(adjacency, directed=False)
-    triple_component = component[np.asarray(subject_ids, dtype=np.int64)]
+    classes = {line.rsplit(b" ", 2)[1] for line in lines if _TYPE_INFIX in line}
+    shared, body, subject_ids, starts, ends = [], [], [], [], []
+    node_ids: dict[bytes, int] = {}
+    node_id = node_ids.setdefault
+    for line in lines:
+        subject, predicate, obj = line.split(b" ", 2)
+        if predicate.startswith(_SCHEMA_PREDICATES) or subject in classes or subject.startswith(vocabulary):
+            shared.append(line)
+            continue
+        body.append(line)
+        subject_ids.append(start := node_id(subject, len(node_ids)))
+        if predicate != _TYPE and obj[0] != 34 and not obj.startswith(vocabulary):  # 34: '"' opens a literal
+            starts.append(start)
+            ends.append(node_id(obj[:-2], len(node_ids)))
+    adjacency = coo_array((np.ones(len(starts), dtype=np.int8), (starts, ends)), shape=(len(node_ids), len(node_ids)))
+    _count, node_component = connected_components(adjacency, directed=False)
+    triple_component = node_component[np.asarray(subject_ids, dtype=np.int64)]
     # components in order of their first triple, packed into parts of at least part_triples
     components, first_triple = np.unique(triple_component, return_index=True)
     sizes = np.bincount(triple_component)
-    part_of, part, filled = {}, 0, 0
+    component_part = np.zeros(len(sizes), dtype=np.int64)
+    part, filled = 0, 0
     for c in components[np.argsort(first_triple)].tolist():
         if filled >= part_triples:
             part, filled = part + 1, 0
-        part_of[c] = part
+        component_part[c] = part
         filled += sizes[c]
-    parts: list[list[bytes]] = [[] for _ in range(part + 1)]
-    for (line, _t), c in zip(body, triple_component.tolist(), strict=True):
-        parts[part_of[c]].append(line)
-    return shared, parts
+    triple_part = component_part[triple_component]
+    order = np.argsort(triple_part, kind="stable").tolist()
+    ends_at = np.cumsum(np.bincount(triple_part, minlength=part + 1)).tolist()
+    in_order = [body[i] for i in order]
+    parts = [in_order[start:end] for start, end in zip([0, *ends_at[:-1]], ends_at, strict=True)]
+    return ModelParts(shared, parts, node_ids, component_part[node_component].tolist())
 
 
 def _has_blank_node(text: bytes) -> bool:
@@ -245,8 +315,9 @@ def _namespace(iri: str) -> str:
 class _Context:
     """What every part's alignment shares (read-only, so threads share it): the ontology as N-Triples
     and as lines; for each class (N-Triples) the lines `` <rdf:type> <super> .`` of its rule-named
-    superclasses (each line without its subject); what each rule reads, and the predicates
-    (N-Triples) some rule reads only some objects of; the rules' texts; the vocabulary prefixes of
+    superclasses by the ontology's and the model's ``rdfs:subClassOf`` (each line without its
+    subject); what each rule reads, and the predicates (N-Triples) some rule reads only some objects
+    of; the rules' texts; the vocabulary prefixes of
     :func:`independent_parts`."""
 
     ontology: bytes
@@ -258,10 +329,10 @@ class _Context:
     vocabulary: tuple[bytes, ...]
 
     @classmethod
-    def of(cls, ontology: list[ox.Triple]) -> _Context:
+    def of(cls, ontology: list[ox.Triple], model_subclasses: list[ox.Triple] = ()) -> _Context:
         text = ox.serialize(ontology, format=ox.RdfFormat.N_TRIPLES)
         type_lines = {str(c).encode(): tuple(b" %s %s ." % (_TYPE, str(s).encode()) for s in supers)
-                      for c, supers in _named_superclasses(ontology).items()}
+                      for c, supers in _named_superclasses([*ontology, *model_subclasses]).items()}
         rules = tuple(text for _name, text in alignment_rules())
         reads = tuple(map(query_reads, rules))  # parsed here, not on the threads
         restricted = frozenset(f"<{p}>".encode() for r in reads for p, objects in r.objects.items() if objects is not None)

@@ -8,7 +8,7 @@ from case_study import EX
 from service.namespaces import GT, RDF
 import service.alignment
 from service.alignment import inferred_triples
-from service.store import ONTOLOGY_GRAPH, GraphStore
+from service.store import ONTOLOGY_GRAPH, GraphStore, parse_rdf
 
 V4 = b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
 @prefix ex: <https://example.org/a#> .
@@ -93,3 +93,18 @@ def test_a_rule_that_keeps_minting_terms_is_stopped_with_a_clear_error(case_stor
     model = case_store.graph_triples(case_store.model_graph("case"))
     with pytest.raises(RuntimeError, match=r"alignment rules in .*alignment did not reach a fixpoint in 8 runs per rule"):
         inferred_triples(model, case_store.graph_triples(ONTOLOGY_GRAPH))
+
+
+def test_a_property_class_the_model_declares_under_saref_temperature_makes_its_observer_a_temperature_sensor():
+    """Rule 50 reads entailed types only: the model's own ``rdfs:subClassOf`` takes part in the
+    entailment as the ontology's does (a device observing such a property becomes a sensor; a
+    controller observing it does not)."""
+    model = parse_rdf(b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
+@prefix rdfs: <http://www.w3.org/2000/01/rdf-schema#> . @prefix ex: <https://example.org/a#> .
+ex:SupplyAirTemperature rdfs:subClassOf ex:AirTemperature . ex:AirTemperature rdfs:subClassOf saref:Temperature .
+ex:sensor a s4bldg:Sensor ; saref:observes ex:t . ex:t a ex:SupplyAirTemperature .
+ex:controller a s4bldg:Controller ; saref:observes ex:t .
+ex:other a s4bldg:Sensor ; saref:observes ex:u . ex:u a ex:Humidity .""", ox.RdfFormat.TURTLE, "model")
+    ontology = GraphStore.embedded(None).graph_triples(ONTOLOGY_GRAPH)
+    typed = {t.subject.value for t in inferred_triples(model, ontology) if t.object == GT.TemperatureSensor}
+    assert typed == {"https://example.org/a#sensor"}

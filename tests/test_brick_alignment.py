@@ -236,14 +236,36 @@ def test_units_linked_through_a_model_node_stay_in_one_part_and_classes_units_an
         campus = _campus(6, extra)
         lines = ox.serialize(campus, format=ox.RdfFormat.N_TRIPLES).split(b"\n")[:-1]
         vocabulary = service.alignment._Context.of(ontology).vocabulary
-        shared, parts = independent_parts(lines, vocabulary, part_triples=1)
+        model_parts = independent_parts(lines, vocabulary, part_triples=1)
         units = [{_unit_of(line) for line in part if line.startswith(b"<" + CAMPUS_NAMESPACE.encode() + b"ahu")}
-                 for part in parts]
-        assert shared == []
+                 for part in model_parts.parts]
+        assert model_parts.shared == []
         assert sorted(u for part in units for u in part) == sorted(f"ahu{i}" for i in range(6))  # each unit once
         assert [part for part in units if len(part) > 1] == ([together] if together else [])
         whole = inferred_triples(campus, ontology)
         assert set(inferred_triples(campus, ontology, part_triples=1, workers=2)) == set(whole)
+
+
+def test_a_node_several_parts_mint_or_another_part_states_is_derived_as_it_is_whole(monkeypatch):
+    """Parts are aligned apart, so a rule may mint in one part a node that another part mints too or
+    states: every unit mints the same node (its lines once each), and ahu1's twin is stated by a
+    part of its own (what the model states is not derived)."""
+    minting = ("99-mint.rq", """PREFIX brick: <https://brickschema.org/schema/Brick#>
+        CONSTRUCT { <urn:everywhere> <urn:sees> ?ahu ; a brick:Site . ?twin a brick:Supply_Fan ; <urn:twinOf> ?ahu . }
+        WHERE { ?ahu a brick:Air_Handling_Unit . BIND(IRI(CONCAT(STR(?ahu), "_twin")) AS ?twin) }""")
+    shipped = alignment_rules()
+    monkeypatch.setattr(service.alignment, "alignment_rules", lambda: shipped + (minting,))
+    twin = f"<{CAMPUS_NAMESPACE}ahu1#ahu_twin>"
+    campus = _campus(6, f"\n{twin} a brick:Supply_Fan ; rdfs:label \"stated twin\" .")
+    ontology = _ontology()
+    whole = inferred_triples(campus, ontology)
+    in_parts = inferred_triples(campus, ontology, part_triples=1, workers=3)
+    assert len(in_parts) == len(set(in_parts)) and set(in_parts) == set(whole)
+    everywhere = [t for t in whole if t.subject == ox.NamedNode("urn:everywhere")]
+    assert len(everywhere) == 7  # a brick:Site once, and each of the six units seen
+    twins = {t.subject.value for t in whole if t.predicate == ox.NamedNode("urn:twinOf")}
+    assert twin[1:-1] in twins and len(twins) == 6
+    assert not any(t.subject.value == twin[1:-1] and t.object.value.endswith("#Supply_Fan") for t in whole)
 
 
 def test_the_n_triples_alignment_asks_for_blank_nodes_to_be_skolemised_first():
