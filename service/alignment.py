@@ -69,6 +69,7 @@ from scipy.sparse.csgraph import connected_components
 from .blank_nodes import skolemize
 from .cpu_count import usable_cpu_count
 from .cyclic_gc import cyclic_gc_paused
+from .ntriples import triple_list
 from .resources import queries_dir
 from .sparql_reads import QueryReads, query_reads
 
@@ -144,10 +145,11 @@ def _named_superclasses(ontology: Iterable[ox.Triple]) -> dict[ox.NamedNode, tup
 
 
 def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], *,
-                      workers: int | None = None, part_triples: int = PART_TRIPLES) -> bytes:
+                      workers: int | None = None, part_triples: int = PART_TRIPLES) -> list[bytes]:
     """What the alignment rules derive from ``model`` with the class hierarchy of the ``ontology``
-    and of the model's own ``rdfs:subClassOf`` triples, as N-Triples: every derived triple not
-    already stated in either (an independent part's together, the parts in the order of the model).
+    and of the model's own ``rdfs:subClassOf`` triples, as N-Triples text in chunks of whole lines
+    (one per independent part, in the order of the model; joined, a million lines are a copy of
+    ~200 MB the store's load does not need): every derived triple not already stated in either.
 
     :param workers: threads aligning independent parts side by side (default: one per CPU this
         process may run on).
@@ -167,13 +169,13 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
         raise ValueError("the alignment needs a model and ontology without blank nodes: skolemise them first")
     with cyclic_gc_paused():
         if len(lines) < 2 * part_triples:
-            return _ntriples(_derived(text, context))
+            return [_ntriples(_derived(text, context))]
         model_parts = independent_parts(lines, context.vocabulary, part_triples)
         minted: dict[bytes, int] = {}
         with ThreadPoolExecutor(workers or usable_cpu_count()) as pool:
             results = list(pool.map(lambda k: _PartResult.of(model_parts, k, minted, _derived(
                 _ntriples(model_parts.shared + model_parts.parts[k]), context)), range(len(model_parts.parts))))
-        return b"".join([*(result.text for result in results), _ntriples(_uncontested(model_parts, minted, results))])
+        return [*(result.text for result in results), _ntriples(_uncontested(model_parts, minted, results))]
 
 
 class _PartResult(NamedTuple):
@@ -228,7 +230,7 @@ def inferred_triples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], 
     are aligned as IRIs and named back."""
     names: dict[ox.BlankNode, ox.NamedNode] = {}
     model, ontology = (skolemize(triples, _BLANK_NODE_NAMESPACE, names) for triples in (model, ontology))
-    triples = [t.triple for t in ox.parse(inferred_ntriples(model, ontology, **options), format=ox.RdfFormat.N_TRIPLES)]
+    triples = triple_list(inferred_ntriples(model, ontology, **options))
     if names:
         blank = {iri: node for node, iri in names.items()}
 
@@ -305,7 +307,7 @@ def independent_parts(lines: list[bytes], vocabulary: tuple[bytes, ...], part_tr
 def _has_blank_node(text: bytes) -> bool:
     """Whether N-Triples ``text`` has a blank node (``_:`` opening a line or after a space; inside a
     literal it may be a false alarm, which only costs the caller a skolemisation)."""
-    return text.startswith(b"_:") or b" _:" in text or b"\n_:" in text
+    return b"_:" in text and (text.startswith(b"_:") or b" _:" in text or b"\n_:" in text)
 
 
 def _namespace(iri: str) -> str:

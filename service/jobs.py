@@ -68,6 +68,7 @@ from .effect_recording import applied_effect_triples
 from .resources import signatures_dir
 from .settings import check_executor
 from .signature import load_signature_library
+from .ntriples import triple_list
 from .store import GraphStore, parse_rdf
 
 __all__ = [
@@ -234,9 +235,7 @@ class DeferredWrites:
 
     def replace_graphs(self, graphs):
         for graph, triples in graphs.items():
-            if isinstance(triples, bytes):
-                triples = [quad.triple for quad in ox.parse(triples, format=ox.RdfFormat.N_TRIPLES)]
-            self.replace_graph(graph, triples)
+            self.replace_graph(graph, triple_list(triples))
 
     def load_graph(self, graph, data, format, *, base_iri=None, source_name="<data>"):
         triples = parse_rdf(data, format, source_name, base_iri)

@@ -57,6 +57,7 @@ from urllib.parse import urlencode
 import httpx
 import pyoxigraph as ox
 
+from .ntriples import GraphTriples
 from .store import bind_values, insert_data_update, parse_rdf
 
 __all__ = ["SparqlEndpointBackend", "SparqlEndpointError", "SparqlEndpointUnreachable", "SparqlRequestError"]
@@ -207,8 +208,9 @@ class SparqlEndpointBackend:
         readers (module docstring)."""
         self.replace_graphs({graph: triples})
 
-    def replace_graphs(self, graphs: Mapping[ox.NamedNode, Iterable[ox.Triple] | bytes]) -> None:
-        """Replace several graphs (triples or N-Triples text; none: remove it) in one update request."""
+    def replace_graphs(self, graphs: Mapping[ox.NamedNode, GraphTriples]) -> None:
+        """Replace several graphs (:data:`service.store.GraphTriples`; none: remove it) in one update
+        request."""
         self.update(insert_data_update(graphs))
 
     def load_graph(self, graph: ox.NamedNode, data: bytes, format: ox.RdfFormat, *,

@@ -48,6 +48,7 @@ import pyoxigraph as ox
 
 from .alignment import inferred_ntriples, inferred_triples
 from .blank_nodes import skolemize
+from .ntriples import GraphTriples, ntriples_chunks
 from .namespaces import GTR, graph_iri
 from .resources import ontologies_dir, queries_dir
 from .signature import Signature
@@ -141,7 +142,7 @@ class SparqlBackend(Protocol):
 
     def replace_graph(self, graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> None: ...
 
-    def replace_graphs(self, graphs: Mapping[ox.NamedNode, Iterable[ox.Triple] | bytes]) -> None: ...
+    def replace_graphs(self, graphs: Mapping[ox.NamedNode, GraphTriples]) -> None: ...
 
     def load_graph(self, graph: ox.NamedNode, data: bytes, format: ox.RdfFormat, *,
                    base_iri: str | None = None, source_name: str = "<data>") -> int: ...
@@ -233,27 +234,23 @@ def query_bound(store: ox.Store, sparql: str, substitutions: Mapping[str, Term] 
     return store.query(bind_values(sparql, substitutions), **kwargs)
 
 
-def insert_data_update(graphs: Mapping[ox.NamedNode, Iterable[ox.Triple] | bytes]) -> str:
+def insert_data_update(graphs: Mapping[ox.NamedNode, GraphTriples]) -> str:
     """``DROP SILENT GRAPH <g> ; … ; INSERT DATA { GRAPH <g> { … } … }``: the ``graphs`` replaced in
     one update request, one transaction (a graph with no triples is removed; ``INSERT DATA`` keeps a
-    blank node shared between its graph blocks). Each graph is triples or N-Triples text (bytes)."""
+    blank node shared between its graph blocks)."""
     blocks = []
     for graph, triples in graphs.items():
-        if text := _ntriples_text(triples):
+        if text := b"".join(ntriples_chunks(triples)):
             blocks.append(f"GRAPH {graph} {{\n{text.decode()}}}")
     update = " ;\n".join(f"DROP SILENT GRAPH {graph}" for graph in graphs)
     return update + (" ;\nINSERT DATA {\n" + "\n".join(blocks) + "\n}" if blocks else "")
 
 
-def _ntriples_text(triples: Iterable[ox.Triple] | bytes) -> bytes:
-    """``triples`` as N-Triples text (bytes are taken to be that already)."""
-    return triples if isinstance(triples, bytes) else ox.serialize(list(triples), format=ox.RdfFormat.N_TRIPLES)
-
-
-def _nquads(graphs: Mapping[ox.NamedNode, bytes]) -> bytes:
-    """N-Quads of N-Triples texts, each in its graph (blank node labels kept: shared between graphs).
+def _nquads(graphs: Mapping[ox.NamedNode, list[bytes]]) -> bytes:
+    """N-Quads of N-Triples chunks, each in its graph (blank node labels kept: shared between graphs).
     Every line of N-Triples ends with `` .`` and a newline, which a literal cannot hold unescaped."""
-    return b"".join(text.replace(b" .\n", b" %s .\n" % str(graph).encode()) for graph, text in graphs.items())
+    return b"".join(chunk.replace(b" .\n", b" %s .\n" % str(graph).encode())
+                    for graph, chunks in graphs.items() for chunk in chunks)
 
 
 #: Named graphs a write stages its data in before moving it into place (left only by a crash between
@@ -290,7 +287,7 @@ class EmbeddedBackend:
         """One N-Quads load (a transaction) when none of ``graphs`` exists yet; else the load into
         staging graphs, then one update that moves them into place. Either is several times faster
         than parsing the same triples as ``INSERT DATA``."""
-        texts = {g: _ntriples_text(t) for g, t in graphs.items()}
+        texts = {g: [chunk for chunk in ntriples_chunks(t) if chunk] for g, t in graphs.items()}
         if not any(self.store.contains_named_graph(g) for g in texts):
             self.store.load(_nquads(texts), ox.RdfFormat.N_QUADS, lenient=True)  # Oxigraph wrote the lines
             return
@@ -526,8 +523,8 @@ class GraphStore:
         """Replace ``graph`` with ``triples`` in one transaction."""
         self.backend.replace_graph(graph, triples)
 
-    def write_graphs(self, graphs: Mapping[ox.NamedNode, Iterable[ox.Triple] | bytes]) -> None:
-        """Replace several graphs (triples, or N-Triples text) in one transaction (the backend's
+    def write_graphs(self, graphs: Mapping[ox.NamedNode, GraphTriples]) -> None:
+        """Replace several graphs (:data:`GraphTriples`) in one transaction (the backend's
         ``replace_graphs``; a remote store receives one update request, whose body an Oxigraph
         server bounds: module :mod:`service.sparql_endpoint_backend`)."""
         self.backend.replace_graphs(graphs)
