@@ -33,7 +33,9 @@ A part's result is sorted on its thread by who owns each line's subject (:class:
 few lines about a node another part owns — one both mint, or one the other states — are settled
 after, so the parts' texts are joined as they are.
 
-The scratch store also holds, for every ``rdf:type`` triple of the model or derived, the types it
+A derived triple no rule can read (by :func:`service.sparql_reads.query_reads`: provenance, columns,
+units, assumption texts, most derived classes) is kept in the result but not loaded into the scratch
+store. The scratch store also holds, for every ``rdf:type`` triple of the model or derived, the types it
 entails by ``rdfs:subClassOf`` in the ontology and the model — only those a rule names (:func:`rule_terms`), so a
 rule writes ``?point a brick:Temperature_Sensor`` and matches every official subclass without a
 property path (``a/rdfs:subClassOf*`` per node made the Brick rules minutes long at 10⁴ triples).
@@ -321,7 +323,7 @@ class _Context:
     and as lines; for each class (N-Triples) the lines `` <rdf:type> <super> .`` of its rule-named
     superclasses by the ontology's and the model's ``rdfs:subClassOf`` (each line without its
     subject); what each rule reads, and the predicates (N-Triples) some rule reads only some objects
-    of; the rules' texts; the vocabulary prefixes of
+    of; what any rule reads (:meth:`read_by_a_rule`); the rules' texts; the vocabulary prefixes of
     :func:`independent_parts`."""
 
     ontology: bytes
@@ -329,8 +331,19 @@ class _Context:
     type_lines: dict[bytes, tuple[bytes, ...]]
     reads: tuple[QueryReads, ...]
     restricted: frozenset[bytes]
+    read_objects: dict[bytes, frozenset[str] | None]
+    read_prefixes: tuple[bytes, ...] | None
     rules: tuple[str, ...]
     vocabulary: tuple[bytes, ...]
+
+    def read_by_a_rule(self, predicate: bytes, obj: bytes) -> bool:
+        """Whether some rule can read a triple with this ``predicate`` and ``obj`` (N-Triples): the
+        others need not be in the scratch store (provenance, columns, units, assumption texts and
+        most derived classes: about 40 % of what the Brick rules derive)."""
+        if predicate in self.read_objects:
+            objects = self.read_objects[predicate]
+            return objects is None or _object_value(obj) in objects
+        return self.read_prefixes is None or predicate.startswith(self.read_prefixes)
 
     @classmethod
     def of(cls, ontology: list[ox.Triple], model_subclasses: list[ox.Triple] = ()) -> _Context:
@@ -340,9 +353,16 @@ class _Context:
         rules = tuple(text for _name, text in alignment_rules())
         reads = tuple(map(query_reads, rules))  # parsed here, not on the threads
         restricted = frozenset(f"<{p}>".encode() for r in reads for p, objects in r.objects.items() if objects is not None)
+        read_objects: dict[bytes, frozenset[str] | None] = {}
+        for predicate, objects in ((f"<{p}>".encode(), o) for r in reads for p, o in r.objects.items()):
+            known = read_objects.get(predicate, frozenset())
+            read_objects[predicate] = None if known is None or objects is None else known | objects
+        read_prefixes = None if any(r.any_predicate for r in reads) else tuple(
+            f"<{prefix}".encode() for r in reads for prefix in r.predicate_prefixes)
         declared = {t.subject.value for t in ontology if t.predicate == _RDF_TYPE and t.object in _DECLARATIONS}
         vocabulary = tuple(sorted({f"<{_namespace(iri)}".encode() for iri in declared | {_QUDT_NAMESPACE}}))
-        return cls(text, frozenset(text.split(b"\n")), type_lines, reads, restricted, rules, vocabulary)
+        return cls(text, frozenset(text.split(b"\n")), type_lines, reads, restricted, read_objects, read_prefixes,
+                   rules, vocabulary)
 
 
 def _derived(model_text: bytes, context: _Context) -> list[bytes]:
@@ -357,16 +377,20 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
     derived: list[bytes] = []
 
     def add(text: bytes) -> list[bytes]:
-        """Add to the scratch store the lines of ``text`` not known yet, with the types they entail;
-        returns those added (entailed ones not among them) and extends ``added``."""
+        """Add to the scratch store the lines of ``text`` not known yet that a rule can read, with
+        the types they entail; returns those not known yet (entailed ones not among them) and
+        extends ``added``."""
         fresh = [line for line in dict.fromkeys(text.split(b"\n")) if line not in known]
         known.update(fresh)
         entailed = [line for line in _entailed(fresh, context.type_lines) if line not in known]
         known.update(entailed)
-        scratch.load(b"\n".join(fresh + entailed), ox.RdfFormat.N_TRIPLES, lenient=True)
+        readable = []
         for line in fresh + entailed:
             _subject, predicate, obj = line.split(b" ", 2)
             added[predicate].add(obj[:-2])
+            if context.read_by_a_rule(predicate, obj[:-2]):
+                readable.append(line)
+        scratch.load(b"\n".join(readable), ox.RdfFormat.N_TRIPLES, lenient=True)
         return fresh
 
     added: defaultdict[bytes, set[bytes]] = defaultdict(set)

@@ -2,8 +2,10 @@
 take, so that a rule engine re-runs a query only when a triple it could match was added
 (:func:`service.alignment.inferred_triples`).
 
-The answer over-approximates and never misses: a predicate given by a variable or a negated property
-set reads every triple; a pattern reads the objects it can take — the IRI or literal it names, or the
+The answer over-approximates and never misses: a predicate given by a variable reads every triple
+unless the variable is restricted — to constants (as objects are, below: those predicates, any
+object) or to IRIs starting with a text by a ``FILTER(STRSTARTS(STR(?p), "…"))`` conjunct (the
+predicates with that prefix); a negated property set reads every triple; a pattern reads the objects it can take — the IRI or literal it names, or the
 constants a variable is restricted to by a ``VALUES`` block or a ``FILTER(?v IN (…))`` conjunct of its
 own group or an enclosing one (``?x a ?class`` with ``VALUES ?class {…}`` reads those classes only);
 a ``VALUES`` row with ``UNDEF``, a variable no group restricts, a number (whose text is not canonical),
@@ -24,19 +26,26 @@ from rdflib.paths import AlternativePath, InvPath, MulPath, NegatedPath, Path, S
 from rdflib.plugins.sparql import prepareQuery
 from rdflib.plugins.sparql.parserutils import CompValue
 
-__all__ = ["QueryReads", "query_reads"]
+__all__ = ["IriPrefix", "QueryReads", "query_reads"]
 
-#: variable → the constants it is restricted to (no entry: unrestricted).
-_Restrictions = Mapping[Variable, frozenset[URIRef | Literal]]
+
+class IriPrefix(str):
+    """A restriction of a variable to the IRIs that start with this text."""
+
+
+#: variable → the constants it is restricted to, or the prefix of the IRIs it is (no entry: unrestricted).
+_Restrictions = Mapping[Variable, frozenset[URIRef | Literal | IriPrefix]]
 
 
 @dataclass(frozen=True)
 class QueryReads:
     """The triples a query can match: for each predicate it names, the objects its patterns can take
-    (``None``: any object); ``any_predicate`` when a pattern's predicate is open."""
+    (``None``: any object); any object of the predicates starting with one of
+    ``predicate_prefixes``; every triple when ``any_predicate`` (a pattern's predicate is open)."""
 
     objects: Mapping[str, frozenset[str] | None]
     any_predicate: bool = False
+    predicate_prefixes: tuple[str, ...] = ()
 
     def may_read(self, added: Mapping[str, Iterable[str]]) -> bool:
         """Whether any of the triples ``added`` (predicate IRI → the IRIs or lexical forms of their
@@ -48,6 +57,8 @@ class QueryReads:
                 read = self.objects[predicate]
                 if read is None or not read.isdisjoint(objects):
                     return True
+            if predicate.startswith(self.predicate_prefixes):
+                return True
         return False
 
 
@@ -60,13 +71,14 @@ def query_reads(text: str) -> QueryReads:
     collector = _Collector()
     collector.walk(prepareQuery(text).algebra["p"], {})
     objects = {p: None if o is None else frozenset(o) for p, o in collector.objects.items()}
-    return QueryReads(objects, collector.any_predicate)
+    return QueryReads(objects, collector.any_predicate, tuple(sorted(collector.predicate_prefixes)))
 
 
 class _Collector:
     def __init__(self) -> None:
         self.objects: dict[str, set[str] | None] = {}
         self.any_predicate = False
+        self.predicate_prefixes: set[str] = set()
 
     def _read(self, predicate: str, objects: Iterable[str] | None) -> None:
         if predicate in self.objects and self.objects[predicate] is None:
@@ -105,12 +117,19 @@ class _Collector:
     def _pattern(self, triple: Iterable, restrictions: _Restrictions) -> None:
         _subject, predicate, obj = triple
         if isinstance(predicate, Variable):
-            self.any_predicate = True
+            constants = restrictions.get(predicate, ())
+            if not constants or not all(isinstance(c, URIRef | IriPrefix) for c in constants):
+                self.any_predicate = True
+            for constant in constants:
+                if isinstance(constant, IriPrefix):
+                    self.predicate_prefixes.add(str(constant))
+                elif isinstance(constant, URIRef):
+                    self._read(str(constant), None)
         elif isinstance(predicate, Path):
             self._path(predicate)
         elif _constant(obj):
             self._read(str(predicate), [str(obj)])
-        elif isinstance(obj, Variable) and obj in restrictions:
+        elif isinstance(obj, Variable) and obj in restrictions and not any(isinstance(c, IriPrefix) for c in restrictions[obj]):
             self._read(str(predicate), [str(c) for c in restrictions[obj]])
         else:
             self._read(str(predicate), None)
@@ -133,10 +152,18 @@ class _Collector:
 
 
 def _merge(outer: _Restrictions, inner: _Restrictions) -> _Restrictions:
-    """Both restrictions hold: intersect where both restrict a variable."""
+    """Both restrictions hold: intersect where both restrict a variable to constants; where one is a
+    prefix (:class:`IriPrefix`), keep the other (a superset of what both allow)."""
     merged = dict(outer)
     for var, constants in inner.items():
-        merged[var] = merged[var] & constants if var in merged else constants
+        if var not in merged:
+            merged[var] = constants
+        elif any(isinstance(c, IriPrefix) for c in constants):
+            continue
+        elif any(isinstance(c, IriPrefix) for c in merged[var]):
+            merged[var] = constants
+        else:
+            merged[var] = merged[var] & constants
     return merged
 
 
@@ -169,7 +196,7 @@ def _values_table(rows: list[Mapping[Variable, object]]) -> _Restrictions:
 
 
 def _in_conjuncts(expr: object) -> _Restrictions:
-    """``?v IN (constant, …)`` conjuncts of a filter expression."""
+    """``?v IN (constant, …)`` and ``STRSTARTS(STR(?v), "prefix")`` conjuncts of a filter expression."""
     if not isinstance(expr, CompValue):
         return {}
     if expr.name == "ConditionalAndExpression":
@@ -180,6 +207,9 @@ def _in_conjuncts(expr: object) -> _Restrictions:
     if (expr.name == "RelationalExpression" and expr.get("op") == "IN" and isinstance(expr["expr"], Variable)
             and all(_constant(c) for c in expr["other"])):
         return {expr["expr"]: frozenset(expr["other"])}
+    if (expr.name == "Builtin_STRSTARTS" and isinstance(text := expr["arg1"], CompValue) and text.name == "Builtin_STR"
+            and isinstance(text["arg"], Variable) and isinstance(expr["arg2"], Literal)):
+        return {text["arg"]: frozenset({IriPrefix(expr["arg2"])})}
     return {}
 
 

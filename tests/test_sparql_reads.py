@@ -60,3 +60,20 @@ def test_predicates_in_paths_read_any_object_and_open_predicates_read_everything
     for where in ("?x ?p ?y", "?x !(ex:p) ?y"):
         assert reads(where).may_read({EX + "s": {EX + "anything"}}), where
     assert not reads("?x ?p ?y").may_read({})  # nothing added, nothing to read
+
+
+def test_a_predicate_variable_restricted_to_a_prefix_or_to_constants_reads_those_predicates_only():
+    r = reads('?x ?p ?y . ?p a ex:Property . FILTER(STRSTARTS(STR(?p), "http://example.org/nominal/"))')
+    assert not r.any_predicate
+    assert r.may_read({EX + "nominal/airFlowRate": {EX + "anything"}})
+    assert r.may_read({RDF_TYPE: {EX + "Property"}})
+    assert not r.may_read({EX + "other": {EX + "anything"}})
+    assert not r.may_read({RDF_TYPE: {EX + "Fan"}})
+    constants = reads("?x ?p ?y . VALUES ?p { ex:a ex:b }")
+    assert constants.may_read({EX + "a": {"1"}}) and not constants.may_read({EX + "c": {"1"}})
+    # a prefix restricts no object: an object variable with one reads any object
+    assert reads('?x ex:p ?y . FILTER(STRSTARTS(STR(?y), "http://example.org/A"))').may_read({EX + "p": {EX + "B"}})
+    # a prefix and constants together: the constants (each of which the prefix may or may not admit)
+    both = reads('?x ?p ?y . VALUES ?p { ex:a } FILTER(STRSTARTS(STR(?p), "http://example.org/"))')
+    assert both.may_read({EX + "a": {"1"}}) and not both.may_read({EX + "b": {"1"}})
+    assert reads('?x ?p ?y . FILTER(STRSTARTS(STR(?p), "http://example.org/") || BOUND(?x))').any_predicate
