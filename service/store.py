@@ -48,8 +48,8 @@ import pyoxigraph as ox
 
 from .alignment import inferred_ntriples, inferred_triples
 from .blank_nodes import skolemize
-from .ntriples import GraphTriples, ntriples_chunks
 from .namespaces import GTR, graph_iri
+from .ntriples import GraphTriples, ntriples_chunks
 from .resources import ontologies_dir, queries_dir
 from .signature import Signature
 
