@@ -3,7 +3,7 @@
 import pyoxigraph as ox
 import pytest
 
-from service.store import ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, bind_values
+from service.store import ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, bind_values, insert_data_update
 
 from case_study import CASE_STUDY, EX
 
@@ -79,6 +79,11 @@ def test_several_graphs_are_replaced_together_and_staging_leaves_nothing_behind(
         rows = backend.query(f"SELECT ?x WHERE {{ GRAPH {g1} {{ ?x ?p ?one }} GRAPH {g2} {{ ?x ?p ?two }} }}")
         assert len(rows) == 1 and backend.triple_count(g1) == backend.triple_count(g2) == 1, version
         assert {t.object.value for t in backend.query(f"CONSTRUCT {{ ?s ?p ?o }} WHERE {{ GRAPH {g1} {{ ?s ?p ?o }} }}")} == {version + " one"}
+    # N-Triples in chunks of whole lines (as the alignment hands them over) are one graph's text
+    chunks = [ox.serialize([ox.Triple(p, p, ox.Literal(f"chunk {i}"))], format=ox.RdfFormat.N_TRIPLES) for i in (1, 2)]
+    backend.replace_graphs({g1: chunks})
+    assert sorted(t.object.value for t in backend.query(f"CONSTRUCT {{ ?s ?p ?o }} WHERE {{ GRAPH {g1} {{ ?s ?p ?o }} }}")) == ["chunk 1", "chunk 2"]
+    assert all(c.decode() in insert_data_update({g1: chunks}) for c in chunks)
     backend.replace_graphs({g1: [], g2: [ox.Triple(p, p, p)]})
     assert backend.graphs() == sorted([g2, other], key=lambda g: g.value) and backend.triple_count(other) == 1
     backend.store.add(ox.Quad(p, p, p, ox.NamedNode(STAGING + "crashed/0")))  # as a crash mid-write leaves it
