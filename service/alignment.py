@@ -31,7 +31,7 @@ writes its result without holding Python's lock, and triples stay N-Triples line
 the result (they hash and compare at C speed; a term object per triple cost more than the rules).
 A part's result is sorted on its thread by who owns each line's subject (:class:`_PartResult`): the
 few lines about a node another part owns — one both mint, or one the other states — are settled
-after, so the parts' texts are joined as they are.
+after, so the parts' texts are handed over as they are (:func:`inferred_ntriples`).
 
 A derived triple no rule can read (by :func:`service.sparql_reads.query_reads`: provenance, columns,
 units, assumption texts, most derived classes) is kept in the result but not loaded into the scratch
