@@ -33,11 +33,11 @@ import pyoxigraph as ox
 from .assembled_model import (
     AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef, load_model_class,
 )
+from .cyclic_gc import cyclic_gc_paused
 from .measuring_device import MeasuringDevice
 from .namespaces import GTR, RDFS
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
-from .cyclic_gc import cyclic_gc_paused
 from .signature_matcher import MatchSession, match_signature, missing_class_report
 from .store import GraphStore
 from .units import convert

@@ -65,10 +65,10 @@ from .assembly_summary import assembly_to_dict
 from .assembly_triples import assembly_triples
 from .calibration_run import calibrate, parse_window
 from .effect_recording import applied_effect_triples
+from .ntriples import triple_list
 from .resources import signatures_dir
 from .settings import check_executor
 from .signature import load_signature_library
-from .ntriples import triple_list
 from .store import GraphStore, parse_rdf
 
 __all__ = [

@@ -130,8 +130,8 @@ class SparqlBackend(Protocol):
     (:func:`bind_values`); ``default_graph`` lists the named graphs whose union is the default graph.
     ``update`` runs a SPARQL update request as one transaction. ``replace_graph`` and ``load_graph``
     replace one named graph atomically, ``replace_graphs`` several in one transaction (each given as
-    triples or N-Triples text; none: the graph is removed; blank nodes shared between them stay
-    shared); ``load_graph`` parses completely first and raises :class:`ModelLoadError`, leaving the
+    :data:`~service.ntriples.GraphTriples`: triples, or N-Triples text whole or in chunks; none: the
+    graph is removed; blank nodes shared between them stay shared); ``load_graph`` parses completely first and raises :class:`ModelLoadError`, leaving the
     store untouched.
     """
 
