@@ -13,7 +13,8 @@
   ``application/sparql-query`` body; ``default-graph-uri``; ``union-default-graph=true`` queries
   every named graph as the default graph). Results by ``Accept``: SPARQL JSON (default), XML, CSV,
   TSV; graphs (CONSTRUCT, DESCRIBE) as Turtle (default), N-Triples, RDF/XML, JSON-LD. An update
-  sent here → 403, a syntax error → 400. ``POST /sparql/update`` runs SPARQL Update (token needed).
+  sent here → 403, so is a ``SERVICE`` clause (the server would fetch other URLs on the caller's
+  behalf), a syntax error → 400. ``POST /sparql/update`` runs SPARQL Update (token needed).
 * ``GET /queries``, ``GET /queries/{name}?var=value``: the files in ``queries/``, each query
   parameter binding the variable of that name (``dataset=MODEL`` makes the model's graphs the
   default graph, for the queries about a building graph).
@@ -73,6 +74,7 @@ from .assembly import AssemblyError, IncompleteModelError, assemble
 from .calibration_data import read_model_data
 from .jobs import (
     JobRecord, JobRecords, JobRunner, JobStateError, add_effect_job, assemble_job, calibrate_job, diagnose_job,
+    effect_version,
     job_executor,
 )
 from .measurements import MeasurementError
@@ -285,6 +287,20 @@ def query_form(sparql: str) -> str | None:
     return keyword.group(1).upper() if keyword else None
 
 
+_TOKEN = re.compile(
+    r'"""(?:[^"\\]|\\.|"(?!""))*"""' r"|'''(?:[^'\\]|\\.|'(?!''))*'''"  # long strings
+    r'|"(?:[^"\\\n]|\\.)*"' r"|'(?:[^'\\\n]|\\.)*'"  # strings
+    r'|<[^<>"{}|^`\\\s]*>|#[^\n]*'  # IRIs, comments
+    r"""|[^\s"'<{}()#]+|\S"""  # words (keywords, prefixed names, variables), punctuation
+)
+
+
+def calls_a_service(sparql: str) -> bool:
+    """Whether ``sparql`` has a ``SERVICE`` clause (a federated query: the engine would fetch another
+    URL), read as tokens: the word in a string, an IRI, a comment or a name does not count."""
+    return any(token.upper() == "SERVICE" for token in _TOKEN.findall(sparql))
+
+
 def negotiate(accept: str | None, offers: list[str]) -> str | None:
     """The offered media type the ``Accept`` header prefers (q-values, ``type/*``, ``*/*``); the first
     offer when the header is absent; None when it accepts none of them."""
@@ -393,6 +409,9 @@ def _prepare(text: str | None, accept: str | None, default_graph_uris: list[str]
     if form in UPDATE_KEYWORDS:
         raise ApiError(403, "this endpoint only answers queries: send SPARQL Update to POST /sparql/update "
                             "with a bearer token")
+    if calls_a_service(text):
+        raise ApiError(403, "SERVICE (federated query) is refused here: the service would send requests to "
+                            "other URLs on the caller's behalf; query the other endpoint directly")
     offers = list(GRAPH_TYPES) if form in ("CONSTRUCT", "DESCRIBE") else list(RESULT_TYPES)
     media = negotiate(accept, offers)
     if media is None:
@@ -717,7 +736,8 @@ def submit_diagnose(body: DiagnoseRequest, response: Response, service: ServiceD
 @router.post("/jobs/add-effect", response_model=JobPublic, status_code=202, tags=["jobs"],
              dependencies=[WriteAccess], responses=_JOB_ERRORS)
 def submit_add_effect(body: AddEffectRequest, response: Response, service: ServiceDep) -> dict:
-    """Record an effect at a building node as a new model version ``<model>+<effect>``."""
+    """Record an effect at a building node as a new model version (``version``, by default
+    ``<model>+<effect>``); 409 when that version exists with other effects."""
     _require_model(service.store, body.model)
     library = load_signature_library(signatures_dir())
     effects = sorted(s.id for s in library.values() if s.kind == "effect")
@@ -727,6 +747,10 @@ def submit_add_effect(body: AddEffectRequest, response: Response, service: Servi
         ox.NamedNode(body.target)
     except ValueError as exc:
         raise ApiError(422, f"target {body.target!r} is not an IRI: {exc}") from None
+    try:
+        effect_version(service.store, body.model_dump())
+    except FileExistsError as exc:
+        raise ApiError(409, str(exc)) from None
     return _submit(service, "add-effect", body.model_dump(), response)
 
 
@@ -810,4 +834,7 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     app.add_exception_handler(ApiError, _api_error_response)
     app.add_exception_handler(RequestValidationError, _validation_error_response)
     app.include_router(router)
+    from . import report_routes  # it imports this module (ApiError, ReadAccess, ServiceDep)
+
+    app.include_router(report_routes.router)
     return app

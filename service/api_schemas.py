@@ -143,6 +143,13 @@ class DiagnoseRequest(_ModelRequest):
 class AddEffectRequest(_ModelRequest):
     effect: str = Field(description="effect signature id, e.g. FanMotorHeat")
     target: str = Field(description="IRI of the building node the effect applies to")
+    version: str | None = Field(default=None, description="name of the new model version (default "
+                                "<model>+<effect>); an existing version with other effects is not overwritten (409)")
+
+    @field_validator("version")
+    @classmethod
+    def _version_name(cls, value: str | None) -> str | None:
+        return value if value is None else GraphStore.check_name(value)
 
 
 class ProgressEntry(BaseModel):

@@ -232,12 +232,17 @@ class BayesianCalibrator(BaseEstimator):
         self.problem_ = problem
         return self
 
-    def predict(self, problem: CalibrationProblem, n_draws: int = 200) -> PosteriorPredictive:
+    def predict(self, problem: CalibrationProblem, n_draws: int = 200,
+                steps_from_training_start: int | None = None) -> PosteriorPredictive:
         """Posterior predictive on a window (the training window or a test window).
 
         :param problem: the window to predict, with the same parameters and targets as the training
             problem (its observations are not used here; see :meth:`PosteriorPredictive.metrics`).
         :param n_draws: posterior draws (with replacement when there are fewer samples).
+        :param steps_from_training_start: where the window's first step lies, in steps after the
+            training window's first step (0: the training window itself, or a window starting with
+            it); None: right after the training window. Only a discrepancy over the time index
+            (``gp_inputs="time"``, or ``"auto"`` on a problem without inputs) depends on it.
         """
         check_is_fitted(self, "samples_")
         if problem.parameter_names != self.parameter_names_:
@@ -253,7 +258,8 @@ class BayesianCalibrator(BaseEstimator):
             train_outputs = self.problem_.run(vectors[:, : likelihood.n_theta])
             test_outputs = problem.run(vectors[:, : likelihood.n_theta])
             hyper = likelihood.hyperparameters(vectors)
-            raw, _ = self._raw_gp_inputs(problem, self.problem_.n_steps)
+            offset = self.problem_.n_steps if steps_from_training_start is None else int(steps_from_training_start)
+            raw, _ = self._raw_gp_inputs(problem, offset)
             test_inputs = likelihood.scale_inputs(raw)
             draws, discrepancy_mean = {}, {}
             for key in self.problem_.target_keys:

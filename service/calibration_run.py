@@ -31,6 +31,7 @@ from .assembly_triples import assembly_iri, assembly_triples
 from .calibration_data import ModelData, read_model_data
 from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
+from .measurements import parse_timestamp
 from .metrics import TargetMetrics, target_metrics
 from .operating_filter import operating_mask
 from .point_calibration import PointCalibrator
@@ -45,15 +46,22 @@ Window = tuple[str | None, str | None]
 
 
 def parse_window(text: str | None) -> Window:
-    """``"START/END"`` (ISO time stamps, either side may be empty) → (start, end).
+    """``"START/END"`` (time stamps :func:`~service.measurements.parse_timestamp` reads, either side
+    may be empty) → (start, end), checked before any data is read.
 
-    :raises ValueError: without exactly one ``/``.
+    :raises ValueError: without exactly one ``/``, or naming the side whose time stamp is unreadable.
     """
     if text is None:
         return (None, None)
     if text.count("/") != 1:
         raise ValueError(f"window {text!r}: write START/END, e.g. 2026-01-12/2026-01-15T23:50")
     start, end = (part.strip() or None for part in text.split("/"))
+    for side, stamp in (("start", start), ("end", end)):
+        if stamp is not None:
+            try:
+                parse_timestamp(stamp)
+            except ValueError as exc:
+                raise ValueError(f"window {text!r}, its {side}: {exc}") from None
     return start, end
 
 
@@ -199,7 +207,8 @@ def calibrate(
         offset = test_slice.start - joined.start if joined is not None else 0
         if method == "bayes":
             test_problem = md.problem(joined or test_slice, target_scales=problem.target_scales, warmup_s=0.0)
-            predictive = calibrator.predict(test_problem, n_draws=200)
+            predictive = calibrator.predict(test_problem, n_draws=200,
+                                            steps_from_training_start=(joined or test_slice).start - train_slice.start)
             median = {k: v[offset:] for k, v in predictive.median.items()}
             intervals["test"] = {node: {level: tuple(b[offset:] for b in predictive.interval(node, level))
                                         for level in (0.5, 0.68, 0.9, 0.95, 0.99)} for node in median}

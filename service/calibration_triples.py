@@ -14,6 +14,8 @@ Shape (vocabulary in ``ontologies/graphtwin.ttl``), all in the run's named graph
         gt:lowerBound ; gt:upperBound ; gt:identified true|false ; rdfs:comment "why not identified" .
     <metric> a gt:Metric ; prov:wasGeneratedBy <run> ; gt:onSensor <sensor node> ;
         gt:window "train" | "test" ; gt:metricName "rmse" ; gt:value 0.21 ; gt:unit "degC" .
+    <metric> … gt:metricName "coverage" | "ace" | "mean_interval_width" ; gt:intervalLevel 0.9 .
+                                            (per prediction interval of a Bayesian run)
     <regime> a gt:OperatingRegime ; prov:wasGeneratedBy <run> ; gt:regimeRule "fan speed > 0.6 …" ;
         gt:share 0.4 ; gt:ruleAccuracy 0.97 .
     <metric> … gt:window "test" ; gt:metricName "rmse" ; gt:inRegime <regime> .   (the RMSE per regime)
@@ -117,6 +119,13 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
                         "1" if attribute in ("r2", "lag1_autocorrelation") else metrics.unit)
                 t += _metric_triples(ox.NamedNode(f"{run.value}/metric/{window}/{_local(sensor)}/{attribute}"),
                                      run, sensor, window, attribute, value, unit)
+            for interval in metrics.coverage:
+                for name, value, unit in (("coverage", interval.coverage, "1"), ("ace", interval.ace, "1"),
+                                          ("mean_interval_width", interval.mean_width, metrics.unit)):
+                    if math.isfinite(value):
+                        node = ox.NamedNode(f"{run.value}/metric/{window}/{_local(sensor)}/{name}/{interval.level:g}")
+                        t += _metric_triples(node, run, sensor, window, name, value, unit)
+                        t.append(ox.Triple(node, GT.intervalLevel, _double(interval.level)))
     units = {sensor: m.unit for sensor, m in record.metrics.get("test", {}).items()}
     for row in record.regimes:
         regime = ox.NamedNode(f"{run.value}/regime/{row['regime']}")

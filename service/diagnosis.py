@@ -174,13 +174,15 @@ def _split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice
     The effect must be fitted on data that shows it and judged on data it was not fitted on: the
     fit uses the training window and the first half of the test window, the judgement the second
     half. The evaluation half is predicted as the continuation of the run from the training start
-    when the test follows the training, else of a run over the whole test window.
+    when the test follows the training, else of a run over the whole test window. Steps between a
+    training window and a later test window are simulated through, not fitted.
     """
     middle = test.start + (test.stop - test.start) // 2
     evaluation = slice(middle, test.stop)
-    if test.start >= train.start:
+    if train.start <= test.start <= train.stop:
         return [slice(train.start, middle)], slice(train.start, test.stop), evaluation
-    return [train, slice(test.start, middle)], test, evaluation
+    fit = [train, slice(test.start, middle)]
+    return fit, (slice(train.start, test.stop) if test.start > train.stop else test), evaluation
 
 
 def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice, theta: np.ndarray) -> dict[str, np.ndarray]:

@@ -667,11 +667,44 @@ def _graph_triples(store: GraphStore, graph: ox.NamedNode) -> list[ox.Triple]:
     return parse_rdf(data, ox.RdfFormat.N_TRIPLES, str(graph)) if data else []
 
 
+def applied_effects(store: GraphStore, model: str) -> set[tuple[str, str]]:
+    """(node IRI, effect signature IRI) of every effect recorded in model ``model`` (none when the
+    store has no such model)."""
+    if not store.has_model(model):
+        return set()
+    return {(row["node"].value, row["effect_signature"].value)
+            for row in store.run_named_query("applied-effects", dataset=model)}
+
+
+def effect_version(store: GraphStore, params: dict) -> str:
+    """The name of the model version an add-effect job writes: ``params["version"]``, by default
+    ``<model>+<effect>``.
+
+    :raises FileExistsError: that version exists with other effects (the same effect at another
+        node, say): it is not overwritten — give ``version`` to keep both.
+    """
+    model, effect, target = params["model"], params["effect"], params["target"]
+    version = store.check_name(params.get("version") or f"{model}+{effect}")
+    if store.has_model(version):
+        existing = applied_effects(store, version)
+        wanted = applied_effects(store, model) | {(target, load_signature_library(signatures_dir())[effect].iri)}
+        if existing != wanted:
+            recorded = "; ".join(f"{_local_name(sig)} at {node}" for node, sig in sorted(existing)) or "no effect"
+            raise FileExistsError(f"model {version} exists with {recorded}: it is not overwritten; "
+                                  "give 'version' (a new model name) to keep both")
+    return version
+
+
+def _local_name(iri: str) -> str:
+    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+
+
 def add_effect_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
-    """``{"model", "effect", "target"}``: a new model version ``<model>+<effect>``: the model's triples
-    plus the applied-effect triples (:mod:`service.effect_recording`), aligned and assembled in a
-    scratch in-memory store (alignment reads the graph it derives from), then written with its
-    ``inferred`` and ``assembly`` graphs. The model ``<model>`` itself is not changed."""
+    """``{"model", "effect", "target"[, "version"]}``: a new model version (:func:`effect_version`):
+    the model's triples plus the applied-effect triples (:mod:`service.effect_recording`), aligned and
+    assembled in a scratch in-memory store (alignment reads the graph it derives from), then written
+    with its ``inferred`` and ``assembly`` graphs. The model ``<model>`` itself is not changed; a
+    version recorded with other effects is not overwritten."""
     model, effect, target = params["model"], params["effect"], params["target"]
     library = load_signature_library(signatures_dir())
     signature = library.get(effect)
@@ -680,7 +713,7 @@ def add_effect_job(store: GraphStore, params: dict, context: JobContext) -> JobR
         raise KeyError(f"no effect {effect!r}; the catalog has {known}")
     context.report(f"checking that {effect} applies at {target}")
     assemble(store, model, library=library, extra_effects=[EffectRequest(effect, target)])
-    version = store.check_name(f"{model}+{effect}")
+    version = effect_version(store, params)
     triples = _graph_triples(store, store.model_graph(model)) + applied_effect_triples(signature, target)
     context.report(f"aligning and assembling {version}")
     scratch = GraphStore.embedded(None)

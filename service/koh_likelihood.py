@@ -211,7 +211,8 @@ class KennedyOHaganLikelihood:
 
         θ: ``theta`` + N(0, (1 % of the prior width)²), or with ``theta_covariance`` (the point
         fit's Laplace covariance, physical units) ``theta`` + D·z with z ~ N(0, R), R its correlation
-        matrix and D its standard errors capped at 10 % of the prior width: the ensemble starts with
+        matrix and D its standard errors capped at 10 % of the prior width (the plain ball when a
+        standard error is zero: the point fit's residuals were exact): the ensemble starts with
         the posterior's shape (a ridge of confounded parameters included), not as a ball that must
         first stretch along the ridge, which is most of the burn-in (flat directions start spread
         over 10 % of their prior, not over the huge linearised variance). Per target log σ_n and
@@ -233,6 +234,9 @@ class KennedyOHaganLikelihood:
             if covariance.shape != (self.n_theta, self.n_theta):
                 raise ValueError(f"theta_covariance has shape {covariance.shape}, expected ({self.n_theta}, {self.n_theta})")
             standard_error = np.sqrt(np.diag(covariance))
+            if not np.all(np.isfinite(covariance)) or np.any(standard_error <= 0.0):
+                theta_covariance = None  # exact residuals (zero standard errors): the plain ball
+        if theta_covariance is not None:
             correlation = covariance / np.outer(standard_error, standard_error)
             values, vectors = np.linalg.eigh(correlation)
             root = vectors * np.sqrt(np.clip(values, 0.0, None))

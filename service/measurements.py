@@ -25,6 +25,7 @@ calibration leaves the affected target steps out.
 from __future__ import annotations
 
 import csv
+import io
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
@@ -100,7 +101,10 @@ class MeasuredData:
     def window(self, start: datetime | str | None, end: datetime | str | None) -> slice:
         """Index slice of the steps with ``start ≤ t ≤ end`` (None: the data's first / last).
 
-        :raises ValueError: a window outside the data or empty, naming the data's range.
+        :raises ValueError: a window outside the data or empty, naming the data's range; a window
+            reaching more than one step beyond the data's first or last time stamp (``2026-01-14``
+            as the end of data that stop at 23:50 the day before is fine; a week of data asked of a
+            day is not cut silently).
         """
         first, last = self.timestamps[0], self.timestamps[-1]
         lo = first if start is None else np.datetime64(parse_timestamp(str(start)), "s")
@@ -109,6 +113,11 @@ class MeasuredData:
             raise ValueError(f"window {lo} – {hi}: the end is before the start")
         if lo > last or hi < first:
             raise ValueError(f"window {lo} – {hi} lies outside the data {self.source} ({first} – {last})")
+        step = np.timedelta64(int(round(self.step_s)), "s")
+        if lo < first - step or hi > last + step:
+            side = "starts before" if lo < first - step else "ends after"
+            raise ValueError(f"window {lo} – {hi} {side} the data {self.source} ({first} – {last}): "
+                             "give a window inside the data")
         i = int(np.searchsorted(self.timestamps, lo, side="left"))
         j = int(np.searchsorted(self.timestamps, hi, side="right"))
         if j - i < 2:
@@ -120,6 +129,27 @@ class MeasuredData:
         window = self.window(start, end)
         return replace(self, timestamps=self.timestamps[window],
                        series={k: v[window] for k, v in self.series.items()})
+
+
+def _decoded(raw: bytes, source: str, warnings: list[str]) -> str:
+    """The file's text: UTF-8 (a byte-order mark dropped), else Windows-1252 — what a BMS export
+    with a ``°`` in its headers often is — with a warning.
+
+    :raises MeasurementError: neither, naming the first offending byte's line and offset.
+    """
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as utf8:
+        try:
+            text = raw.decode("cp1252")
+        except UnicodeDecodeError:
+            line = raw.count(b"\n", 0, utf8.start) + 1
+            raise MeasurementError(source, [
+                f"line {line}: byte 0x{raw[utf8.start]:02x} at offset {utf8.start} is neither UTF-8 nor "
+                "Windows-1252 text: is this a CSV file?"]) from None
+        line = raw.count(b"\n", 0, utf8.start) + 1
+        warnings.append(f"not UTF-8 (line {line}: byte 0x{raw[utf8.start]:02x}): read as Windows-1252")
+        return text
 
 
 def parse_timestamp(text: str) -> datetime:
@@ -181,16 +211,15 @@ def read_measurements(
     problems: list[str] = []
     warnings: list[str] = []
     try:
-        handle = path.open(newline="", encoding="utf-8-sig")
+        raw = path.read_bytes()
     except OSError as exc:
         raise MeasurementError(source, [str(exc)]) from None
-    with handle:
-        reader = csv.reader(handle)
-        try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise MeasurementError(source, ["the file is empty"]) from None
-        rows = list(reader)
+    reader = csv.reader(io.StringIO(_decoded(raw, source, warnings), newline=""))
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise MeasurementError(source, ["the file is empty"]) from None
+    rows = list(reader)
     if len(header) < 2:
         raise MeasurementError(source, ["line 1: expected a time column and at least one series column"])
 
@@ -229,9 +258,14 @@ def read_measurements(
                 error_cells[header[column]] = error_cells.get(header[column], 0) + 1
                 continue
             try:
-                values[node][line - 2] = float(cell)
+                value = float(cell)
             except ValueError:
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a number")
+                continue
+            if np.isfinite(value):
+                values[node][line - 2] = value
+            else:
+                problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a finite number")
     if len(times) < 2:
         problems.append("fewer than two data rows")
     warnings += [f"column {name!r}: {count} spreadsheet error cell(s) read as missing" for name, count in error_cells.items()]

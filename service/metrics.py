@@ -8,9 +8,12 @@ the number of estimated parameters and ``ȳ`` the mean of ``y``:
   worse than the mean);
 * ASHRAE Guideline 14-2014, with ``n − p`` degrees of freedom::
 
-      CV(RMSE) = sqrt(Σ(y − ŷ)² / (n − p)) / ȳ · 100 %
-      NMBE     = Σ(y − ŷ) / ((n − p) · ȳ) · 100 %      (sign kept: > 0 means the model under-predicts)
+      CV(RMSE) = sqrt(Σ(y − ŷ)² / (n − p)) / |ȳ| · 100 %
+      NMBE     = Σ(y − ŷ) / ((n − p) · |ȳ|) · 100 %    (sign kept: > 0 means the model under-predicts)
 
+  (Guideline 14 writes ``ȳ``, for energy use, which is positive; ``|ȳ|`` keeps a signal whose mean
+  is negative — a cooling coil's heat rate — from a negative CV(RMSE) that passes any threshold,
+  and keeps NMBE's sign meaning the same)
   and its hourly calibration criteria ``CV(RMSE) ≤ 30 %`` and ``|NMBE| ≤ 10 %``. They are computed
   at the resolution of the data given (pass hourly means for a literal Guideline-14 check). Both are
   ratios to ȳ, which only means something on a ratio scale, so the criteria are *not applied*
@@ -140,8 +143,8 @@ def target_metrics(
     total = float(np.sum((y - mean) ** 2))
     dof = n - p
     with np.errstate(divide="ignore", invalid="ignore"):
-        cv = float(np.sqrt(np.sum(error**2) / dof) / mean * 100.0) if dof > 0 and mean != 0.0 else np.nan
-        nmbe = float(np.sum(error) / (dof * mean) * 100.0) if dof > 0 and mean != 0.0 else np.nan
+        cv = float(np.sqrt(np.sum(error**2) / dof) / abs(mean) * 100.0) if dof > 0 and mean != 0.0 else np.nan
+        nmbe = float(np.sum(error) / (dof * abs(mean)) * 100.0) if dof > 0 and mean != 0.0 else np.nan
     applies, passed, note = _guideline14(unit, mean, float(np.max(np.abs(y))), dof, cv, nmbe)
     residual = np.where(measured, y_all - y_hat_all, np.nan)
     centred = residual - np.nanmean(residual)

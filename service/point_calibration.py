@@ -208,7 +208,7 @@ class PointCalibrator(BaseEstimator):
         unit_covariance = (vt.T / clipped**2) @ vt * sigma2
         self.covariance_ = unit_covariance * np.outer(width, width)
         self.standard_errors_ = np.sqrt(np.diag(self.covariance_))
-        self.correlation_ = self.covariance_ / np.outer(self.standard_errors_, self.standard_errors_)
+        self.correlation_ = _correlation(self.covariance_, self.standard_errors_)
         self.identifiability_ = self._verdicts(problem, singular, vt)
 
     def _verdicts(self, problem: CalibrationProblem, singular: np.ndarray, vt: np.ndarray) -> dict:
@@ -240,3 +240,12 @@ class PointCalibrator(BaseEstimator):
                     f"prior bounds [{lo:.4g}, {hi:.4g}]"
                 )
         return {name: ParameterIdentifiability(name, not why, tuple(why)) for name, why in reasons.items()}
+
+
+def _correlation(covariance: np.ndarray, standard_errors: np.ndarray) -> np.ndarray:
+    """Correlation matrix of ``covariance``; a parameter with a zero standard error (residuals that
+    are exactly zero) correlates with nothing: 0 off the diagonal, 1 on it."""
+    scale = np.outer(standard_errors, standard_errors)
+    correlation = np.divide(covariance, scale, out=np.zeros_like(covariance), where=scale > 0)
+    np.fill_diagonal(correlation, 1.0)
+    return correlation

@@ -167,7 +167,14 @@ def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_
     median = outcome.predictions["test"][node]
     assert lower.shape == median.shape == (36,) and np.all(lower <= median) and np.all(median <= upper)
     assert {c.level for c in record.metrics["test"][node].coverage} == {0.5, 0.68, 0.9, 0.95, 0.99}
-    assert any(r["run"].value.endswith(record.run_id) for r in store.run_named_query("sensor-metrics", model="case"))
+    stored = {(r["metric"].value, float(r["level"].value)): float(r["value"].value)
+              for r in store.run_named_query("sensor-metrics", model="case")
+              if r["run"].value.endswith(record.run_id) and r["sensor"].value == node and r["window"].value == "test"
+              and "level" in r}
+    for interval in record.metrics["test"][node].coverage:  # ACE, coverage and width per level, queryable
+        assert stored[("ace", interval.level)] == pytest.approx(interval.ace)
+        assert stored[("coverage", interval.level)] == pytest.approx(interval.coverage)
+        assert stored[("mean_interval_width", interval.level)] == pytest.approx(interval.mean_width)
 
     paths = plot_calibration(outcome, tmp_path / "plots")
     assert [p.name for p in paths] == [f"{record.run_id}-{kind}.png" for kind in ("fit", "trace", "corner")]

@@ -29,14 +29,27 @@ def test_bms_time_format_columns_by_series_id_and_local_name(tmp_path):
     assert parse_timestamp("2025-01-01T01:00:00+01:00").hour == 0
 
 
+def test_a_windows_1252_export_is_read_and_a_binary_file_is_refused(tmp_path):
+    spec = {"https://example.org/x#sat": SeriesSpec("https://example.org/x#sat", "SAT (°F)", "http://qudt.org/vocab/unit/DEG_F", "degC")}
+    path = tmp_path / "bms.csv"
+    path.write_bytes("time,SAT (°F)\n2025-01-01 00:00,50\n2025-01-01 00:10,68\n".encode("cp1252"))
+    data = read_measurements(path, spec)
+    assert data.series["https://example.org/x#sat"] == pytest.approx([10.0, 20.0])
+    assert "not UTF-8 (line 1: byte 0xb0): read as Windows-1252" in data.warnings
+    path.write_bytes(b"time,SAT\n2025-01-01 00:00,50\n\x81\x00\x9d")
+    with pytest.raises(MeasurementError, match="line 3: byte 0x81 at offset 29 is neither UTF-8 nor Windows-1252"):
+        read_measurements(path, spec)
+
+
 def test_every_problem_is_reported_with_line_and_column(tmp_path):
-    path = _write(tmp_path, "time,SAT,valve,extra\n2025-01-01 00:00,20,abc,1\n2025-01-01 00:00,21,10,1\n2024-12-31 23:50,21,10,1\n")
+    path = _write(tmp_path, "time,SAT,valve,extra\n2025-01-01 00:00,20,abc,1\n2025-01-01 00:00,21,10,1\n2024-12-31 23:50,-inf,10,1\n")
     with pytest.raises(MeasurementError) as info:
         read_measurements(path, SPECS)
     text = str(info.value)
     assert "line 2, column 'valve': 'abc' is not a number" in text
     assert "line 3: duplicate time stamp" in text
     assert "line 4: time stamp" in text and "before the previous one" in text
+    assert "line 4, column 'SAT': '-inf' is not a finite number" in text
     with pytest.raises(MeasurementError, match="no column for https://example.org/x#valve"):
         read_measurements(_write(tmp_path, "time,SAT\n2025-01-01 00:00,20\n2025-01-01 00:10,21\n"), SPECS)
 
@@ -58,6 +71,11 @@ def test_windows_outside_the_data_are_refused(tmp_path):
     assert data.window("2025-01-01 00:10", None) == slice(1, 3)
     with pytest.raises(ValueError, match="outside the data"):
         data.window("2026-01-01", "2026-01-02")
+    assert data.window(None, "2025-01-01 00:30") == slice(0, 3)  # one step past the last stamp: a whole period
+    with pytest.raises(ValueError, match=r"ends after the data .*\(2025-01-01T00:00:00 – 2025-01-01T00:20:00\)"):
+        data.window("2025-01-01 00:10", "2025-01-02")  # a day asked of 20 minutes: not cut silently
+    with pytest.raises(ValueError, match="starts before the data"):
+        data.window("2024-12-31 23:00", "2025-01-01 00:10")
 
 
 def test_valid_mask_and_select_by_time(tmp_path):

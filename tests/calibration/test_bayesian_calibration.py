@@ -13,6 +13,7 @@ import pytest
 from synthetic_zone import DAY_S, NAMES, TRUTH, zone_windows
 
 from service.bayesian_calibration import BayesianCalibrator
+from service.calibration_problem import CalibrationProblem
 from service.metrics import target_metrics
 
 ESTIMATE = ("UA_W_per_K", "C_J_per_K", "heater_power_W")
@@ -120,3 +121,46 @@ def test_predict_checks_the_window_and_the_interval_level(right_model):
         BayesianCalibrator(gp_inputs="space", progress=False).fit(train)
     with pytest.raises(ValueError, match=r"gp_inputs=\[0\] selects columns, but the problem has no gp_inputs"):
         BayesianCalibrator(gp_inputs=[0], progress=False).fit(train)
+
+
+def test_a_time_index_discrepancy_is_placed_where_the_predicted_window_lies():
+    """With the GP over the time index, predicting the training steps again (alone, or as the head of
+    a longer window) conditions the discrepancy on those very steps: the median follows the slow
+    structure the model lacks; placed after the training window it would not."""
+    steps = np.arange(100, dtype=float)
+    truth = 2 * np.sin(steps / 6) + 1 + 0.5 * np.sin(steps / 25)  # the model lacks the slow sinusoid
+    observed = truth + np.random.default_rng(0).normal(0, 0.05, steps.size)
+
+    def window(n):
+        def simulate(theta):
+            return {"y": theta[:, :1] * np.sin(steps[:n] / 6)[None] + theta[:, 1:2]}
+        return CalibrationProblem(("a", "b"), np.array([0.0, -3.0]), np.array([5.0, 3.0]), simulate,
+                                  {"y": observed[:n]}, units={"y": "degC"})
+
+    train, joined = window(80), window(100)
+    fit = BayesianCalibrator(gp_inputs="time", max_steps=400, n_temperatures=2, random_state=0, progress=False).fit(train)
+
+    def rmse_on_training_steps(predictive):
+        return float(np.sqrt(np.mean((predictive.median["y"][:80] - observed[:80]) ** 2)))
+
+    in_place = rmse_on_training_steps(fit.predict(joined, n_draws=100, steps_from_training_start=0))
+    assert in_place < 0.1  # noise 0.05 K, slow sinusoid 0.35 K rms
+    assert rmse_on_training_steps(fit.predict(train, n_draws=100, steps_from_training_start=0)) == pytest.approx(in_place, rel=0.3)
+    assert rmse_on_training_steps(fit.predict(joined, n_draws=100)) > 3 * in_place  # read as the steps after training
+
+
+def test_exact_data_start_the_sampler_from_the_plain_ball():
+    """Noise-free data the model reproduces: the point fit's residuals and standard errors are zero;
+    its correlation is 0 off the diagonal (not NaN) and the walkers still start inside the prior."""
+    steps = np.arange(80, dtype=float)
+
+    def simulate(theta):
+        return {"y": theta[:, :1] * np.sin(steps / 6)[None] + theta[:, 1:2]}
+
+    exact = CalibrationProblem(("a", "b"), np.array([0.0, -3.0]), np.array([5.0, 3.0]), simulate,
+                               {"y": simulate(np.array([[2.0, 1.0]]))["y"][0]}, units={"y": "degC"},
+                               default=np.array([2.0, 1.0]))
+    fit = BayesianCalibrator(max_steps=100, n_temperatures=2, random_state=0, progress=False).fit(exact)
+    point = fit.point_calibrator_
+    assert np.all(point.standard_errors_ == 0.0) and np.array_equal(point.correlation_, np.eye(2))
+    assert np.allclose(fit.median_, [2.0, 1.0], atol=0.01)

@@ -33,6 +33,15 @@ def test_over_prediction_gives_a_negative_nmbe():
     assert m.guideline14_applies and m.guideline14_pass is False
 
 
+def test_a_negative_mean_neither_passes_guideline14_by_sign_nor_flips_nmbe():
+    # a cooling coil's heat rate: mean −13 W; the same errors as above, mirrored
+    m = target_metrics(-OBSERVED, -PREDICTED, n_parameters=1, unit="W")
+    assert m.cv_rmse_percent == pytest.approx(np.sqrt(4 / 3) / 13 * 100, rel=1e-12)
+    assert m.nmbe_percent == pytest.approx(-2 / (3 * 13) * 100, rel=1e-12)  # the model over-predicts
+    scattered = target_metrics(-OBSERVED, -OBSERVED + np.array([8.0, -8.0, 0.0, 8.0, -8.0]), unit="W")
+    assert scattered.cv_rmse_percent > 30 and scattered.guideline14_pass is False
+
+
 def test_interval_coverage_and_average_coverage_error():
     intervals = {0.9: (PREDICTED - 1.5, PREDICTED + 1.5), 0.5: (PREDICTED - 0.5, PREDICTED + 1.2)}
     m = target_metrics(OBSERVED, PREDICTED, intervals=intervals)

@@ -219,6 +219,11 @@ def test_bad_sparql_requests_get_their_status_and_change_nothing(client, auth, s
     assert client.post("/sparql/update", content=update, headers={"Content-Type": "application/sparql-update"}).status_code == 401
     bad = client.post("/sparql/update", content="INSERT DATA { <a> ", headers={**auth, "Content-Type": "application/sparql-update"})
     assert bad.status_code == 400
+    service = "SELECT * WHERE { SERVICE <http://127.0.0.1:9/sparql> { ?s ?p ?o } }"
+    refused = client.get("/sparql", params={"query": service})
+    assert refused.status_code == 403 and "SERVICE" in refused.json()["detail"]
+    named = client.get("/sparql", params={"query": 'SELECT * WHERE { ?service ?p "SERVICE" } LIMIT 1'})
+    assert named.status_code == 200  # the word as a variable or a literal is no federated query
     too_many = client.get("/sparql", params={"query": "SELECT * WHERE { GRAPH ?g { ?s ?p ?o } }"})
     assert too_many.status_code == 422 and "LIMIT" in too_many.json()["detail"]
     assert snapshot(store) == before
@@ -279,6 +284,10 @@ def test_job_requests_for_unknown_things_are_refused(client, auth, case_csv):
     assert bad_window.status_code == 422 and "START/END" in bad_window.json()["detail"]
     assert bad_window.json()["problems"] == ["body.train: Value error, window '2026-01-12': write START/END, "
                                              "e.g. 2026-01-12/2026-01-15T23:50"]
+    bad_stamp = client.post("/jobs/calibrate", json={"model": "case", "measurements": upload,
+                                                     "train": "2026-01-12/2026-13-45"}, headers=auth)
+    assert bad_stamp.status_code == 422  # refused before a job is queued, naming the side
+    assert "window '2026-01-12/2026-13-45', its end: time stamp '2026-13-45'" in bad_stamp.json()["detail"]
     effect = client.post("/jobs/add-effect", json={"model": "case", "effect": "Nope", "target": EX + "supply_fan"}, headers=auth)
     assert effect.status_code == 422 and "FanMotorHeat" in effect.json()["detail"]
     assert client.post("/jobs/diagnose", json={"model": "case", "measurements": upload, "train": "/"}, headers=auth).status_code == 422
@@ -306,6 +315,17 @@ def test_assemble_and_add_effect_jobs_write_their_results(client, auth, store, w
     effects = _rows(client.get("/queries/applied-effects", params={"dataset": "case+ValveLeakage"}))
     assert [e["node"]["value"] for e in effects] == [EX + "heating_valve"]
     assert any(c.signature.id == "ValveLeakage" for c in assemble(store, "case+ValveLeakage").components.values())
+    # the same effect at another node would overwrite that version: refused, the version kept
+    elsewhere = client.post("/jobs/add-effect", headers=auth, json={
+        "model": "case", "effect": "ValveLeakage", "target": EX + "supply_fan"})
+    assert elsewhere.status_code == 409 and "ValveLeakage at " + EX + "heating_valve" in elsewhere.json()["detail"]
+    assert [e["node"]["value"] for e in _rows(client.get("/queries/applied-effects", params={"dataset": "case+ValveLeakage"}))] == [EX + "heating_valve"]
+    again = wait_job(client, client.post("/jobs/add-effect", headers=auth, json={  # the same request again: idempotent
+        "model": "case", "effect": "ValveLeakage", "target": EX + "heating_valve"}).json()["id"])
+    assert again["status"] == "succeeded", again
+    named = wait_job(client, client.post("/jobs/add-effect", headers=auth, json={
+        "model": "case", "effect": "ValveLeakage", "target": EX + "heating_valve", "version": "case-leak"}).json()["id"])
+    assert named["status"] == "succeeded" and named["result"]["model"] == "case-leak", named
 
     job = wait_job(client, client.post("/jobs/add-effect", headers=auth, json={
         "model": "case", "effect": "FanMotorHeat", "target": EX + "heating_valve"}).json()["id"])

@@ -34,7 +34,6 @@ from service.report_page import (
     CONTENT_SECURITY_POLICY, INTERVAL_LEVEL, UnknownRunError, data_file_locator, read_diagnosis,
     read_run, recompute_series, report_html, topology_svg,
 )
-from service.report_routes import router as report_router
 from service.resources import signatures_dir
 from service.settings import Settings
 from service.signature import load_signature_library
@@ -311,10 +310,7 @@ def report_client(case, tmp_path):
     uploads = settings.measurements_dir / "case"
     uploads.mkdir(parents=True)
     (uploads / case.data.name).write_bytes(case.data.read_bytes())
-    app = create_app(settings, store=case.store)
-    if not any(getattr(route, "path", "") == "/runs/{run_id}/report" for route in app.routes):
-        app.include_router(report_router)  # until service/api.py includes it (then delete these two lines)
-    with TestClient(app) as client:
+    with TestClient(create_app(settings, store=case.store)) as client:
         yield client
 
 
