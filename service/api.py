@@ -82,6 +82,7 @@ from .namespaces import PREFIXES
 from .resources import queries_dir, signatures_dir
 from .settings import Settings
 from .signature import load_signature_library
+from .sparql_endpoint_backend import SparqlEndpointError
 from .store import EmbeddedBackend, GraphStore, ModelLoadError, drain, query_bound, rdf_format
 
 __all__ = ["create_app", "ApiError", "MeasurementUploads", "query_form", "negotiate"]
@@ -109,6 +110,12 @@ def _validation_error_response(request: Request, exc: RequestValidationError) ->
     problems = [f"{'.'.join(str(part) for part in error['loc'])}: {error['msg']}" for error in exc.errors()]
     body = ErrorBody(detail="the request is not valid: " + "; ".join(problems), problems=problems)
     return JSONResponse(body.model_dump(exclude_none=True), status_code=422)
+
+
+def _store_unavailable_response(request: Request, exc: SparqlEndpointError) -> JSONResponse:
+    """The external SPARQL endpoint failed or is unreachable, whichever route asked it → 503 naming it."""
+    return JSONResponse(ErrorBody(detail=f"the store did not answer: {exc}").model_dump(exclude_none=True),
+                        status_code=503)
 
 
 def _errors(*codes: int) -> dict:
@@ -833,6 +840,7 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     app.state.graphtwin = Service(settings, store, runner, uploads, query_pool)
     app.add_exception_handler(ApiError, _api_error_response)
     app.add_exception_handler(RequestValidationError, _validation_error_response)
+    app.add_exception_handler(SparqlEndpointError, _store_unavailable_response)
     app.include_router(router)
     from . import report_routes  # it imports this module (ApiError, ReadAccess, ServiceDep)
 

@@ -11,11 +11,10 @@ parameters to estimate are all parameters minus those mapped from the graph (Eq.
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field
 
 from .component import ComponentModel, Parameter
-from .signature import Signature
+from .signature import Signature, check_model_names, import_model_class
 
 __all__ = [
     "MeasurementLink", "ComponentInstance", "Connection", "ParameterRef", "AssembledModel",
@@ -110,23 +109,21 @@ _MODEL_CACHE: dict[str, type[ComponentModel]] = {}
 
 
 def load_model_class(signature: Signature) -> type[ComponentModel]:
-    """Import the Python model a signature names (``"module:Class"``); FMU signatures get the
-    FMU wrapper class built for that file."""
+    """The Python model a signature names (``"module:Class"``, imported once); FMU signatures get the
+    FMU wrapper class built for that file, checked against the ports and parameters the signature
+    maps (:func:`~service.signature.check_model_names`; a Python model was checked when the library
+    was loaded).
+
+    :raises SignatureError: the model cannot be imported, or the FMU lacks a port or parameter.
+    """
     if signature.fmu is not None:
         from .fmu_component import fmu_model_class
 
-        return fmu_model_class(signature.fmu)
+        model_class = fmu_model_class(signature.fmu)
+        check_model_names(signature, model_class)
+        return model_class
     assert signature.model is not None
     cached = _MODEL_CACHE.get(signature.model)
     if cached is None:
-        module_name, _, class_name = signature.model.partition(":")
-        try:
-            cached = getattr(importlib.import_module(module_name), class_name)
-        except (ImportError, AttributeError) as exc:
-            raise ValueError(
-                f"{signature.source_file}: model {signature.model!r} cannot be imported: {exc}"
-            ) from None
-        if not (isinstance(cached, type) and issubclass(cached, ComponentModel)):
-            raise ValueError(f"{signature.source_file}: {signature.model!r} is not a ComponentModel")
-        _MODEL_CACHE[signature.model] = cached
+        cached = _MODEL_CACHE[signature.model] = import_model_class(signature.source_file, "model", signature.model)
     return cached

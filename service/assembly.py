@@ -23,6 +23,7 @@ spliced into one port of the component that represents its ``splice.node``.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -65,10 +66,19 @@ class EffectRequest:
     node: str
 
 
-def component_iri(model_name: str, signature: Signature, node_iri: str) -> str:
-    """Stable IRI of a component instance: model name, signature id and the node it represents."""
-    local = node_iri.rstrip("/#").replace("#", "/").rsplit("/", 1)[-1]
+def component_iri(model_name: str, signature: Signature, node_iri: str, *, shared_local_name: bool = False) -> str:
+    """Stable IRI of a component instance: model name, signature id and the local name of the node it
+    represents; when other nodes the same signature represents share that local name
+    (``…/unit1/supply_fan``, ``…/unit2/supply_fan``), also the first 8 hex digits of the SHA-256 of
+    the node's IRI, so no instance replaces another."""
+    local = _local_name(node_iri)
+    if shared_local_name:
+        local += "-" + hashlib.sha256(node_iri.encode()).hexdigest()[:8]
     return f"{GTR}model/{model_name}/component/{signature.id}/{local}"
+
+
+def _local_name(iri: str) -> str:
+    return iri.rstrip("/#").replace("#", "/").rsplit("/", 1)[-1]
 
 
 def assemble(
@@ -101,37 +111,49 @@ def assemble(
     candidates = []
     with cyclic_gc_paused():  # one collection after the library, not one per signature
         for signature in components:
-            for match in _best_match_per_anchor(match_signature(store, signature, session=session), signature):
+            for match in _best_match_per_anchor(match_signature(store, signature, session=session), signature, notes):
                 candidates.append((signature, match))
     candidates.sort(key=lambda c: (
         -sum(depth(cls) for node in c[0].modeled_nodes for cls in c[0].nodes[node].classes),
         -c[0].complexity, -len(c[0].modeled_nodes), c[0].id, _modeled(c[0], c[1]),
     ))
-    instances: dict[str, ComponentInstance] = {}
-    claimed: dict[str, ComponentInstance] = {}
+    chosen: list[tuple[Signature, Mapping[str, str | None]]] = []
+    claimed: dict[str, tuple[Signature, str]] = {}  # building node → the signature representing it, its anchor
+    lost: dict[tuple[str, str], str] = {}  # (signature id, its anchor node) → why it was not used there
     for signature, match in candidates:
         nodes = _modeled(signature, match)
         taken = [n for n in nodes if n in claimed]
         if taken:
-            winner = claimed[taken[0]]
-            notes.append(
-                f"{_short(taken[0])}: signature {winner.signature.id} chosen over {signature.id} "
-                f"({_why(winner.signature, signature, depth)})"
-            )
+            winner, at = claimed[taken[0]]
+            why = (f"signature {winner.id} chosen over {signature.id} ({_why(winner, signature, depth)})"
+                   if winner.id != signature.id else f"the {winner.id} at {_short(at)} represents it already")
+            notes.append(f"{_short(taken[0])}: {why}")
+            lost.setdefault((signature.id, nodes[0]), f"{signature.id} matches there but also needs {taken[0]}: {why}")
             continue
-        instance = _instantiate(store, model_name, signature, match)
-        instances[instance.iri] = instance
+        chosen.append((signature, match))
         for node in nodes:
-            claimed[node] = instance
+            claimed[node] = (signature, nodes[0])
+    local_names = defaultdict(set)
+    for signature, match in chosen:
+        node = _modeled(signature, match)[0]
+        local_names[(signature.id, _local_name(node))].add(node)
+    instances: dict[str, ComponentInstance] = {}
+    for signature, match in chosen:
+        shared = len(local_names[(signature.id, _local_name(_modeled(signature, match)[0]))]) > 1
+        instance = _instantiate(store, model_name, signature, match, shared_local_name=shared)
+        instances[instance.iri] = instance
 
+    notes += _values_without_unit(store, instances, session)
     effect_requests = list(extra_effects) + _recorded_effects(store, model_name, library)
     connections, unconnected = _wire(instances)
     for request in effect_requests:
         connections = _splice_effect(store, model_name, library, request, instances, connections, session)
     # measuring devices without a modelled source are boundary inputs, not missing connections
     devices = {iri for iri, inst in instances.items() if issubclass(inst.model_class, MeasuringDevice)}
-    incomplete = [p for iri, p in unconnected if iri not in devices]
-    incomplete += _unmatched_anchor_report(store, components, claimed, session)
+    incomplete = [p for iri, p, _ in unconnected if iri not in devices]
+    notes += [f"{p}: {instances[iri].node} is a boundary input, not a calibration target"
+              for iri, p, source_modelled in unconnected if iri in devices and source_modelled]
+    incomplete += _unmatched_anchor_report(store, components, claimed, lost, session)
     if incomplete and not allow_incomplete:
         raise IncompleteModelError(incomplete)
     notes.extend(incomplete)
@@ -152,16 +174,28 @@ def _modeled(signature: Signature, match: Mapping[str, str | None]) -> tuple[str
     return tuple(str(match[n]) for n in signature.modeled_nodes)
 
 
-def _best_match_per_anchor(matches: Sequence[Mapping[str, str | None]], signature: Signature):
+def _best_match_per_anchor(matches: Sequence[Mapping[str, str | None]], signature: Signature,
+                           notes: list[str] | None = None):
     """One match per modelled-node tuple: the one binding most optional nodes, then the first in
-    sorted order (several matches arise when, e.g., two sensors sit on parallel upstream branches)."""
+    sorted order (several matches arise when, e.g., two sensors sit on parallel upstream branches,
+    or a coil and a bypass both lie nearest upstream of a fan); a tie is said in ``notes``."""
     best: dict[tuple[str, ...], Mapping[str, str | None]] = {}
-    for match in matches:
+    tied: dict[tuple[str, ...], list[Mapping[str, str | None]]] = {}
+    for match in matches:  # sorted: the first of a tie is kept
         key = _modeled(signature, match)
         bound = sum(v is not None for v in match.values())
         current = best.get(key)
         if current is None or bound > sum(v is not None for v in current.values()):
-            best[key] = match
+            best[key], tied[key] = match, []
+        elif bound == sum(v is not None for v in current.values()):
+            tied[key].append(match)
+    for key in sorted(k for k, others in tied.items() if others and notes is not None):
+        kept = best[key]
+        differing = sorted({n for other in tied[key] for n, v in other.items() if v != kept[n]})
+        alternatives = "; ".join(", ".join(f"{n} = {_short(str(other[n]))}" for n in differing) for other in tied[key])
+        notes.append(f"{_short(key[0])}: {signature.id} matches {len(tied[key]) + 1} ways alike; kept "
+                     f"{', '.join(f'{n} = {_short(str(kept[n]))}' for n in differing)} (first in IRI order) "
+                     f"over {alternatives}: a more specific graph (or a sensor on the branch) would decide")
     return [best[k] for k in sorted(best)]
 
 
@@ -194,7 +228,8 @@ def _short(iri: str) -> str:
     return iri.replace("#", "/").rsplit("/", 1)[-1]
 
 
-def _instantiate(store: GraphStore, model_name: str, signature: Signature, match: Mapping[str, str | None]) -> ComponentInstance:
+def _instantiate(store: GraphStore, model_name: str, signature: Signature, match: Mapping[str, str | None], *,
+                 shared_local_name: bool = False) -> ComponentInstance:
     model_class = load_model_class(signature)
     nodes = _modeled(signature, match)
     mapped: dict[str, float] = {}
@@ -217,14 +252,62 @@ def _instantiate(store: GraphStore, model_name: str, signature: Signature, match
     if issubclass(model_class, MeasuringDevice):
         measurement = _measurement_link(store, model_name, nodes[0])
     return ComponentInstance(
-        iri=component_iri(model_name, signature, nodes[0]), signature=signature,
+        iri=component_iri(model_name, signature, nodes[0], shared_local_name=shared_local_name), signature=signature,
         bindings={k: v for k, v in match.items() if v is not None}, modeled_nodes=nodes,
         mapped_parameters=mapped, measurement=measurement,
     )
 
 
+def _values_without_unit(store: GraphStore, instances: Mapping[str, ComponentInstance], session: MatchSession) -> list[str]:
+    """Parameters left to estimate although the graph states their value, without the unit its
+    OPTIONAL block requires (a nominal power of 1800 with no ``saref:isMeasuredIn``): one sentence
+    each. Each is found by matching the block without its unit triples, made required, at the node."""
+    notes = []
+    for instance in instances.values():
+        signature = instance.signature
+        anchor = signature.modeled_nodes[0]
+        for mapping in signature.parameters:
+            if mapping.unit_node is None or mapping.node in instance.bindings:
+                continue
+            block = _optional_block(signature, mapping.node, through=anchor, without=mapping.unit_node)
+            if not block:
+                continue
+            nodes = {n for t in block for n in (t.subject, t.object)} | {anchor}
+            probe = dataclasses.replace(
+                signature, id=f"{signature.id}:{mapping.name}:without-unit", modeled_nodes=(anchor,),
+                nodes={n: signature.nodes[n] for n in nodes}, inputs=(), outputs=(), parameters=(), splice=None,
+                triples=tuple(dataclasses.replace(t, rule=Rule.EXACT, optional=False) for t in block),
+            )
+            unit_triple = next(t for t in signature.triples if mapping.unit_node in (t.subject, t.object))
+            for match in match_signature(store, probe, session=session):
+                if match[anchor] == instance.bindings[anchor]:
+                    holder = match.get(unit_triple.subject if unit_triple.object == mapping.unit_node else unit_triple.object)
+                    notes.append(f"{_short(instance.node)}: parameter {mapping.name} of {signature.id} is estimated, "
+                                 f"not mapped: the graph gives {match[mapping.node]} but no unit for it "
+                                 f"(add <{holder}> <{unit_triple.predicate}> <a QUDT unit IRI> .)")
+                    break
+    return notes
+
+
+def _optional_block(signature: Signature, node: str, *, through: str, without: str) -> list[PatternTriple]:
+    """The optional triples connected to ``node``, not walking on through node ``through`` (the
+    component's own node) and leaving out those that touch node ``without``."""
+    optional = [t for t in signature.triples if t.rule is Rule.OPTIONAL and without not in (t.subject, t.object)]
+    reached, frontier, block = {node}, [node], []
+    while frontier:
+        current = frontier.pop()
+        for triple in optional:
+            if current in (triple.subject, triple.object) and triple not in block:
+                block.append(triple)
+                other = triple.object if triple.subject == current else triple.subject
+                if other not in reached and other != through:
+                    reached.add(other)
+                    frontier.append(other)
+    return block
+
+
 def _measurement_link(store: GraphStore, model_name: str, node: str) -> MeasurementLink:
-    rows = store.run_named_query("measurement-link", dataset=model_name, device=node)
+    rows = store.run_named_query("measurement-link", dataset=model_name, device=ox.NamedNode(node))
     series_id = unit = None
     if rows:
         series_id = rows[0]["series_id"].value if rows[0].get("series_id") is not None else None
@@ -242,19 +325,21 @@ def _outputs_at(instance: ComponentInstance) -> dict[tuple[str, str], str]:
     return table
 
 
-def _wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection], list[tuple[str, str]]]:
+def _wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection], list[tuple[str, str, bool]]]:
+    """The connections, and the inputs left unconnected: (component IRI, why in words, whether
+    the input's source node is modelled — by a component without an output of that quantity)."""
     providers: dict[tuple[str, str], list[tuple[str, str]]] = defaultdict(list)
     for iri, instance in instances.items():
         for key, port in _outputs_at(instance).items():
             providers[key].append((iri, port))
     connections: list[Connection] = []
-    unconnected: list[tuple[str, str]] = []
+    unconnected: list[tuple[str, str, bool]] = []
     for iri, instance in instances.items():
         for mapping in instance.signature.inputs:
             source_node = instance.bindings.get(mapping.source)
             where = f"input {mapping.port} of {instance.signature.id} at {instance.node}"
             if source_node is None:
-                unconnected.append((iri, f"{where}: no {mapping.source} node matched, so nothing feeds it"))
+                unconnected.append((iri, f"{where}: no {mapping.source} node matched, so nothing feeds it", False))
                 continue
             found = [p for p in providers.get((source_node, mapping.quantity), []) if p[0] != iri]
             if not found:
@@ -263,7 +348,7 @@ def _wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection],
                     f"{source_node} is modelled by {', '.join(modelled_by)}, which has no output carrying "
                     f"'{mapping.quantity}' there" if modelled_by else f"no component models {source_node}"
                 )
-                unconnected.append((iri, f"{where}: {reason}"))
+                unconnected.append((iri, f"{where}: {reason}", bool(modelled_by)))
                 continue
             source, port = sorted(found)[0]
             connections.append(Connection(source, port, iri, mapping.port))
@@ -322,21 +407,26 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
         spliced.append(Connection(effect.iri, "value_out", host.iri, port))
     extra, missing = _wire({**{effect.iri: effect}, **{k: v for k, v in instances.items() if k != effect.iri}})
     spliced.extend(c for c in extra if c.target == effect.iri and c.target_port != "value_in")
-    missing_here = [p for iri, p in missing if iri == effect.iri and "value_in" not in p]
+    missing_here = [p for iri, p, _ in missing if iri == effect.iri and "value_in" not in p]
     if missing_here:
         raise IncompleteModelError(missing_here)
     return spliced
 
 
-def _unmatched_anchor_report(store, components, claimed, session: MatchSession) -> list[str]:
-    """For building nodes of a signature's modelled class that no component represents: the first
-    required triple of that signature that finds nothing there, as a sentence."""
+def _unmatched_anchor_report(store, components, claimed, lost: Mapping[tuple[str, str], str],
+                             session: MatchSession) -> list[str]:
+    """For building nodes of a signature's modelled class that no component represents: why that
+    signature is not used there, as a sentence — it matched but lost a node it needs to another
+    signature (``lost``), or the first of its required triples that finds nothing there."""
     problems = []
     for signature in components:
         anchor = signature.modeled_nodes[0]
         instances = session.instances(signature.nodes[anchor].classes)
         for node in sorted(n.value for n in instances if isinstance(n, ox.NamedNode)):
             if node in claimed:
+                continue
+            if (signature.id, node) in lost:
+                problems.append(f"{node} is not modelled: {lost[(signature.id, node)]}")
                 continue
             missing = _first_failing_triple(store, signature, anchor, node, session)
             if missing is not None:
@@ -364,7 +454,8 @@ def _describe_missing(triple: PatternTriple, anchor: str, signature: Signature, 
     what = " or ".join(_short(c) for c in spec.classes) or (spec.iri or "value")
     if triple.rule is Rule.TRAVERSE:
         side = "upstream of" if triple.object == anchor else "downstream of"
-        return f"no {what} {side} {node} along {triple.predicate} (signature {signature.source_file})"
+        return (f"no {what} {side} {node} along {triple.predicate} (the search stops at building spaces; "
+                f"signature {signature.source_file})")
     if triple.subject == anchor:
         return f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} (signature {signature.source_file})"
     return f"no triple ?{other} <{triple.predicate}> <{node}> with ?{other} a {what} (signature {signature.source_file})"

@@ -59,7 +59,8 @@ def default_target_scale(values: np.ndarray, unit: str = "", target: str = "") -
     if not scale > 0.0:
         raise ValueError(
             f"target {target} is constant at 0 in the window and its unit {unit!r} has no accuracy "
-            "floor: give its target_scales entry"
+            "floor, so its errors cannot be weighed: choose a window in which it reads something "
+            "(calling the library: give its target_scales entry)"
         )
     return float(scale)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -17,6 +18,7 @@ import typer
 from rich.console import Console
 from rich.syntax import Syntax
 from rich.table import Table
+from rich.text import Text
 
 from .assembly import AssemblyError, EffectRequest, assemble
 from .assembly_summary import assembly_to_dict, print_assembly
@@ -29,7 +31,7 @@ from .measurements import MeasurementError
 from .resources import examples_dir, signatures_dir
 from .signature import SignatureError, load_signature_library
 from .sparql_compiler import compile_signature
-from .store import GraphStore, ModelLoadError
+from .store import GraphStore, ModelLoadError, StoreInUseError
 from .units import unit_label
 
 __all__ = ["app"]
@@ -59,10 +61,14 @@ USER_ERRORS = (ModelLoadError, AssemblyError, SignatureError, MeasurementError, 
 
 
 def open_store(store: Path, memory: bool) -> GraphStore:
-    """The embedded store with the ontology subsets and the signature library loaded."""
-    graph_store = GraphStore.embedded(None if memory else store)
-    graph_store.ensure_ontologies()
-    graph_store.ensure_signature_library()
+    """The embedded store with the ontology subsets and the signature library loaded; a store another
+    process holds, or a signature file with a mistake, is a one-line error (exit code 2)."""
+    try:
+        graph_store = GraphStore.embedded(None if memory else store)
+        graph_store.ensure_ontologies()
+        graph_store.ensure_signature_library()
+    except (*USER_ERRORS, StoreInUseError) as exc:
+        raise fail(str(exc)) from None
     return graph_store
 
 
@@ -74,7 +80,8 @@ def model_name_for(path: Path, name: str | None) -> str:
 
 
 def fail(message: str) -> typer.Exit:
-    error_console.print(f"[bold red]error:[/bold red] {message}")
+    """Print ``message`` as an error (as it is: no markup read in it, no line breaks added) → exit 2."""
+    error_console.print(Text.assemble(("error:", "bold red"), " ", message), soft_wrap=True)
     return typer.Exit(code=2)
 
 
@@ -150,11 +157,16 @@ def signature_list() -> None:
 
 @signature_app.command("explain")
 def signature_explain(name: Annotated[str, typer.Argument(help="Signature id, e.g. Fan.")]) -> None:
-    """Print the SPARQL query a signature compiles to."""
+    """Print the SPARQL query a signature compiles to (highlighted on a terminal; the text as it is
+    when written to a file or a pipe, so ``explain Fan > fan.rq`` is a query any endpoint runs)."""
     library = load_signature_library(signatures_dir())
     if name not in library:
         raise fail(f"no signature {name!r}; known: {', '.join(sorted(library))}")
-    console.print(Syntax(compile_signature(library[name]).text, "sparql", word_wrap=True))
+    text = compile_signature(library[name]).text
+    if console.is_terminal:
+        console.print(Syntax(text, "sparql", word_wrap=True))
+    else:
+        sys.stdout.write(text)
 
 
 def _print_metrics(title: str, metrics: dict) -> None:

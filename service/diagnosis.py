@@ -43,7 +43,7 @@ import pyoxigraph as ox
 
 from .assembly import EffectRequest, assemble
 from .calibration_data import ModelData
-from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR, CalibrationProblem
+from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR, CalibrationProblem
 from .calibration_run import Window, calibrate
 from .cpu_count import usable_cpu_count
 from .effect_ranking import (
@@ -63,10 +63,12 @@ from .units import unit_label
 __all__ = ["DiagnosisReport", "diagnose", "noise_level", "effect_candidates"]
 
 
-def noise_level(values: np.ndarray, unit: str) -> float:
-    """Measurement noise σ of a sensor from the second differences of its residual y − ŷ (the model
-    removes the signal's own dynamics, what is left at the step scale is noise), floored at the
-    instrument accuracy of its unit.
+def noise_level(values: np.ndarray, unit: str, observed: np.ndarray) -> float:
+    """Measurement noise σ of a sensor from the second differences of its residual y − ŷ
+    (``values``: the model removes the signal's own dynamics, what is left at the step scale is
+    noise), floored at the instrument accuracy of its unit — for a unit without an absolute one
+    (W, m³/s) 1 % of the mean magnitude of the ``observed`` reading, as the calibration's weights
+    (:data:`~service.calibration_problem.RELATIVE_ACCURACY_FLOOR`).
 
     Δ²e of white noise has standard deviation √6·σ; the first quartile of |Δ²e| is 0.3186·√6·σ for
     Gaussian noise, and stays a noise measure while model error bends the residual on up to half of
@@ -76,7 +78,7 @@ def noise_level(values: np.ndarray, unit: str) -> float:
     second = np.diff(finite, n=2)
     second = second[np.isfinite(second)]
     sigma = float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
-    floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, 0.01 * float(np.nanmean(np.abs(finite))))
+    floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.nanmean(np.abs(observed))))
     return max(sigma, floor)
 
 
@@ -399,7 +401,7 @@ def diagnose(
     sensors: dict[str, dict] = {}
     matches: dict[str, bool] = {md.node_of[c]: True for c in model.boundary_inputs}
     for node, metrics in base.record.metrics["test"].items():
-        sigma = noise_level(observed[node] - predicted[node], md.units[node])
+        sigma = noise_level(observed[node] - predicted[node], md.units[node], observed[node])
         fails = metrics.rmse > failure_ratio * sigma
         matches[node] = not fails
         sensors[node] = {

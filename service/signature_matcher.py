@@ -7,7 +7,9 @@ condition is the same read in either direction, so the matcher searches from whi
 already bound: a breadth-first search over the predicate's edges that does not expand through
 blocking nodes; the nodes it reaches are that end's nearest partners. Searches never expand a node
 twice, so loops (return air mixed back into the supply) terminate and give the right answer: a
-sensor on a loop finds the equipment right before it, not everything on the loop.
+sensor on a loop finds the equipment right before it, not everything on the loop. A node is not its
+own partner: a loop that comes back to the start without meeting another instance gives no pair
+(a fan whose only upstream equipment is itself has no inlet to wire, and is reported).
 
 A :class:`MatchSession` reads each traversed predicate's edge list, each class's instances and
 subclasses ONCE, runs each distinct part query once (signatures share sensor and device parts) and
@@ -229,9 +231,9 @@ class MatchSession:
         return self.literals[text]
 
     def nearest(self, traversal: Traversal, starts: Iterable[str], forward: bool) -> dict[str, frozenset[str]]:
-        """For each of ``starts`` (and every start searched before): the nodes it reaches along the
-        traversal's predicate (``forward``) or that reach it, on a path whose intermediate nodes are
-        no instances of its blocking classes."""
+        """For each of ``starts`` (and every start searched before): the nodes other than itself it
+        reaches along the traversal's predicate (``forward``) or that reach it, on a path whose
+        intermediate nodes are no instances of its blocking classes."""
         searches = self._near.setdefault((traversal.predicate, traversal.blocking_classes, forward), {})
         new = [start for start in set(starts) if start not in searches]
         if new:
@@ -249,6 +251,7 @@ class MatchSession:
                                 if nxt not in blocking:
                                     reached.append(nxt)
                     frontier = reached
+                seen.discard(start)
                 searches[start] = frozenset(seen)
         return searches
 

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import pyoxigraph as ox
 
-from .namespaces import PREFIXES
+from .namespaces import PREFIXES, S4BLDG
 from .signature import PatternTriple, Rule, Signature
 
 __all__ = ["CompiledQuery", "QueryPart", "Traversal", "compile_signature"]
@@ -314,13 +314,18 @@ def _fewest_first(nodes: list[str], restricted: set[str], instance_counts: Mappi
     return [start] + [n for n in nodes if n != start]
 
 
+#: Nodes no traverse passes: the air that leaves a room is not the air that entered it (a fan coil's
+#: inlet across the room it serves would read its own supply air as its inlet).
+OPAQUE_CLASSES = (f"{S4BLDG}BuildingSpace",)
+
+
 def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -> Traversal:
     """The searched-for end is the one the signature does not model (a fan looks for its nearest
     upstream sensor, a coil for its nearest downstream fan, even past another coil); when both or
-    neither end is modelled, both ends' classes block."""
+    neither end is modelled, both ends' classes block; so do :data:`OPAQUE_CLASSES`."""
     ends = [triple.subject, triple.object]
     searched = [n for n in ends if n not in signature.modeled_nodes] or ends
     if len(searched) == 2:
         searched = ends
-    classes = tuple(c for n in searched for c in signature.nodes[n].classes)
+    classes = tuple(c for n in searched for c in signature.nodes[n].classes) + OPAQUE_CLASSES
     return Traversal(triple.subject, triple.predicate, triple.object, tuple(dict.fromkeys(classes)), block)

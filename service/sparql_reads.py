@@ -17,6 +17,7 @@ Oxigraph evaluates them).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
@@ -62,14 +63,21 @@ class QueryReads:
         return False
 
 
+#: rdflib's SPARQL grammar (pyparsing) is not safe to use from two threads at once: the first
+#: parses of two models loaded side by side failed with parse errors on valid rules.
+_PARSER_LOCK = threading.Lock()
+
+
 @lru_cache(maxsize=None)
 def query_reads(text: str) -> QueryReads:
-    """What the SPARQL query ``text`` can read (module docstring).
+    """What the SPARQL query ``text`` can read (module docstring); safe to call from several threads.
 
     :raises pyparsing.ParseException: when ``text`` is not SPARQL rdflib can parse.
     """
+    with _PARSER_LOCK:
+        algebra = prepareQuery(text).algebra["p"]
     collector = _Collector()
-    collector.walk(prepareQuery(text).algebra["p"], {})
+    collector.walk(algebra, {})
     objects = {p: None if o is None else frozenset(o) for p, o in collector.objects.items()}
     return QueryReads(objects, collector.any_predicate, tuple(sorted(collector.predicate_prefixes)))
 

@@ -17,14 +17,19 @@ memory for tests) and :class:`service.sparql_endpoint_backend.SparqlEndpointBack
 endpoint with the graph store protocol). Contracts, as pyoxigraph's:
 
 * every write is one transaction: a reader sees a graph before or after, never half of it; a model
-  and what alignment infers from it are written together (:meth:`GraphStore.write_graphs`). The
-  embedded store replaces existing graphs by loading the new triples into staging graphs
-  (``gtr:staging/…``, a query over every named graph may see them for that moment) and moving them
-  into place in one update, several times faster than ``INSERT DATA``;
+  and what alignment infers from it are written together (:meth:`GraphStore.write_graphs`), and
+  the model's old assembly is removed in the same write. The embedded store replaces existing
+  graphs by loading the new triples into staging graphs (``gtr:staging/…``, a query over every
+  named graph may see them for that moment) and moving them into place in one update, several
+  times faster than ``INSERT DATA``; its writes run one at a time, so two writes of the same graphs
+  at once leave the last one whole, never both merged;
 * a load parses everything first and raises :class:`ModelLoadError` (file, line, column) before
-  anything is written: a failed load leaves the store as it was;
+  anything is written: a failed load leaves the store as it was. A leading UTF-8 byte-order mark
+  is skipped; an IRI that JSON-LD would drop silently (relative, invalid) is an error there as in
+  the other formats;
 * a model's blank nodes are skolemised on load (RDF 1.1 Concepts §3.5, :func:`skolemize`): each
-  becomes an IRI ``gtr:model/<name>/genid/<n>``, numbered in order of appearance, so it keeps its
+  becomes an IRI ``gtr:model/<name>/genid/<n>``, numbered in order of appearance (skipping the IRIs
+  of that form the file already holds, as a model exported from the store does), so it keeps its
   identity across graphs (inferred triples about it), across update requests (SPARQL ``INSERT DATA``
   renames blank nodes) and across backends, can be bound in a query, and reloading the same file
   gives the same triples;
@@ -38,11 +43,13 @@ endpoint with the graph store protocol). Contracts, as pyoxigraph's:
 from __future__ import annotations
 
 import re
+import threading
 import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
 from typing import Protocol, runtime_checkable
+from xml.parsers import expat
 
 import pyoxigraph as ox
 
@@ -55,15 +62,19 @@ from .signature import Signature
 
 __all__ = [
     "drain",
-    "ModelLoadError", "SparqlBackend", "bind_values", "insert_data_update", "EmbeddedBackend", "GraphStore",
+    "ModelLoadError", "StoreInUseError", "SparqlBackend", "bind_values", "insert_data_update", "EmbeddedBackend", "GraphStore",
     "rdf_format", "parse_rdf", "skolemize", "ONTOLOGY_GRAPH", "SIGNATURE_GRAPH",
 ]
 
 Term = ox.NamedNode | ox.BlankNode | ox.Literal
 ONTOLOGY_GRAPH = graph_iri("ontology", "core")
 SIGNATURE_GRAPH = graph_iri("signatures", "library")
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-+]*$")
-_POSITION = re.compile(r"line (\d+) between columns (\d+)")
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-+]*")
+#: What pyoxigraph's syntax error messages start with (the position, given as ``lineno``/``offset``
+#: too): ``Parser error at line 3 between columns 16 and 20: ``, ``… at line 2 column 11: ``,
+#: ``… between line 2 column 11 and line 5 column 1: ``.
+_POSITION_PREFIX = re.compile(r"^Parser error (at|between) line [^:]*: ")
+_BOM = b"\xef\xbb\xbf"
 
 
 class ModelLoadError(ValueError):
@@ -73,6 +84,11 @@ class ModelLoadError(ValueError):
         self.source, self.line, self.column = source, line, column
         where = f"{source}, line {line}, column {column}" if line is not None else source
         super().__init__(f"{where}: {message}")
+
+
+class StoreInUseError(OSError):
+    """The on-disk store is open already: in another process (a running ``graphtwin serve``?) or,
+    not closed yet, in this one."""
 
 
 _SUFFIXES = {
@@ -101,22 +117,65 @@ def rdf_format(name_or_suffix: str) -> ox.RdfFormat:
 
 
 def parse_rdf(data: bytes, fmt: ox.RdfFormat, source_name: str, base_iri: str | None = None) -> list[ox.Triple]:
-    """Parse completely (nothing is written anywhere) or raise :class:`ModelLoadError`."""
+    """Parse completely (nothing is written anywhere) or raise :class:`ModelLoadError`.
+
+    A leading UTF-8 byte-order mark is skipped. RDF/XML must be well-formed XML (checked by expat
+    first, which names the line and column; pyoxigraph reads a document cut short up to the cut).
+    JSON-LD may not hold an IRI that is relative (without ``base_iri``) or invalid, nor an invalid
+    language tag: where the JSON-LD algorithms drop the triple, this names it.
+    """
+    data = data.removeprefix(_BOM)
+    if fmt == ox.RdfFormat.RDF_XML:
+        _check_well_formed_xml(data, source_name)
+    quads = _parsed(data, fmt, source_name, base_iri)
+    if fmt == ox.RdfFormat.JSON_LD:
+        lenient = _parsed(data, fmt, source_name, base_iri, lenient=True)
+        if len(lenient) != len(quads):
+            raise _dropped_by_json_ld(lenient, len(lenient) - len(quads), source_name)
+    return [ox.Triple(q.subject, q.predicate, q.object) for q in quads]
+
+
+def _parsed(data: bytes, fmt: ox.RdfFormat, source_name: str, base_iri: str | None, lenient: bool = False) -> list[ox.Quad]:
+    """Every quad of ``data``, or :class:`ModelLoadError` (with pyoxigraph's position, named once)."""
     try:
-        quads = list(ox.parse(data, format=fmt, base_iri=base_iri))
+        return list(ox.parse(data, format=fmt, base_iri=base_iri, lenient=lenient))
     except SyntaxError as exc:
-        message = str(exc)
-        line = column = None
-        match = _POSITION.search(message)
-        if match:
-            line, column = int(match.group(1)), int(match.group(2))
-        elif getattr(exc, "lineno", None):
-            line, column = exc.lineno, exc.offset
-        message = re.sub(r"^Parser error at line \d+ between columns \d+( and \d+)?: ", "", message)
-        raise ModelLoadError(source_name, message, line, column) from None
+        message = _POSITION_PREFIX.sub("", exc.msg or str(exc))
+        raise ModelLoadError(source_name, message, exc.lineno, exc.offset) from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise ModelLoadError(source_name, str(exc)) from None
-    return [ox.Triple(q.subject, q.predicate, q.object) for q in quads]
+
+
+def _check_well_formed_xml(data: bytes, source_name: str) -> None:
+    """:raises ModelLoadError: ``data`` is not well-formed XML (line, column of the first error)."""
+    try:
+        expat.ParserCreate().Parse(data, True)
+    except expat.ExpatError as exc:
+        message = expat.ErrorString(exc.code)
+        if exc.code == expat.errors.codes[expat.errors.XML_ERROR_NO_ELEMENTS]:
+            message += " (the document has no root element, or ends before it is closed)"
+        raise ModelLoadError(source_name, f"not well-formed XML: {message}", exc.lineno, exc.offset + 1) from None
+
+
+def _dropped_by_json_ld(lenient: list[ox.Quad], dropped: int, source_name: str) -> ModelLoadError:
+    """The error for a JSON-LD document whose strict parse dropped ``dropped`` triples its ``lenient``
+    parse kept: it names the first triple with an invalid IRI or language tag."""
+    for quad in lenient:
+        for term in (quad.subject, quad.predicate, quad.object, quad.graph_name):
+            try:
+                if isinstance(term, ox.NamedNode):
+                    ox.NamedNode(term.value)
+                elif isinstance(term, ox.Literal) and term.language is not None:
+                    ox.Literal(term.value, language=term.language)
+            except ValueError as exc:
+                triple = f"{quad.subject} {quad.predicate} {quad.object}"
+                if isinstance(term, ox.NamedNode):
+                    return ModelLoadError(source_name, (
+                        f"invalid IRI {term.value!r} ({exc}) in the triple {triple}: an @id, @type, key or IRI "
+                        "value the @context does not expand to an absolute IRI (JSON-LD would drop the triple)"))
+                return ModelLoadError(source_name, (
+                    f"invalid language tag {term.language!r} ({exc}) in the triple {triple} (JSON-LD would drop it)"))
+    return ModelLoadError(source_name, f"JSON-LD would drop {dropped} triples holding an invalid term")
 
 
 @runtime_checkable
@@ -259,13 +318,21 @@ STAGING = f"{GTR}staging/"
 
 
 class EmbeddedBackend:
-    """pyoxigraph :class:`~pyoxigraph.Store` on disk under ``path`` (created if missing), or in memory."""
+    """pyoxigraph :class:`~pyoxigraph.Store` on disk under ``path`` (created if missing), or in memory.
+
+    Its writes run one at a time: a replacement checks which graphs exist and writes accordingly,
+    and two at once could both find a new graph missing and both add to it.
+
+    :raises StoreInUseError: another process (or an open :class:`EmbeddedBackend` of this one) holds
+        the store at ``path``.
+    """
 
     def __init__(self, path: Path | None = None):
         self.path = Path(path) if path is not None else None
+        self._write_lock = threading.RLock()
         if self.path is not None:
             self.path.mkdir(parents=True, exist_ok=True)
-            self.store = ox.Store(str(self.path))
+            self.store = _open_store(self.path)
         else:
             self.store = ox.Store()
         for graph in [g for g in self.store.named_graphs() if g.value.startswith(STAGING)]:
@@ -278,7 +345,8 @@ class EmbeddedBackend:
         return _rows(query_bound(self.store, sparql, substitutions, **kwargs))
 
     def update(self, sparql):
-        self.store.update(sparql)
+        with self._write_lock:
+            self.store.update(sparql)
 
     def replace_graph(self, graph, triples):
         self.replace_graphs({graph: triples})
@@ -288,14 +356,15 @@ class EmbeddedBackend:
         staging graphs, then one update that moves them into place. Either is several times faster
         than parsing the same triples as ``INSERT DATA``."""
         texts = {g: [chunk for chunk in ntriples_chunks(t) if chunk] for g, t in graphs.items()}
-        if not any(self.store.contains_named_graph(g) for g in texts):
-            self.store.load(_nquads(texts), ox.RdfFormat.N_QUADS, lenient=True)  # Oxigraph wrote the lines
-            return
-        run = uuid.uuid4().hex
-        staging = {g: ox.NamedNode(f"{STAGING}{run}/{i}") for i, g in enumerate(texts) if texts[g]}
-        self.store.load(_nquads({staging[g]: texts[g] for g in staging}), ox.RdfFormat.N_QUADS, lenient=True)
-        self.update(" ;\n".join(
-            f"DROP SILENT GRAPH {g}" + (f" ;\nMOVE {staging[g]} TO {g}" if g in staging else "") for g in texts))
+        with self._write_lock:
+            if not any(self.store.contains_named_graph(g) for g in texts):
+                self.store.load(_nquads(texts), ox.RdfFormat.N_QUADS, lenient=True)  # Oxigraph wrote the lines
+                return
+            run = uuid.uuid4().hex
+            staging = {g: ox.NamedNode(f"{STAGING}{run}/{i}") for i, g in enumerate(texts) if texts[g]}
+            self.store.load(_nquads({staging[g]: texts[g] for g in staging}), ox.RdfFormat.N_QUADS, lenient=True)
+            self.update(" ;\n".join(
+                f"DROP SILENT GRAPH {g}" + (f" ;\nMOVE {staging[g]} TO {g}" if g in staging else "") for g in texts))
 
     def load_graph(self, graph, data, format, *, base_iri=None, source_name="<data>"):
         triples = parse_rdf(data, format, source_name, base_iri)
@@ -303,8 +372,9 @@ class EmbeddedBackend:
         return len(triples)
 
     def drop_graph(self, graph):
-        if self.store.contains_named_graph(graph):
-            self.store.remove_graph(graph)
+        with self._write_lock:
+            if self.store.contains_named_graph(graph):
+                self.store.remove_graph(graph)
 
     def graphs(self):
         return sorted(self.store.named_graphs(), key=lambda g: g.value)
@@ -314,6 +384,22 @@ class EmbeddedBackend:
 
     def triple_count(self, graph):
         return sum(1 for _ in self.store.quads_for_pattern(None, None, None, graph))
+
+
+def _open_store(path: Path) -> ox.Store:
+    """The pyoxigraph store under ``path``.
+
+    :raises StoreInUseError: when RocksDB cannot take the store's lock (its messages: ``While lock
+        file: …`` held by another process, ``lock hold by current process`` by this one).
+    """
+    try:
+        return ox.Store(str(path))
+    except OSError as exc:
+        if "While lock file" in str(exc):
+            raise StoreInUseError(f"store {path} is in use by another process (a running graphtwin serve?)") from exc
+        if "lock hold by current process" in str(exc):
+            raise StoreInUseError(f"store {path} is open already in this process") from exc
+        raise
 
 
 @lru_cache(maxsize=None)
@@ -348,7 +434,10 @@ class GraphStore:
 
     @classmethod
     def embedded(cls, path: Path | None = None) -> GraphStore:
-        """On disk under ``path`` (the default deployment), in memory when None."""
+        """On disk under ``path`` (the default deployment), in memory when None.
+
+        :raises StoreInUseError: another process holds the store at ``path`` (:class:`EmbeddedBackend`).
+        """
         return cls(EmbeddedBackend(path))
 
     @classmethod
@@ -365,7 +454,7 @@ class GraphStore:
 
         :raises ValueError: naming the rule.
         """
-        if not _NAME.match(name or ""):
+        if not _NAME.fullmatch(name or ""):
             raise ValueError(
                 f"model name {name!r}: use letters, digits, '_', '-', '.', '+' (starting with a letter or digit)"
             )
@@ -434,7 +523,8 @@ class GraphStore:
     def load_model(self, name: str, source: Path | bytes | str, format: str | None = None, *,
                    source_name: str | None = None) -> int:
         """Load (or replace) building model ``name`` with what alignment infers from it, in one
-        transaction; blank nodes are skolemised (module docstring).
+        transaction that also removes the model's assembly graph (it described the model replaced);
+        blank nodes are skolemised (module docstring).
 
         :param source: a file path, or the RDF as bytes.
         :param format: ``ttl``, ``nt``, ``rdf``, ``jsonld`` or a media type; from the suffix when None
@@ -463,6 +553,7 @@ class GraphStore:
         self.write_graphs({
             self.model_graph(name): triples,
             self.inferred_graph(name): inferred_ntriples(triples, self._ontology_triples),
+            self.assembly_graph(name): [],
         })
         return len(triples)
 

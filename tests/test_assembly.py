@@ -70,3 +70,101 @@ def test_a_missing_upstream_source_is_reported_in_words():
     with pytest.raises(IncompleteModelError) as info:
         assemble(store, "broken")
     assert any("supply_fan" in p and "upstream" in p for p in info.value.problems)
+
+
+def test_two_units_whose_nodes_share_local_names_keep_every_component():
+    """Two copies of the case study in two namespaces: ``…/unit1#supply_fan`` and
+    ``…/unit2#supply_fan`` are two fans, two components (before, one replaced the other)."""
+    text = CASE_STUDY.read_text()
+    units = [text.replace(EX, EX.replace("case-study#", f"case-study/unit{k}#")) for k in (1, 2)]
+    store = GraphStore.embedded(None)
+    store.ensure_ontologies()
+    store.load_model("two", "\n".join(units).encode())
+    store.load_model("case", CASE_STUDY)
+    one = assemble(store, "case")
+    both = assemble(store, "two")
+    assert len(both.components) == 2 * len(one.components)
+    assert len(both.targets) == 10 and len(both.boundary_inputs) == 2 * len(one.boundary_inputs)
+    fans = sorted(c.node for c in both.components.values() if c.signature.id == "Fan")
+    assert [f.rsplit("/", 1)[-1] for f in fans] == ["unit1#supply_fan", "unit2#supply_fan"]
+    # each unit's coil is fed by its own fan
+    for unit in ("unit1", "unit2"):
+        coil = both.component_for_node(EX.replace("case-study#", f"case-study/{unit}#") + "heating_coil_air_side").iri
+        fed_by = {both.components[c.source].node for c in both.connections if c.target == coil and c.target_port == "air_mass_flow"}
+        assert fed_by == {EX.replace("case-study#", f"case-study/{unit}#") + "supply_fan"}
+
+
+def test_a_device_whose_upstream_model_lacks_its_quantity_is_a_boundary_input_with_a_note():
+    """The coil outlet water sensor moved after the check valve: the hot-water loop models the check
+    valve but gives no temperature there, so the sensor cannot be a target — said, not silent."""
+    text = CASE_STUDY.read_text()
+    for old, new in (("fso:suppliesFluidTo ex:coil_outlet_water_temperature_sensor .", "fso:suppliesFluidTo ex:check_valve ."),
+                     ('gt:timeSeriesId "coil_outlet_water_temperature" ;\n    fso:suppliesFluidTo ex:check_valve .',
+                      'gt:timeSeriesId "coil_outlet_water_temperature" .'),
+                     ("fso:suppliesFluidTo ex:return_water_pipe .\n\nex:return_water_pipe",
+                      "fso:suppliesFluidTo ex:coil_outlet_water_temperature_sensor .\n\nex:return_water_pipe")):
+        assert old in text
+        text = text.replace(old, new)
+    store = GraphStore.embedded(None)
+    store.load_model("moved", text.encode())
+    model = assemble(store, "moved")
+    sensor = model.component_for_node(EX + "coil_outlet_water_temperature_sensor").iri
+    assert sensor in model.boundary_inputs and sensor not in model.targets
+    assert any(f"{EX}check_valve is modelled by HotWaterLoop, which has no output carrying 'temperature' there" in note
+               and note.endswith("coil_outlet_water_temperature_sensor is a boundary input, not a calibration target")
+               for note in model.notes)
+
+
+def test_two_nearest_partners_alike_are_a_note_naming_both():
+    """A second fan feeding the coil in parallel: the coil's nearest upstream fan is either; one is
+    kept (the first in IRI order, deterministic) and the note names the one set aside."""
+    store = GraphStore.embedded(None)
+    store.load_model("parallel", CASE_STUDY.read_text().encode()
+                     + b"\nex:supply_fan_2 a s4bldg:Fan ; fso:suppliesFluidTo ex:heating_coil_air_side .\n")
+    model = assemble(store, "parallel", allow_incomplete=True)  # the second fan has no flow meter
+    [note] = [n for n in model.notes if "ways alike" in n]
+    assert note.startswith("heating_coil_air_side: HotWaterLoop matches 4 ways alike; kept air_inlet = supply_fan, fan = supply_fan")
+    assert "fan = supply_fan_2" in note
+    assert model.component_for_node(EX + "heating_coil_air_side").bindings["fan"] == EX + "supply_fan"
+
+
+SHARED_PUMP = """@prefix ex: <https://example.org/plant/> . @prefix saref: <https://saref.etsi.org/core/> .
+@prefix s4bldg: <https://saref.etsi.org/saref4bldg/> . @prefix fso: <https://w3id.org/fso#> .
+@prefix gt: <https://w3id.org/graphtwin/ontology#> . @prefix unit: <http://qudt.org/vocab/unit/> .
+ex:sws a s4bldg:Sensor ; saref:observes ex:sws_t ; saref:isMeasuredIn unit:DEG_C ; fso:suppliesFluidTo ex:pump .
+ex:sws_t a saref:Temperature . ex:pump a s4bldg:Pump ; fso:suppliesFluidTo ex:v1, ex:v2 .
+""" + "".join(f"""
+ex:v{k} a s4bldg:Valve ; saref:hasProperty ex:v{k}_pos ; fso:suppliesFluidTo ex:c{k}_w . ex:v{k}_pos a gt:OpeningPosition .
+ex:c{k}_w a s4bldg:Coil ; fso:transfersHeatTo ex:c{k}_a ; fso:suppliesFluidTo ex:cv{k} . ex:cv{k} a s4bldg:Valve .
+ex:in{k} a s4bldg:Sensor ; saref:observes ex:in{k}_t ; saref:isMeasuredIn unit:DEG_C ; fso:suppliesFluidTo ex:fm{k} .
+ex:in{k}_t a saref:Temperature . ex:fm{k}_q a gt:FlowRate .
+ex:fm{k} a s4bldg:FlowMeter ; saref:observes ex:fm{k}_q ; saref:isMeasuredIn unit:M3-PER-SEC ; fso:suppliesFluidTo ex:fan{k} .
+ex:fan{k} a s4bldg:Fan ; fso:suppliesFluidTo ex:c{k}_a . ex:c{k}_a a s4bldg:Coil ; fso:suppliesFluidTo ex:out{k} .
+ex:out{k} a s4bldg:Sensor ; saref:observes ex:out{k}_t ; saref:isMeasuredIn unit:DEG_C . ex:out{k}_t a saref:Temperature .
+ex:ctl{k} a s4bldg:Controller ; saref:observes ex:out{k}_t ; saref:controls ex:v{k}_pos ; saref:hasProfile ex:sp{k} .
+ex:sp{k} a gt:SetpointSchedule ; saref:isMeasuredIn unit:DEG_C .""" for k in (1, 2))
+
+
+def test_a_match_that_loses_a_node_it_needs_is_reported_as_the_reason():
+    """One pump serving two coils: the hot-water loop of coil 2 matches but needs the pump, which the
+    loop of coil 1 represents; the report says so, not only which triples another signature missed."""
+    store = GraphStore.embedded(None)
+    store.load_model("plant", SHARED_PUMP.encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "plant")
+    assert ("https://example.org/plant/c2_a is not modelled: HotWaterLoop matches there but also needs "
+            "https://example.org/plant/pump: the HotWaterLoop at c1_a represents it already") in info.value.problems
+
+
+def test_a_nominal_value_without_its_unit_is_estimated_with_a_note(case_store):
+    text = CASE_STUDY.read_text()
+    old = 'saref:hasValue "1.8"^^xsd:double ;\n    saref:isMeasuredIn unit:KiloW .'
+    assert old in text
+    store = GraphStore.embedded(None)
+    store.load_model("no_unit", text.replace(old, 'saref:hasValue "1.8"^^xsd:double .').encode())
+    model = assemble(store, "no_unit")
+    assert "nominal_power" not in {ref.name for ref in model.mapped_parameters}
+    assert (f"supply_fan: parameter nominal_power of Fan is estimated, not mapped: the graph gives 1.8 but no unit "
+            f"for it (add <{EX}supply_fan_nominal_power> <https://saref.etsi.org/core/isMeasuredIn> <a QUDT unit IRI> .)"
+            ) in model.notes
+    assert not [n for n in assemble(case_store, "case").notes if "no unit" in n]  # with its unit: no note

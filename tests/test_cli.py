@@ -1,12 +1,18 @@
 """The command line: JSON output, clear errors with exit code 2, add-effect round trip."""
 
 import json
+import subprocess
+import sys
 
+import pyoxigraph as ox
 from case_study import CASE_STUDY, EX
 from typer.testing import CliRunner
 
 from service.assembly import assemble
 from service.cli import app
+from service.resources import signatures_dir
+from service.signature import load_signature_library
+from service.sparql_compiler import compile_signature
 from service.store import GraphStore
 
 runner = CliRunner()
@@ -31,6 +37,9 @@ def test_a_broken_model_fails_with_line_and_column(tmp_path):
 def test_signature_explain_prints_the_compiled_query():
     result = runner.invoke(app, ["signature", "explain", "Fan"])
     assert result.exit_code == 0 and "suppliesFluidTo+" in result.output
+    # piped: the text as it is (no wrapping of long comment lines), a query any endpoint parses
+    assert result.output == compile_signature(load_signature_library(signatures_dir())["Fan"]).text
+    assert list(ox.Store().query(result.output)) == []
     assert runner.invoke(app, ["signature", "explain", "Fann"]).exit_code == 2
 
 
@@ -157,3 +166,18 @@ def test_compare_strategies_prints_both_fits_per_regime_and_their_cross_validati
     assert text.exit_code == 0 and "better on held-out data:" in text.output and "joint | successive" in text.output
     short = runner.invoke(app, ["compare-strategies", str(CASE_STUDY), str(data), "--folds", "30", "--memory"])
     assert short.exit_code == 2 and "30 folds" in short.output
+
+
+def test_a_store_another_process_holds_is_a_one_line_error(tmp_path):
+    path = tmp_path / "data"
+    GraphStore.embedded(path)  # created, then closed
+    holder = subprocess.Popen(
+        [sys.executable, "-c", f"import sys, pyoxigraph; s = pyoxigraph.Store({str(path)!r}); print('open', flush=True); sys.stdin.read()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "open"
+        result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--store", str(path)])
+    finally:
+        holder.communicate("", timeout=30)
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"error: store {path} is in use by another process (a running graphtwin serve?)" in result.output

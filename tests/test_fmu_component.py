@@ -15,11 +15,11 @@ import pytest
 fmpy = pytest.importorskip("fmpy", reason="fmpy is needed to run FMU components")
 
 from fan_lag_fmu import FAN_CURVE, SOURCE, compile_fan_lag, fan_lag_model, package_fmu  # noqa: E402
-from service.assembled_model import ComponentInstance, Connection, ParameterRef  # noqa: E402
+from service.assembled_model import ComponentInstance, Connection, ParameterRef, load_model_class  # noqa: E402
 from service.component import first_order_lag_factor  # noqa: E402
 from service.fan import Fan  # noqa: E402
 from service.fmu_component import fmu_model_class, live_instance_count  # noqa: E402
-from service.signature import signature_from_dict  # noqa: E402
+from service.signature import SignatureError, signature_from_dict  # noqa: E402
 from service.simulator import Simulator  # noqa: E402
 
 FAN_PARAMETERS = ("nominal_air_flow", "nominal_power", "c1", "c2", "c3", "c4")
@@ -156,3 +156,13 @@ def test_bad_files_raise_value_errors_naming_the_file(build, tmp_path):
     no_binary = package_fmu(tmp_path, "no_binary.fmu", description, None)
     with pytest.raises(ValueError, match=r"no_binary\.fmu: no binary for this platform"):
         fmu_model_class(no_binary)
+
+
+def test_an_fmu_signature_mapping_a_port_the_fmu_lacks_names_file_key_and_ports(fan_lag_fmu, tmp_path):
+    signature = signature_from_dict({
+        "id": "FanFMU", "modeled_nodes": ["n"], "nodes": {"n": {"classes": ["urn:Fan"]}},
+        "fmu": str(Path(fan_lag_fmu).resolve()), "outputs": {"lagged_powr": {"node": "n", "quantity": "power"}},
+    }, tmp_path / "fan_fmu.toml")
+    with pytest.raises(SignatureError, match=r"fan_fmu\.toml: outputs\.lagged_powr: .* has no output port "
+                                             r"'lagged_powr'; its output ports: .*lagged_power"):
+        load_model_class(signature)

@@ -59,6 +59,16 @@ def test_traverse_is_exact_on_a_recirculation_loop():
     assert _pairs(match_signature(store, _sensor_upstream())) == [("coil", "sat"), ("sat", "rat")]
 
 
+def test_a_loop_back_to_the_start_makes_no_node_its_own_partner():
+    # a sensor alone on a closed loop reaches itself round the room: that is no upstream device
+    store = _store("x:s_a a x:Sensor ; x:feeds x:room . x:room a x:Room ; x:feeds x:s_a .")
+    assert _pairs(match_signature(store, _sensor_upstream())) == []
+    # with a fan on the loop, the fan is the sensor's upstream device, not the sensor itself
+    store = _store("x:s_a a x:Sensor ; x:feeds x:room . x:room a x:Room ; x:feeds x:fan . "
+                   "x:fan a x:Fan ; x:feeds x:s_a .")
+    assert _pairs(match_signature(store, _sensor_upstream())) == [("fan", "s_a")]
+
+
 def _upstream_of_box():
     return signature_from_dict({
         "id": "Mix", "modeled_nodes": ["mix"], "model": "service.measuring_device:MeasuringDevice",
@@ -233,3 +243,19 @@ def test_a_part_query_starts_from_its_node_with_fewest_instances():
         "?room rdf:type ?room__class .")
     assert session.compiled(signature).text == compile_signature(signature).text
     assert _pairs(match_signature(store, signature, session=session), "room", "sensor") == [("r", "s1"), ("r", "s2")]
+
+
+def test_a_traverse_does_not_pass_through_a_building_space():
+    # a fan coil recirculating room air: the sensor's nearest upstream device is the coil; the coil's
+    # is nothing (across the room lies the supply sensor, whose air the room changes)
+    store = _store("""
+        @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
+        x:room a s4bldg:BuildingSpace ; x:feeds x:coil . x:coil a x:Coil ; x:feeds x:sat .
+        x:sat a x:Sensor ; x:feeds x:room .""")
+    coil_inlet = signature_from_dict({
+        "id": "CoilInlet", "modeled_nodes": ["coil"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"coil": {"classes": [X + "Coil"]}, "up": {"classes": [X + "Sensor"]}},
+        "triples": [{"subject": "up", "predicate": X + "feeds", "object": "coil", "rule": "traverse"}],
+    })
+    assert match_signature(store, coil_inlet) == []
+    assert _pairs(match_signature(store, _sensor_upstream())) == [("coil", "sat")]

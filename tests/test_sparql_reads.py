@@ -1,8 +1,11 @@
 """What a SPARQL query can read (service.sparql_reads): the over-approximation the alignment rules'
 scheduler relies on — it may say "reads" too often, never too rarely."""
 
+import threading
+
 import pytest
 
+from service.alignment import alignment_rules
 from service.sparql_reads import QueryReads, query_reads
 
 RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
@@ -77,3 +80,26 @@ def test_a_predicate_variable_restricted_to_a_prefix_or_to_constants_reads_those
     both = reads('?x ?p ?y . VALUES ?p { ex:a } FILTER(STRSTARTS(STR(?p), "http://example.org/"))')
     assert both.may_read({EX + "a": {"1"}}) and not both.may_read({EX + "b": {"1"}})
     assert reads('?x ?p ?y . FILTER(STRSTARTS(STR(?p), "http://example.org/") || BOUND(?x))').any_predicate
+
+
+def test_queries_are_read_from_several_threads_at_once():
+    """rdflib's SPARQL grammar is not thread-safe: two models aligned side by side parse their
+    rules at the same time (without the lock every parse here failed)."""
+    texts = [text for _name, text in alignment_rules()]
+    errors, barrier = [], threading.Barrier(4)
+
+    def read_all(thread: int) -> None:
+        barrier.wait()
+        for text in texts:
+            try:
+                query_reads(f"{text}\n# thread {thread}\n")  # a text of its own: not in the cache
+            except Exception as exc:  # noqa: BLE001 - any failure is the finding
+                errors.append(exc)
+
+    threads = [threading.Thread(target=read_all, args=(k,)) for k in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+    assert query_reads(texts[0] + "\n# thread 0\n") == query_reads(texts[0])

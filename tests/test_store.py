@@ -1,9 +1,16 @@
 """The store: named-graph layout, atomic loads with clear parse errors, value binding."""
 
+import re
+import subprocess
+import sys
+import threading
+
 import pyoxigraph as ox
 import pytest
 
-from service.store import ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, bind_values, insert_data_update
+from service.store import (
+    ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, StoreInUseError, bind_values, insert_data_update,
+)
 
 from case_study import CASE_STUDY, EX
 
@@ -34,6 +41,7 @@ def test_a_parse_error_names_file_line_and_column_and_changes_nothing(case_store
         case_store.load_model("case", path)
     assert info.value.line == 3 and info.value.column is not None
     assert str(path) in str(info.value) and "zz:" in str(info.value)
+    assert len(re.findall(r"line \d", str(info.value))) == 1  # the position once, not pyoxigraph's again
     assert _snapshot(case_store) == before
 
 
@@ -46,6 +54,10 @@ def test_unknown_format_and_empty_model_are_refused(case_store, tmp_path):
         case_store.load_model("x", b"# nothing\n", "ttl")
     with pytest.raises(ValueError, match="model name"):
         case_store.load_model("bad name", CASE_STUDY)
+    for name in ("case\n", "case\r\n", "\ncase"):
+        with pytest.raises(ValueError, match="model name"):
+            GraphStore.check_name(name)
+    assert GraphStore.check_name("case+v1.2_x-y") == "case+v1.2_x-y"
 
 
 def test_json_ld_and_n_triples_load_the_same_triples(tmp_path):
@@ -62,6 +74,80 @@ def test_json_ld_and_n_triples_load_the_same_triples(tmp_path):
 def test_replacing_a_model_swaps_it_whole(case_store):
     case_store.load_model("case", b"<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
     assert case_store.backend.triple_count(case_store.model_graph("case")) == 1
+
+
+def test_replacing_a_model_removes_its_assembly_in_the_same_write(case_store):
+    """The assembly described the model replaced: it goes with it, in the write of the new model."""
+    component, p = ox.NamedNode(EX + "c"), ox.NamedNode(EX + "p")
+    case_store.write_graph(case_store.assembly_graph("case"), [ox.Triple(component, p, ox.Literal("old"))])
+    other = case_store.assembly_graph("other")
+    case_store.write_graph(other, [ox.Triple(component, p, ox.Literal("kept"))])
+    updates = []
+    update = case_store.backend.update
+    case_store.backend.update = lambda sparql: (updates.append(sparql), update(sparql))
+    case_store.load_model("case", b"<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
+    assert case_store.assembly_graph("case") not in case_store.backend.graphs()
+    assert len(updates) == 1 and f"DROP SILENT GRAPH {case_store.assembly_graph('case')}" in updates[0]
+    assert case_store.backend.triple_count(other) == 1
+
+
+class _LookingTogether:
+    """A pyoxigraph store whose ``contains_named_graph`` waits (up to a second) for a second caller, so
+    two writers both look which graphs exist before either writes, unless something serialises them."""
+
+    def __init__(self, store: ox.Store):
+        self._store, self._barrier = store, threading.Barrier(2)
+
+    def __getattr__(self, name):
+        return getattr(self._store, name)
+
+    def contains_named_graph(self, graph):
+        try:
+            self._barrier.wait(timeout=1)
+        except threading.BrokenBarrierError:  # the other writer waits for this one to finish
+            pass
+        return self._store.contains_named_graph(graph)
+
+
+def test_two_loads_of_a_new_model_at_once_leave_one_of_them_whole():
+    """Each writer finding the model missing and adding its triples would merge the two."""
+    store = GraphStore.embedded(None)
+    store.ensure_ontologies()
+    store.backend.store = _LookingTogether(store.backend.store)
+    docs = {tag: b"".join(b'<https://example.org/%s/s%d> <https://example.org/p> "%d" .\n' % (tag, i, i) for i in range(50))
+            for tag in (b"A", b"B")}
+    loaded = []
+
+    def load(doc):
+        loaded.append(store.load_model("x", doc, "nt"))
+
+    writers = [threading.Thread(target=load, args=(doc,)) for doc in docs.values()]
+    for writer in writers:
+        writer.start()
+    for writer in writers:
+        writer.join()
+    subjects = {t.subject.value.split("/")[3] for t in store.graph_triples(store.model_graph("x"))}
+    assert loaded == [50, 50] and len(subjects) == 1 and store.backend.triple_count(store.model_graph("x")) == 50
+
+
+def test_a_store_another_process_holds_is_refused_with_a_clear_error(tmp_path):
+    path = tmp_path / "data"
+    GraphStore.embedded(path)  # created, then closed
+    holder = subprocess.Popen(
+        [sys.executable, "-c", f"import sys, pyoxigraph; s = pyoxigraph.Store({str(path)!r}); print('open', flush=True); sys.stdin.read()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "open"
+        with pytest.raises(StoreInUseError, match=r"in use by another process \(a running graphtwin serve\?\)") as info:
+            GraphStore.embedded(path)
+        assert isinstance(info.value, OSError) and str(path) in str(info.value)
+    finally:
+        holder.communicate("", timeout=30)
+    held_here = EmbeddedBackend(path)
+    with pytest.raises(StoreInUseError, match="open already in this process"):
+        EmbeddedBackend(path)
+    del held_here
+    assert GraphStore.embedded(path).models() == []
 
 
 def test_several_graphs_are_replaced_together_and_staging_leaves_nothing_behind(tmp_path):

@@ -3,10 +3,11 @@ and the control without one (the method must not invent effects)."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from case_study import CASE_STUDY, EX
 
-from service.diagnosis import diagnose
+from service.diagnosis import diagnose, noise_level
 from service.resources import signatures_dir
 from service.signature import load_signature_library
 from service.store import GraphStore
@@ -120,3 +121,15 @@ def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tm
     assert all(e.delta_bic <= len(e.parameter_names) * np.log(n) for e in report.effects), [
         (e.effect, e.node, e.delta_bic) for e in report.effects]
     assert report.effects[0].effect == "FanMotorHeat" and report.effects[0].delta_bic < -10
+
+
+def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():
+    """A 500 W meter read 4 W (0.8 %) low with 0.3 W of noise: within its ±1 % accuracy, so its noise
+    level is 5 W (1 % of the reading), not 1 % of the small residual — it does not "fail"."""
+    rng = np.random.default_rng(0)
+    observed = 500.0 + 50.0 * np.sin(np.arange(288) / 20.0) + rng.normal(0.0, 0.3, 288)
+    residual = np.full(288, 4.0) + rng.normal(0.0, 0.3, 288)
+    assert noise_level(residual, "W", observed) == pytest.approx(0.01 * np.mean(np.abs(observed)))
+    # a temperature keeps its absolute floor of 0.1 K, whatever the reading
+    assert noise_level(rng.normal(0.0, 0.01, 288), "degC", observed) == pytest.approx(0.1)
+

@@ -258,6 +258,16 @@ def test_a_failing_sparql_endpoint_gets_503(tmp_path, store, monkeypatch):
         assert response.status_code == 503 and "(HTTP 500): boom" in response.json()["detail"]
 
 
+def test_every_route_answers_503_naming_an_unreachable_endpoint(tmp_path, auth):
+    down = "http://127.0.0.1:9"  # the discard port: nothing listens
+    settings = Settings(data_dir=tmp_path, token=auth["Authorization"].split()[-1], executor="threads", sparql_endpoint=down)
+    with TestClient(create_app(settings)) as client:
+        for response in (client.get("/models"), client.get("/models/m"),
+                         client.put("/models/m", content=b"<urn:a> <urn:p> <urn:b> .",
+                                    headers={**auth, "Content-Type": "application/n-triples"})):
+            assert response.status_code == 503 and down in response.json()["detail"], response.text
+
+
 def test_named_queries_are_listed_and_run_with_bindings(client):
     listed = {q["name"]: q for q in client.get("/queries").json()["data"]}
     assert "model" in listed["calibrated-parameters"]["variables"] and listed["flow-edges"]["description"]
