@@ -82,7 +82,8 @@ _TYPE = str(_RDF_TYPE).encode()
 _TYPE_INFIX = b" %s " % _TYPE
 _BLANK_NODE_NAMESPACE = "urn:graphtwin:alignment:blank-node:"
 _SUBCLASS_OF = ox.NamedNode("http://www.w3.org/2000/01/rdf-schema#subClassOf")
-_SUBCLASS_INFIX = b" %s " % str(_SUBCLASS_OF).encode()
+_EQUIVALENT_CLASS = ox.NamedNode("http://www.w3.org/2002/07/owl#equivalentClass")
+_CLASS_AXIOM_INFIXES = tuple(b" %s " % str(p).encode() for p in (_SUBCLASS_OF, _EQUIVALENT_CLASS))
 _SCHEMA_PREDICATES = (b"<http://www.w3.org/2002/07/owl#", *(b"<http://www.w3.org/2000/01/rdf-schema#%s>" % p for p in (
     b"subClassOf", b"subPropertyOf", b"domain", b"range")))
 _QUDT_NAMESPACE = "http://qudt.org/vocab/"
@@ -126,11 +127,17 @@ def rule_terms() -> frozenset[str]:
 
 
 def _named_superclasses(ontology: Iterable[ox.Triple]) -> dict[ox.NamedNode, tuple[ox.NamedNode, ...]]:
-    """class → its strict superclasses (``rdfs:subClassOf`` closure) that a rule names."""
+    """class → its strict superclasses that a rule names: the closure of ``rdfs:subClassOf`` and of
+    ``owl:equivalentClass`` read both ways (an instance of the alias ``brick:AHU`` is one of
+    ``brick:Air_Handling_Unit``, and the other way round)."""
     parents: dict[ox.NamedNode, set[ox.NamedNode]] = defaultdict(set)
     for t in ontology:
-        if t.predicate == _SUBCLASS_OF and isinstance(t.object, ox.NamedNode) and isinstance(t.subject, ox.NamedNode):
-            parents[t.subject].add(t.object)
+        if isinstance(t.object, ox.NamedNode) and isinstance(t.subject, ox.NamedNode):
+            if t.predicate == _SUBCLASS_OF:
+                parents[t.subject].add(t.object)
+            elif t.predicate == _EQUIVALENT_CLASS:
+                parents[t.subject].add(t.object)
+                parents[t.object].add(t.subject)
     named = rule_terms()
     result = {}
     for cls in list(parents):
@@ -165,8 +172,10 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
     """
     text = ox.serialize(model, format=ox.RdfFormat.N_TRIPLES)
     lines = text.split(b"\n")[:-1]
-    model_subclasses = ox.parse(b"\n".join(line for line in lines if _SUBCLASS_INFIX in line), format=ox.RdfFormat.N_TRIPLES)
-    context = _Context.of(list(ontology), [t.triple for t in model_subclasses])
+    subclass, equivalent = _CLASS_AXIOM_INFIXES
+    model_axioms = ox.parse(b"\n".join(line for line in lines if subclass in line or equivalent in line),
+                            format=ox.RdfFormat.N_TRIPLES)
+    context = _Context.of(list(ontology), [t.triple for t in model_axioms])
     if _has_blank_node(text) or _has_blank_node(context.ontology):
         raise ValueError("the alignment needs a model and ontology without blank nodes: skolemise them first")
     with cyclic_gc_paused():
@@ -346,10 +355,10 @@ class _Context:
         return self.read_prefixes is None or predicate.startswith(self.read_prefixes)
 
     @classmethod
-    def of(cls, ontology: list[ox.Triple], model_subclasses: list[ox.Triple] = ()) -> _Context:
+    def of(cls, ontology: list[ox.Triple], model_class_axioms: list[ox.Triple] = ()) -> _Context:
         text = ox.serialize(ontology, format=ox.RdfFormat.N_TRIPLES)
         type_lines = {str(c).encode(): tuple(b" %s %s ." % (_TYPE, str(s).encode()) for s in supers)
-                      for c, supers in _named_superclasses([*ontology, *model_subclasses]).items()}
+                      for c, supers in _named_superclasses([*ontology, *model_class_axioms]).items()}
         rules = tuple(text for _name, text in alignment_rules())
         reads = tuple(map(query_reads, rules))  # parsed here, not on the threads
         restricted = frozenset(f"<{p}>".encode() for r in reads for p, objects in r.objects.items() if objects is not None)

@@ -6,8 +6,10 @@ Read from a loaded model (:meth:`service.store.GraphStore.load_model`): its own 
 ``inferred`` graph.
 
 * **Unaligned classes**: a Brick or RealEstateCore class the model types nodes with, where some of
-  those nodes took no part in the alignment: no triple of the inferred graph names them and none of
-  their parts or points (``brick:hasPart`` / ``brick:hasPoint`` and inverses) was aligned. Per class:
+  those nodes took no part in the alignment: no rule derived anything from them (they carry no
+  ``gt:derivedByRule``: a node a flow edge merely passes, such as a humidifier between two coils, is
+  not aligned) and, for an air handling unit, none of its parts or points (``brick:hasPart`` /
+  ``brick:hasPoint`` and inverses) was aligned. Per class:
   the count of such nodes out of all, and what would be needed (an official class of
   ``ontologies/brick-subset.ttl`` with a similar name when the class is not in it; a signature or
   rule for it when it is).
@@ -50,7 +52,7 @@ _CLASSES = _PREFIXES + f"""
 SELECT ?class (COUNT(DISTINCT ?node) AS ?count) (COUNT(DISTINCT ?unaligned) AS ?unaligned_count) WHERE {{
   GRAPH ?model {{ ?node a ?class }}
   FILTER(STRSTARTS(STR(?class), "{BRICK}") || STRSTARTS(STR(?class), "{REC}"))
-  BIND(EXISTS {{ GRAPH ?inferred {{ {{ ?node ?p ?o }} UNION {{ ?s ?q ?node }} }} }} AS ?named)
+  BIND(EXISTS {{ GRAPH ?inferred {{ ?node gt:derivedByRule ?rule }} }} AS ?named)
   BIND(EXISTS {{
     GRAPH ?ontology {{ ?class rdfs:subClassOf* brick:Air_Handling_Unit }}
     GRAPH ?model {{ ?node brick:hasPart|^brick:isPartOf|brick:hasPoint|^brick:isPointOf ?member }}

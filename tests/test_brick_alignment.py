@@ -77,6 +77,21 @@ def test_a_unit_described_by_its_points_gets_the_equipment_they_imply(store):
             ("oat", "ahu_mixing_section")} <= wires
 
 
+@pytest.mark.parametrize("alias", ["AHU", "Air_Handler_Unit"])
+def test_a_unit_typed_with_an_official_alias_aligns_as_the_class(store, alias):
+    """brick:AHU and brick:Air_Handler_Unit are owl:equivalentClass brick:Air_Handling_Unit (Brick
+    1.4): the same equipment, path and wiring (before, the unit was taken as plain equipment)."""
+    aliased = GraphStore.embedded(None)
+    aliased.load_model("alias", POINTS_ONLY.replace(":ahu a brick:Air_Handling_Unit .", f":ahu a brick:{alias} .").encode())
+
+    def summary(model):
+        nodes = {i: c.node.removeprefix(EX) for i, c in model.components.items()}
+        return ({(n, model.components[i].signature.id) for i, n in nodes.items()},
+                {(nodes[c.source], nodes[c.target]) for c in model.connections}, _nodes(model, model.targets))
+
+    assert summary(assemble(aliased, "alias")) == summary(assemble(store, "points"))
+
+
 def test_every_minted_node_is_an_assumption_with_the_triples_that_remove_it(store):
     rows = store.query(f"""
         PREFIX gt: <{GT}>
@@ -169,6 +184,12 @@ def test_the_brick_subset_holds_every_official_subclass_of_the_classes_the_rules
             missing.add(cls)
         todo += official[cls]
     assert len(roots) > 20 and sorted(missing) == []
+    # every official alias of a class held (owl:equivalentClass) is held too, with the axiom
+    equivalent = [t for t in parse_rdf(BRICK_TTL.read_bytes(), ox.RdfFormat.TURTLE, str(BRICK_TTL))
+                  if t.predicate.value == "http://www.w3.org/2002/07/owl#equivalentClass" and isinstance(t.object, ox.NamedNode)]
+    axioms = set(subset)
+    assert sorted(str(t) for t in equivalent
+                  if (t.subject.value in declared or t.object.value in declared) and t not in axioms) == []
     # every Brick/REC class a rule names is declared in the subset
     named = {expand[p] + local for _n, text in alignment_rules() for p, local in re.findall(r"\b(brick|rec):([A-Za-z_]+)", text)
              if local[0].isupper()}
@@ -275,3 +296,48 @@ def test_the_n_triples_alignment_asks_for_blank_nodes_to_be_skolemised_first():
     derived = inferred_triples(model, _ontology())  # blank nodes aligned as IRIs and named back
     series = {t.object.value for t in derived if t.predicate.value == GT + "timeSeriesId"}
     assert "rat_column" in series and not any("alignment:blank-node" in str(t) for t in derived)
+
+
+def test_wet_bulb_and_differential_temperatures_are_not_read_as_air_temperatures():
+    """An outdoor wet-bulb point and an economiser's enable differential are official subclasses of
+    brick:Outside_Air_Temperature_Sensor, but no dry-bulb temperature: left out, and reported."""
+    from service.brick_report import brick_report
+
+    extra = (':owb a brick:Outside_Air_Wet_Bulb_Temperature_Sensor ; brick:isPointOf :ahu ; rdfs:label "OA WB" .\n'
+             ':oed a brick:Outside_Air_Temperature_Enable_Differential_Sensor ; brick:isPointOf :ahu ; rdfs:label "OA Diff" .\n')
+    store = GraphStore.embedded(None)
+    store.load_model("wet", (POINTS_ONLY + extra).encode())
+    model = assemble(store, "wet")
+    assert not {"owb", "oed"} & {c.node.removeprefix(EX) for c in model.components.values()}
+    assert not [n for n in model.notes if "ways alike" in n]  # the dry-bulb OAT is the mixing box's outdoor air
+    box = model.component_for_node(EX + "ahu_mixing_section")
+    assert box.bindings["outdoor_sensor"] == EX + "oat"
+    unaligned = {c.class_iri.removeprefix(BRICK) for c in brick_report(store, "wet").unaligned_classes}
+    assert {"Outside_Air_Wet_Bulb_Temperature_Sensor", "Outside_Air_Temperature_Enable_Differential_Sensor"} <= unaligned
+
+
+def test_a_return_fan_speed_command_does_not_drive_the_supply_fan():
+    extra = ':rf_cmd a brick:Fan_Speed_Command ; brick:isPointOf :ahu ; brick:hasUnit unit:PERCENT ; rdfs:label "RF Speed" .\n'
+    store = GraphStore.embedded(None)
+    store.load_model("two_fans", (POINTS_ONLY + extra).encode())
+    model = assemble(store, "two_fans")
+    fan = model.component_for_node(EX + "ahu_supply_fan")
+    assert fan.signature.id == "SpeedControlledFan" and fan.bindings["command"] == EX + "fan_cmd"
+    assert not [n for n in model.notes if "ways alike" in n]
+
+
+def test_the_supply_air_sensor_reads_the_supply_fan_not_the_end_of_the_exhaust_path():
+    """Return fan → exhaust damper → exhaust fan, all parts of the unit: the exhaust fan also feeds
+    no part of the unit, but the supply air is what the supply fan blows into the room."""
+    text = """@prefix brick: <https://brickschema.org/schema/Brick#> . @prefix ex: <https://example.org/relief#> .
+ex:ahu a brick:Air_Handling_Unit ; brick:hasPart ex:oad, ex:rad, ex:ead, ex:mix, ex:ccl, ex:sf, ex:rf, ex:ef ;
+  brick:hasPoint ex:sat .
+ex:room a brick:HVAC_Zone ; brick:feeds ex:rf . ex:rf a brick:Return_Fan ; brick:feeds ex:rad, ex:ead .
+ex:ead a brick:Exhaust_Damper ; brick:feeds ex:ef . ex:ef a brick:Exhaust_Fan .
+ex:oad a brick:Outside_Damper ; brick:feeds ex:mix . ex:rad a brick:Return_Damper ; brick:feeds ex:mix .
+ex:mix a brick:HVAC_Equipment ; brick:feeds ex:ccl . ex:ccl a brick:Cooling_Coil ; brick:feeds ex:sf .
+ex:sf a brick:Supply_Fan ; brick:feeds ex:room . ex:sat a brick:Supply_Air_Temperature_Sensor ."""
+    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "relief"), _ontology())
+    placed = {t.object.value.rsplit("#", 1)[-1] for t in derived if t.predicate.value == GT + "measuresAtOutletOf"
+              and t.subject.value.endswith("#sat")}
+    assert placed == {"sf"}

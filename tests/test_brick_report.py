@@ -34,3 +34,20 @@ def test_a_saref_model_has_nothing_to_report():
     store = GraphStore.embedded(None)
     store.load_model("saref", examples_dir() / "flexlab_ahu" / "model.ttl")
     assert not brick_report(store, "saref").is_brick
+
+
+def test_equipment_a_flow_edge_merely_passes_is_listed():
+    """A humidifier between the mixing box and the cooling coil: brick:feeds through it becomes flow
+    edges through it, but no rule models it — the report names it (before, the edges hid it)."""
+    store = GraphStore.embedded(None)
+    store.load_model("hum", b"""
+@prefix brick: <https://brickschema.org/schema/Brick#> . @prefix ex: <http://example.org/> .
+ex:ahu a brick:Air_Handling_Unit ; brick:hasPart ex:oad, ex:rad, ex:mix, ex:hum, ex:ccl, ex:sf ; brick:hasPoint ex:sat .
+ex:oad a brick:Outside_Damper ; brick:feeds ex:mix . ex:rad a brick:Return_Damper ; brick:feeds ex:mix .
+ex:mix a brick:HVAC_Equipment ; brick:feeds ex:hum .
+ex:hum a brick:Humidifier ; brick:feeds ex:ccl . ex:ccl a brick:Cooling_Coil ; brick:feeds ex:sf .
+ex:sf a brick:Supply_Fan ; brick:feeds ex:zone . ex:zone a brick:HVAC_Zone .
+ex:sat a brick:Supply_Air_Temperature_Sensor .
+""")
+    by_class = {c.class_iri.removeprefix(BRICK): c for c in brick_report(store, "hum").unaligned_classes}
+    assert set(by_class) == {"Humidifier"} and by_class["Humidifier"].unaligned == 1
