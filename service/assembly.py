@@ -23,7 +23,7 @@ spliced into one port of the component that represents its ``splice.node``.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
+import re
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -36,7 +36,7 @@ from .assembled_model import (
 )
 from .cyclic_gc import cyclic_gc_paused
 from .measuring_device import MeasuringDevice
-from .namespaces import GTR, RDFS
+from .namespaces import GTR, RDFS, local_name
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
 from .signature_matcher import MatchSession, match_signature, missing_class_report
@@ -71,14 +71,7 @@ def component_iri(model_name: str, signature: Signature, node_iri: str, *, share
     represents; when other nodes the same signature represents share that local name
     (``…/unit1/supply_fan``, ``…/unit2/supply_fan``), also the first 8 hex digits of the SHA-256 of
     the node's IRI, so no instance replaces another."""
-    local = _local_name(node_iri)
-    if shared_local_name:
-        local += "-" + hashlib.sha256(node_iri.encode()).hexdigest()[:8]
-    return f"{GTR}model/{model_name}/component/{signature.id}/{local}"
-
-
-def _local_name(iri: str) -> str:
-    return iri.rstrip("/#").replace("#", "/").rsplit("/", 1)[-1]
+    return f"{GTR}model/{model_name}/component/{signature.id}/{local_name(node_iri, hashed=shared_local_name)}"
 
 
 def assemble(
@@ -136,10 +129,10 @@ def assemble(
     local_names = defaultdict(set)
     for signature, match in chosen:
         node = _modeled(signature, match)[0]
-        local_names[(signature.id, _local_name(node))].add(node)
+        local_names[(signature.id, local_name(node))].add(node)
     instances: dict[str, ComponentInstance] = {}
     for signature, match in chosen:
-        shared = len(local_names[(signature.id, _local_name(_modeled(signature, match)[0]))]) > 1
+        shared = len(local_names[(signature.id, local_name(_modeled(signature, match)[0]))]) > 1
         instance = _instantiate(store, model_name, signature, match, shared_local_name=shared)
         instances[instance.iri] = instance
 
@@ -375,6 +368,13 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
     matches = [m for m in match_signature(store, signature, session=session)
                if m.get(signature.splice.node) == request.node]
     if not matches:
+        dataset = store.matching_dataset(model_name)
+        if not _is_node(store, request.node, dataset):
+            named = sorted({row["x"].value for row in store.query(
+                "SELECT DISTINCT ?x WHERE { ?x ?p ?o FILTER(isIRI(?x) && REGEX(STR(?x), CONCAT('[/#]', ?local, '$'))) }",
+                substitutions={"local": ox.Literal(re.escape(request.node))}, default_graph=dataset)})
+            hint = f": give its full IRI, e.g. {named[0]}" if named else ""
+            raise AssemblyError(f"effect {signature.id} at {request.node}: the model has no node {request.node}{hint}")
         raise AssemblyError(
             f"effect {signature.id} does not apply at {request.node}: its pattern "
             f"({signature.source_file}) does not match there"
@@ -387,6 +387,13 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
         raise AssemblyError(
             f"effect {signature.id} at {request.node}: it extends {', '.join(signature.splice.host_models)}, "
             f"but {request.node} is modelled by {host.signature.model}"
+        )
+    ports = host.model_class.output_names() if signature.splice.side == "output" else host.model_class.input_names()
+    if signature.splice.port not in ports:
+        raise AssemblyError(
+            f"effect {signature.id} at {request.node}: it splices {signature.splice.side} {signature.splice.port!r}, "
+            f"which {host.signature.model} (modelling {request.node}) does not have; its {signature.splice.side}s: "
+            f"{', '.join(ports)} ({signature.source_file})"
         )
     effect = _instantiate(store, model_name, signature, match)
     effect = dataclasses.replace(effect, iri=f"{effect.iri}/on/{_short(host.iri)}")
@@ -411,6 +418,15 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
     if missing_here:
         raise IncompleteModelError(missing_here)
     return spliced
+
+
+def _is_node(store: GraphStore, text: str, dataset: list[ox.NamedNode]) -> bool:
+    """Whether ``text`` is the IRI of a subject of the model (``supply_fan`` alone is no IRI)."""
+    try:
+        node = ox.NamedNode(text)
+    except ValueError:
+        return False
+    return bool(store.query("ASK { ?node ?p ?o }", substitutions={"node": node}, default_graph=dataset))
 
 
 def _unmatched_anchor_report(store, components, claimed, lost: Mapping[tuple[str, str], str],

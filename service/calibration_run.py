@@ -171,7 +171,7 @@ def calibrate(
     settings = {"substeps": substeps, "step_s": data.step_s}
     if only_when:
         settings["only_when"] = list(only_when)
-    diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes)}
+    diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes) + list(md.simulator.notes)}
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None
     if method == "point":

@@ -34,7 +34,7 @@ import pyoxigraph as ox
 
 from . import __version__
 from .calibration_record import CalibrationRecord
-from .namespaces import GT, GTR, PROV, RDF, RDFS, XSD
+from .namespaces import GT, GTR, PROV, RDF, RDFS, XSD, distinct_local_names
 
 __all__ = ["run_iri", "calibration_triples", "software_agent"]
 
@@ -109,6 +109,8 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
                 t.append(ox.Triple(node, predicate, _double(value)))
         if estimate.reasons:
             t.append(ox.Triple(node, RDFS.comment, ox.Literal("; ".join(estimate.reasons))))
+    sensor_name = distinct_local_names([*(n for per_sensor in record.metrics.values() for n in per_sensor),
+                                        *(n for row in record.regimes for n in row["rmse"])])
     for window, per_sensor in record.metrics.items():
         for sensor, metrics in per_sensor.items():
             for attribute in METRIC_ATTRIBUTES:
@@ -117,13 +119,13 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
                     continue
                 unit = ("%" if attribute.endswith("percent") else
                         "1" if attribute in ("r2", "lag1_autocorrelation") else metrics.unit)
-                t += _metric_triples(ox.NamedNode(f"{run.value}/metric/{window}/{_local(sensor)}/{attribute}"),
+                t += _metric_triples(ox.NamedNode(f"{run.value}/metric/{window}/{sensor_name[sensor]}/{attribute}"),
                                      run, sensor, window, attribute, value, unit)
             for interval in metrics.coverage:
                 for name, value, unit in (("coverage", interval.coverage, "1"), ("ace", interval.ace, "1"),
                                           ("mean_interval_width", interval.mean_width, metrics.unit)):
                     if math.isfinite(value):
-                        node = ox.NamedNode(f"{run.value}/metric/{window}/{_local(sensor)}/{name}/{interval.level:g}")
+                        node = ox.NamedNode(f"{run.value}/metric/{window}/{sensor_name[sensor]}/{name}/{interval.level:g}")
                         t += _metric_triples(node, run, sensor, window, name, value, unit)
                         t.append(ox.Triple(node, GT.intervalLevel, _double(interval.level)))
     units = {sensor: m.unit for sensor, m in record.metrics.get("test", {}).items()}
@@ -136,7 +138,7 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
         for sensor, value in row["rmse"].items():
             if not math.isfinite(value):
                 continue
-            node = ox.NamedNode(f"{run.value}/metric/test/{_local(sensor)}/rmse/regime/{row['regime']}")
+            node = ox.NamedNode(f"{run.value}/metric/test/{sensor_name[sensor]}/rmse/regime/{row['regime']}")
             t += _metric_triples(node, run, sensor, "test", "rmse", value, units.get(sensor, ""))
             t.append(ox.Triple(node, GT.inRegime, regime))
     return t
@@ -159,7 +161,3 @@ def _metric_triples(node: ox.NamedNode, run: ox.NamedNode, sensor: str, window: 
 def _component_slug(iri: str) -> str:
     """``…/component/Fan/supply_fan`` → ``Fan.supply_fan`` (unique within a model)."""
     return iri.split("/component/", 1)[-1].replace("/", ".")
-
-
-def _local(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]

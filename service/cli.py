@@ -7,8 +7,10 @@ file (Turtle, N-Triples, RDF/XML, JSON-LD), loaded under ``--name`` (default: th
 
 from __future__ import annotations
 
+import csv
 import json
 import os
+import re
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -68,15 +70,26 @@ def open_store(store: Path, memory: bool) -> GraphStore:
         graph_store.ensure_ontologies()
         graph_store.ensure_signature_library()
     except (*USER_ERRORS, StoreInUseError) as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     return graph_store
 
 
 def model_name_for(path: Path, name: str | None) -> str:
-    """The model's name in the store: ``--name``, else the file stem (the folder for ``model.ttl``)."""
+    """The model's name in the store: ``--name``, else the file stem (the folder named with it for
+    ``…/NAME/model.ttl``; ``model`` for a ``model.ttl`` in the current folder)."""
     if name:
         return name
-    return path.parent.name if path.stem == "model" else path.stem
+    return path.parent.name if path.stem == "model" and path.parent.name else path.stem
+
+
+def error_text(exc: BaseException) -> str:
+    """What an error says, for a person: a KeyError's message without the quotes ``str`` adds, a
+    missing file as ``PATH: No such file or directory``."""
+    if isinstance(exc, KeyError) and exc.args:
+        return str(exc.args[0])
+    if isinstance(exc, OSError) and exc.filename is not None:
+        return f"{exc.filename}: {exc.strerror}"
+    return str(exc)
 
 
 def fail(message: str) -> typer.Exit:
@@ -111,13 +124,13 @@ def assemble_command(
     try:
         model_name = _load(graph_store, model, name)
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     try:
         assembled = assemble(graph_store, model_name, max_complexity=max_complexity)
     except USER_ERRORS as exc:
         hint = (f"\n{model} is a Brick model: graphtwin brick-report {model} lists what the alignment could not use"
                 if brick_report(graph_store, model_name).is_brick else "")
-        raise fail(f"{exc}{hint}") from None
+        raise fail(f"{error_text(exc)}{hint}") from None
     graph_store.write_graph(graph_store.assembly_graph(model_name), assembly_triples(assembled, model_name))
     if as_json:
         console.print_json(json.dumps(assembly_to_dict(assembled)))
@@ -141,7 +154,7 @@ def brick_report_command(
     try:
         report = brick_report(graph_store, _load(graph_store, model, name))
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     if as_json:
         console.print_json(json.dumps(report.to_dict()))
     else:
@@ -202,7 +215,7 @@ def calibrate_command(
                             test=parse_window(test) if test else None, method=method, seed=seed,
                             progress=not as_json, only_when=only_when or ())
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     record = outcome.record
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
@@ -212,10 +225,10 @@ def calibrate_command(
         return
     table = Table(title=f"Estimates ({record.method}, run {record.run_id})")
     for column in ("component", "parameter", "estimate", "16–84 %", "unit", "identified"):
-        table.add_column(column)
+        table.add_column(column, overflow="fold")
     for e in record.estimates:
         table.add_row(_short(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", e.unit,
-                      "yes" if e.identified else "no: " + "; ".join(e.reasons)[:80])
+                      "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(r"\1.\2", "; ".join(e.reasons)))
     console.print(table)
     for window, metrics in record.metrics.items():
         _print_metrics(f"Metrics, {window} window", metrics)
@@ -305,7 +318,7 @@ def simulate_command(
         md = ModelData(assembled, measured, loop_substeps(assembled, measured.step_s))
         result = md.simulator.run(md.boundary(slice(0, measured.n_steps)), [theta])
     except (*USER_ERRORS, json.JSONDecodeError) as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     simulated = target_series(assembled, result)
     if output is not None:
         write_comparison_csv(output, measured, simulated)
@@ -349,7 +362,7 @@ def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, m
                           seed=seed, rank_effects=rank_effects, only_when=only_when or (),
                           on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     if as_json:
         console.print_json(json.dumps(report.to_dict(), default=str))
         return
@@ -415,7 +428,7 @@ def compare_strategies_command(
                                                     test=parse_window(test) if test else None, n_folds=folds,
                                                     seed=seed)
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     if as_json:
         console.print_json(json.dumps(comparison.to_dict(), default=str))
         return
@@ -440,7 +453,7 @@ def add_effect_command(
         assemble(check, "check", library=library, extra_effects=[EffectRequest(effect, target)])
         record_effect_in_file(model, output, applied_effect_triples(signature, target))
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     console.print(f"{effect} recorded at {target} in {output}")
 
 
@@ -481,7 +494,7 @@ def example_generate(
             store, model_name, output, library=load_signature_library(signatures_dir()), hidden_effect=hidden_effect,
             node=node, seed=seed, n_days=days, operation=operation, truth=truth)
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     where = f" at {generated.node}" if generated.node else ""
     driven = f"the operation of {operation}" if operation is not None else f"{days:g} days of synthetic operation"
     given = f", {len(truth)} parameters from {truth_from}" if truth else ""
@@ -502,24 +515,47 @@ def query_command(
     name: Annotated[str, typer.Argument(help="A query in queries/ (file name without .rq).")],
     model: Annotated[str | None, typer.Option(help="Bind ?model to this model name.")] = None,
     param: Annotated[list[str] | None, typer.Option(help="More bindings, VAR=VALUE.")] = None,
+    output_format: Annotated[str | None, typer.Option(
+        "--format", help="table, csv or json (full IRIs); default: a table on a terminal, CSV when piped.")] = None,
     store: StoreOption = Path("graphtwin-data"),
 ) -> None:
     """Run a named SPARQL query over the store (e.g. calibrated-parameters --model NAME)."""
+    output_format = output_format or ("table" if console.is_terminal else "csv")
+    if output_format not in ("table", "csv", "json"):
+        raise fail(f"--format {output_format!r}: give table, csv or json")
     graph_store = open_store(store, False)
-    bindings = dict(p.split("=", 1) for p in (param or []))
-    if model is not None:
-        bindings["model"] = model
+    if model is not None and model not in graph_store.models():
+        raise fail(f"no model {model!r} in the store {store}; it holds {', '.join(graph_store.models()) or 'none'}")
     try:
+        bindings = dict(_binding(p) for p in (param or []))
+        if model is not None:
+            bindings["model"] = model
         rows = graph_store.run_named_query(name, **bindings)
     except USER_ERRORS as exc:
-        raise fail(str(exc)) from None
-    table = Table(title=f"{name} ({len(rows)} rows)")
-    columns = sorted({k for row in rows for k in row}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
-    for column in columns:
-        table.add_column(column)
-    for row in rows:
-        table.add_row(*[_short(row[c].value) if c in row and row[c].value.startswith("http") else (row[c].value if c in row else "") for c in columns])
-    console.print(table)
+        raise fail(error_text(exc)) from None
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    values = [{c: row[c].value for c in columns if c in row} for row in rows]
+    if output_format == "json":
+        sys.stdout.write(json.dumps(values, indent=1) + "\n")
+    elif output_format == "csv":
+        writer = csv.DictWriter(sys.stdout, fieldnames=columns, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(values)
+    else:
+        table = Table(title=f"{name} ({len(rows)} rows)")
+        for column in columns:
+            table.add_column(column, overflow="fold")
+        for row in values:
+            table.add_row(*[_short(v) if v.startswith("http") else v for v in (row.get(c, "") for c in columns)])
+        console.print(table)
+
+
+def _binding(text: str) -> tuple[str, str]:
+    """``VAR=VALUE`` → (var, value). :raises ValueError: without ``=``."""
+    var, equals, value = text.partition("=")
+    if not equals or not var:
+        raise ValueError(f"--param {text!r}: write VAR=VALUE")
+    return var, value
 
 
 @app.command("history")
@@ -559,6 +595,10 @@ def history_command(
         console.print(f"plot: {plot_error_history(plot, history)}")
 
 
+#: A parameter key (``<component IRI>#<name>``) in a sentence, read as ``<component's node>.<name>``.
+_PARAMETER_KEY = re.compile(r"\S*/component/[^/\s]+/([^\s/#]+)#(\w+)")
+
+
 def _with_unit(value: float, unit: str) -> str:
     return f"{value:.3g} {unit_label(unit)}" if value == value else "–"
 
@@ -581,7 +621,7 @@ def report_command(
     try:
         page = report_html(graph_store, run, locate_data=data_file_locator(data))
     except UnknownRunError as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     output.write_text(page, encoding="utf-8")
     console.print(f"wrote {output}")
 
@@ -673,7 +713,7 @@ def serve_command(
     try:
         settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
     except ValidationError as exc:
-        raise fail(str(exc)) from None
+        raise fail(error_text(exc)) from None
     if settings.store_dir is None and settings.sparql_endpoint is None:
         settings = settings.model_copy(update={"store_dir": Path("graphtwin-data")})
     if settings.token is None:

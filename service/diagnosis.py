@@ -51,7 +51,7 @@ from .effect_ranking import (
 )
 from .failure_episodes import find_episodes
 from .flow_path_localization import FlowTopology, localize_failures
-from .namespaces import GT, PROV, RDF, RDFS, XSD
+from .namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_names
 from .point_calibration import PointCalibrator
 from .residual_dependence import residual_dependence
 from .signature import Signature, load_signature_library
@@ -525,8 +525,9 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
     t = [ox.Triple(run, RDF.type, GT.DiagnosisRun), ox.Triple(run, RDF.type, PROV.Activity),
          ox.Triple(run, GT.basedOnCalibration, calibration), ox.Triple(run, GT.forModel, ox.Literal(report.model_name)),
          ox.Triple(run, RDFS.comment, ox.Literal(report.summary))]
+    node_name = distinct_local_names(item.node for item in report.effects)
     for rank, item in enumerate(report.effects, start=1):
-        node = ox.NamedNode(f"{run.value}/candidate/{item.effect}/{_short(item.node)}")
+        node = ox.NamedNode(f"{run.value}/candidate/{item.effect}/{node_name[item.node]}")
         t += [ox.Triple(node, RDF.type, GT.EffectCandidate), ox.Triple(node, PROV.wasGeneratedBy, run),
               ox.Triple(node, GT.candidateEffect, ox.NamedNode(item.effect_iri)),
               ox.Triple(node, GT.onNode, ox.NamedNode(item.node)),

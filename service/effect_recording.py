@@ -18,18 +18,16 @@ from pathlib import Path
 
 import pyoxigraph as ox
 
-from .namespaces import GT, GTR, PROV, RDF, RDFS, XSD
+from .namespaces import GT, GTR, PROV, RDF, RDFS, XSD, local_name
 from .signature import Signature
 
 __all__ = ["applied_effect_iri", "applied_effect_triples", "record_effect_in_file"]
 
 
-def _local(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
-
-
 def applied_effect_iri(signature: Signature, node: str) -> ox.NamedNode:
-    return ox.NamedNode(f"{GTR}applied-effect/{signature.id}/{_local(node)}")
+    """``gtr:applied-effect/<effect>/<node's local name>-<8 hex digits of its IRI's SHA-256>``: one per
+    effect and building node, whatever other node shares the local name."""
+    return ox.NamedNode(f"{GTR}applied-effect/{signature.id}/{local_name(node, hashed=True)}")
 
 
 def applied_effect_triples(signature: Signature, node: str, when: datetime | None = None) -> list[ox.Triple]:
@@ -40,7 +38,7 @@ def applied_effect_triples(signature: Signature, node: str, when: datetime | Non
         ox.Triple(ox.NamedNode(node), GT.hasEffect, applied),
         ox.Triple(applied, RDF.type, GT.AppliedEffect),
         ox.Triple(applied, GT.effectSignature, ox.NamedNode(signature.iri)),
-        ox.Triple(applied, RDFS.label, ox.Literal(f"{signature.id} at {_local(node)}")),
+        ox.Triple(applied, RDFS.label, ox.Literal(f"{signature.id} at {local_name(node)}")),
         ox.Triple(applied, PROV.generatedAtTime, ox.Literal(when.isoformat(), datatype=XSD.dateTime)),
     ]
 

@@ -65,8 +65,6 @@ from .heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_fi
 __all__ = ["HotWaterLoop", "loop_water_flow_m3_per_h", "REFERENCE_WATER_MASS_FLOW"]
 
 _TINY = 1e-9
-#: Floor of ṁ_a·c_p when air heats up from the coil's heat: 0.1 kg/s of air (fan off, stack draught).
-_MINIMUM_AIR_CAPACITY_W_PER_K = 0.1 * AIR_SPECIFIC_HEAT_J_PER_KG_K
 #: Reference water flow of the water-side film conductance hA_w, kg/s (hA_a: REFERENCE_AIR_MASS_FLOW).
 REFERENCE_WATER_MASS_FLOW = 0.5
 
@@ -137,7 +135,6 @@ class HotWaterLoop(ComponentModel):
         air_in = np.broadcast_to(inputs["inlet_air_temperature"], shape).astype(float)
         water_flow = self._water_flow(params, np.clip(inputs["valve_position"], 0.0, 1.0))
         heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0), water_flow, supply)
-        c_air_floor = np.maximum(c_air, _MINIMUM_AIR_CAPACITY_W_PER_K)
         low, high = np.minimum(air_in, supply), np.maximum(air_in, supply)
         return {
             # lag factors of the constant time constants, computed once per run
@@ -146,7 +143,7 @@ class HotWaterLoop(ComponentModel):
             "_water_factor": first_order_lag_factor(dt_s, params["water_side_time_constant"]) + 0.0 * supply,
             "inlet_water_temperature": supply.copy(),
             "heat_rate": heat + 0.0 * supply,
-            "outlet_air_temperature": np.clip(air_in + heat / c_air_floor, low, high),
+            "outlet_air_temperature": np.clip(air_in + heat / c_air, low, high),
             "outlet_water_temperature": np.where(water_flow > 0.0, np.clip(supply - heat / c_water, low, high), air_in),
         }
 
@@ -161,8 +158,9 @@ class HotWaterLoop(ComponentModel):
         heat = state["heat_rate"]
         heat += state["_metal_factor"] * (heat_static - heat)
         low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
-        c_air_floor = np.maximum(c_air, _MINIMUM_AIR_CAPACITY_W_PER_K)
-        air_target = np.minimum(np.maximum(air_in + heat / c_air_floor, low), high)
+        # T_a,out = T_a,in + Q/(ṁ_a·c_p), the same C_a as the heat rate's (energy balance); clipped to
+        # [T_a,in, T_w,in]: stagnant air (fan off) in a warm coil approaches the water temperature
+        air_target = np.minimum(np.maximum(air_in + heat / c_air, low), high)
         water_target = np.where(water_flow > 0.0, np.minimum(np.maximum(water_in - heat / c_water, low), high), air_in)
         air_out = state["outlet_air_temperature"]
         air_out += state["_air_factor"] * (air_target - air_out)

@@ -62,9 +62,10 @@ import pyoxigraph as ox
 
 from .assembly import EffectRequest, assemble
 from .assembly_summary import assembly_to_dict
-from .assembly_triples import assembly_triples
+from .assembly_triples import assembly_iri, assembly_triples
 from .calibration_run import calibrate, parse_window
 from .effect_recording import applied_effect_triples
+from .namespaces import GT
 from .ntriples import triple_list
 from .resources import signatures_dir
 from .settings import check_executor
@@ -721,7 +722,8 @@ def add_effect_job(store: GraphStore, params: dict, context: JobContext) -> JobR
     assembled = assemble(scratch, version, library=library)
     store.write_graph(store.model_graph(version), triples)
     store.write_graph(store.inferred_graph(version), _graph_triples(scratch, scratch.inferred_graph(version)))
-    store.write_graph(store.assembly_graph(version), assembly_triples(assembled, version))
+    store.write_graph(store.assembly_graph(version), assembly_triples(assembled, version) + [
+        ox.Triple(assembly_iri(version), GT.derivedFromModel, ox.Literal(model))])
     return JobResult(
         {"model": version, "base_model": model, "effect": effect, "target": target, "triples": len(triples),
          "components": len(assembled.components)},

@@ -288,12 +288,13 @@ def read_measurements(
             problems.append(str(exc))
     if problems:
         raise MeasurementError(source, problems)
+    step_s = float(np.median(np.diff(stamps).astype(np.int64)))
     for node, column in claimed.items():
         if not specs[node].holds_values:
             warnings += [f"column {header[column]!r}: {text}" for text in frozen_spans(
-                stamps, values[node], specs[node].unit or "", min_span_s=frozen_after_s)]
+                stamps, values[node], specs[node].unit or "", min_span_s=frozen_after_s,
+                max_gap_s=max_gap_steps * step_s)]
 
-    step_s = float(np.median(np.diff(stamps).astype(np.int64)))
     regular = np.all(np.diff(stamps).astype(np.int64) == step_s)
     if not regular:
         grid = np.arange(stamps[0], stamps[-1] + np.timedelta64(1, "s"), np.timedelta64(int(step_s), "s"))
@@ -331,17 +332,21 @@ def read_measurements(
     )
 
 
-def frozen_spans(stamps: np.ndarray, values: np.ndarray, unit: str, *, min_span_s: float) -> list[str]:
+def frozen_spans(stamps: np.ndarray, values: np.ndarray, unit: str, *, min_span_s: float,
+                 max_gap_s: float = np.inf) -> list[str]:
     """One sentence per span where ``values`` (in ``unit``, at ``stamps`` datetime64) hold exactly
     one non-zero value for at least ``min_span_s`` seconds: a frozen point (a BMS that keeps the
     last reading of a failed sensor or a lost connection; a live sensor's reading flickers by its
-    resolution at least). Zero is exempt: a flow or power meter reads a true zero with the fan off."""
+    resolution at least). Zero is exempt: a flow or power meter reads a true zero with the fan off.
+    Readings more than ``max_gap_s`` apart (a day missing from the file, a long run of empty cells)
+    do not make one span: two equal readings across a gap are no evidence of a hold."""
     finite = np.isfinite(values)
     index = np.flatnonzero(finite)
     if index.size < 2:
         return []
     kept = values[index]
-    starts = np.flatnonzero(np.r_[True, kept[1:] != kept[:-1]])
+    gap = np.diff(stamps[index]).astype("timedelta64[s]").astype(float) > max_gap_s
+    starts = np.flatnonzero(np.r_[True, (kept[1:] != kept[:-1]) | gap])
     stops = np.r_[starts[1:], kept.size]
     found = []
     for start, stop in zip(starts, stops):

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import hashlib
+from collections import Counter
+from collections.abc import Iterable
+
 import pyoxigraph as ox
 
 __all__ = [
     "SAREF", "S4BLDG", "S4SYST", "FSO", "BRICK", "REF", "GT", "GTR", "QUDT", "UNIT", "QK",
     "RDF", "RDFS", "OWL", "XSD", "PROV", "DCTERMS", "PREFIXES", "Namespace", "expand_curie",
-    "graph_iri",
+    "graph_iri", "local_name", "distinct_local_names",
 ]
 
 
@@ -76,3 +80,20 @@ def expand_curie(curie: str) -> str:
 def graph_iri(kind: str, name: str = "") -> ox.NamedNode:
     """IRI of one of graphtwin's named graphs, e.g. ``graph_iri("model", "ahu1")``."""
     return ox.NamedNode(f"{GTR}graph/{kind}" + (f"/{name}" if name else ""))
+
+
+def local_name(iri: str, *, hashed: bool = False) -> str:
+    """The last segment of ``iri`` (after its last ``/`` or ``#``); with ``hashed``, followed by ``-``
+    and the first 8 hex digits of the SHA-256 of the whole IRI (``…/unit1#fan`` and ``…/unit2#fan``
+    then name two things)."""
+    local = iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+    return f"{local}-{hashlib.sha256(iri.encode()).hexdigest()[:8]}" if hashed else local
+
+
+def distinct_local_names(iris: Iterable[str]) -> dict[str, str]:
+    """IRI → its :func:`local_name`, hashed where two of ``iris`` share one: names for result IRIs
+    that stay readable and never merge two nodes."""
+    iris = set(iris)
+    shared = Counter(local_name(i) for i in iris)
+    return {i: local_name(i, hashed=shared[local_name(i)] > 1) for i in iris}
+

@@ -39,7 +39,6 @@ their first inputs.
 
 from __future__ import annotations
 
-import warnings
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -170,7 +169,8 @@ def loop_substeps(model: AssembledModel, step_s: float) -> int:
 
 
 class Simulator:
-    """Prepared simulation of ``model`` at fixed step ``step_s`` (seconds)."""
+    """Prepared simulation of ``model`` at fixed step ``step_s`` (seconds); ``notes`` says how a
+    cycle without a feedback port was broken (calibration runs report them with the data's)."""
 
     def __init__(self, model: AssembledModel, step_s: float, substeps: int = 1):
         if not step_s > 0:
@@ -181,8 +181,6 @@ class Simulator:
         self.step_s = float(step_s)
         self.substeps = int(substeps)
         self.order, self.delayed, self.notes = component_order(model)
-        for note in self.notes:
-            warnings.warn(note, stacklevel=2)
         self.instances = {iri: model.components[iri].model_class() for iri in self.order}
         self.column = {ref.key: j for j, ref in enumerate(model.estimated_parameters)}
         self.n_parameters = len(model.estimated_parameters)

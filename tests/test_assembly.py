@@ -1,5 +1,7 @@
 """Assembly of the case study: components, wiring, boundary inputs, targets, parameters, effects."""
 
+import dataclasses
+
 import pytest
 from case_study import CASE_STUDY, EX
 
@@ -168,3 +170,15 @@ def test_a_nominal_value_without_its_unit_is_estimated_with_a_note(case_store):
             f"for it (add <{EX}supply_fan_nominal_power> <https://saref.etsi.org/core/isMeasuredIn> <a QUDT unit IRI> .)"
             ) in model.notes
     assert not [n for n in assemble(case_store, "case").notes if "no unit" in n]  # with its unit: no note
+
+
+def test_an_effect_splicing_a_port_its_host_lacks_is_refused_by_name(case_store):
+    """The pattern matches, but the component modelling the node has no such port: an assembly
+    error naming the port and the host's ports (before, the simulation failed with a KeyError)."""
+    library = load_signature_library(signatures_dir())
+    offset = library["SensorOffset"]
+    library["SensorOffset"] = dataclasses.replace(offset, splice=dataclasses.replace(offset.splice, port="inlet_value"))
+    with pytest.raises(AssemblyError, match=r"splices input 'inlet_value', which service\.measuring_device:MeasuringDevice "
+                                            r"\(modelling .*coil_outlet_air_temperature_sensor\) does not have; its inputs: measured_value"):
+        assemble(case_store, "case", library=library,
+                 extra_effects=[EffectRequest("SensorOffset", EX + "coil_outlet_air_temperature_sensor")])

@@ -2,6 +2,7 @@
 
 import matplotlib.image
 import numpy as np
+import pyoxigraph as ox
 import pytest
 from case_study import CASE_STUDY, EX
 
@@ -212,3 +213,42 @@ def test_the_latest_run_of_each_parameter_is_the_one_queried(point_run):
     renewed = {(e.component, e.name) for e in newer.estimates}
     assert run_of == {(e.component, e.name): newer.run_id if (e.component, e.name) in renewed else older.run_id
                       for e in older.estimates}
+    # a run ending at the same moment as the newest: still one row per parameter
+    twin = dataclasses.replace(newer, run_id=older.run_id + "-twin")
+    store_run(store, point_run.model, "case", twin)
+    assert len(store.run_named_query("calibrated-parameters", model="case")) == len(older.estimates)
+    # a parameter the graph now states (mapped in the current assembly): no stale estimate of it
+    stated = older.estimates[-1]
+    parameter = ox.NamedNode(f"{stated.component}/parameter/{stated.name}")
+    store.backend.update(f"INSERT DATA {{ GRAPH {store.assembly_graph('case')} {{ {parameter} a "
+                         f"<https://w3id.org/graphtwin/ontology#MappedParameter> }} }}")
+    names = {(r["component"].value, r["name"].value) for r in store.run_named_query("calibrated-parameters", model="case")}
+    assert len(names) == len(older.estimates) - 1 and (stated.component, stated.name) not in names
+
+
+def test_metrics_of_two_sensors_sharing_a_local_name_stay_apart(point_run):
+    """Two units' ``…/unit1#sat`` and ``…/unit2#sat``: one metric resource each (before, one resource
+    held both sensors' values)."""
+    import dataclasses
+
+    from service.calibration_triples import calibration_triples
+    from service.effect_recording import applied_effect_iri
+    from service.namespaces import distinct_local_names
+
+    record = point_run.record
+    sensor = EX + "coil_outlet_air_temperature_sensor"
+    twin = "https://example.org/unit2#coil_outlet_air_temperature_sensor"
+    doubled = dataclasses.replace(record, metrics={w: {**m, twin: m[sensor]} for w, m in record.metrics.items()})
+    triples = calibration_triples(doubled, model_graph="urn:g", assembly="urn:a")
+    on_sensor = [t for t in triples if t.predicate.value.endswith("#onSensor")]
+    per_metric: dict = {}
+    for t in on_sensor:
+        per_metric.setdefault(t.subject, set()).add(t.object.value)
+    assert all(len(sensors) == 1 for sensors in per_metric.values())
+    assert {s for sensors in per_metric.values() for s in sensors} >= {sensor, twin}
+    library = load_signature_library(signatures_dir())
+    assert applied_effect_iri(library["SensorOffset"], sensor) != applied_effect_iri(library["SensorOffset"], twin)
+    # the names diagnosis candidates are minted with too: readable where unique, hashed where shared
+    names = distinct_local_names([sensor, twin, EX + "fan_power_meter"])
+    assert names[EX + "fan_power_meter"] == "fan_power_meter" and names[sensor] != names[twin]
+    assert names[sensor].startswith("coil_outlet_air_temperature_sensor-") and len(names[sensor].rsplit("-", 1)[1]) == 8

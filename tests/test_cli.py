@@ -1,5 +1,8 @@
 """The command line: JSON output, clear errors with exit code 2, add-effect round trip."""
 
+import csv
+import gc
+import io
 import json
 import subprocess
 import sys
@@ -181,3 +184,45 @@ def test_a_store_another_process_holds_is_a_one_line_error(tmp_path):
         holder.communicate("", timeout=30)
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert f"error: store {path} is in use by another process (a running graphtwin serve?)" in result.output
+
+
+def test_add_effect_with_a_local_name_suggests_the_full_iri(tmp_path):
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "FanMotorHeat", "--target", "supply_fan",
+                                 "-o", str(tmp_path / "x.ttl")])
+    assert result.exit_code == 2
+    assert f"the model has no node supply_fan: give its full IRI, e.g. {EX}supply_fan" in result.output
+
+
+def test_a_model_ttl_in_the_current_folder_is_model_named_model(tmp_path, monkeypatch):
+    (tmp_path / "model.ttl").write_bytes(CASE_STUDY.read_bytes())
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, ["assemble", "model.ttl", "--store", str(tmp_path / "store")])
+    assert result.exit_code == 0, result.output
+    assert GraphStore.embedded(tmp_path / "store").models() == ["model"]
+
+
+def _run(args: list[str]) -> tuple[int, str]:
+    """Exit code and output of a command that opens the on-disk store; its store is closed after
+    (the runner keeps the command's frames, which hold it, in the result: a process would exit)."""
+    result = runner.invoke(app, args)
+    outcome = (result.exit_code, result.output)
+    del result
+    gc.collect()
+    return outcome
+
+
+def test_query_prints_csv_or_json_with_full_iris_and_refuses_an_unknown_model(tmp_path):
+    store = ["--store", str(tmp_path / "store")]
+    assert _run(["assemble", str(CASE_STUDY), *store])[0] == 0
+    coil = ["--param", "class=https://saref.etsi.org/saref4bldg/Coil"]
+    code, output = _run(["query", "models-for-class", *coil, *store])  # piped: CSV
+    assert code == 0, output
+    rows = list(csv.DictReader(io.StringIO(output)))
+    assert {r["id"] for r in rows} >= {"HotWaterLoop", "WaterCoil"}
+    assert all(r["signature"].startswith("https://w3id.org/graphtwin/resource/signature/") for r in rows)
+    code, output = _run(["query", "models-for-class", *coil, "--format", "json", *store])
+    assert [r["id"] for r in json.loads(output)] == [r["id"] for r in rows]
+    code, output = _run(["query", "calibrated-parameters", "--model", "modle", *store])
+    assert code == 2 and "no model 'modle' in the store" in output and "ventilation_case_study" in output
+    code, output = _run(["query", "calibrated-paramters", *store])
+    assert code == 2 and "error: no query 'calibrated-paramters'" in output

@@ -150,3 +150,12 @@ def test_a_frozen_sensor_is_reported_but_a_held_command_or_a_zero_is_not(tmp_pat
     held = replace(specs["https://example.org/x#valve"], holds_values=False)
     assert any(w.startswith("column 'valve': holds 40 %") for w in read_measurements(
         _write(tmp_path, f"time,SAT,valve,flow\n{rows}\n"), {**specs, held.node: held}).warnings)
+
+
+def test_two_equal_readings_across_a_missing_day_are_no_frozen_point(tmp_path):
+    """FLEXLAB's files skip whole days: the last reading of one day and the first of the day after
+    next happened to be equal — a gap in the file, not a held value."""
+    rows = [f"2017-09-12 23:{m:02d},{60.0 + 0.1 * (m % 7):.1f},10" for m in range(50, 60)]
+    rows += [f"2017-09-14 00:{m:02d},{60.0 + 0.1 * ((m + 3) % 7):.1f},10" for m in range(0, 10)]  # 9/13 absent
+    data = read_measurements(_write(tmp_path, "time,SAT,valve\n" + "\n".join(rows) + "\n"), SPECS)
+    assert not [w for w in data.warnings if "frozen" in w]

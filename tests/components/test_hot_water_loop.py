@@ -36,12 +36,13 @@ def test_closed_valve_gives_no_flow_and_no_heat(run_model, params_for):
     assert out["outlet_air_temperature"][0] == pytest.approx(5.0, abs=1e-12)
 
 
-def test_steady_state_energy_balance_within_half_a_percent(run_model, params_for):
-    out = run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(0.6), steps=200)[-1]
-    air = 1.5 * AIR_SPECIFIC_HEAT_J_PER_KG_K * (out["outlet_air_temperature"][0] - 5.0)
+@pytest.mark.parametrize("air_flow", [1.5, 0.05])  # 0.05 kg/s: a fan at low speed, below the old 0.1 kg/s floor
+def test_steady_state_energy_balance_within_half_a_percent(run_model, params_for, air_flow):
+    out = run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(0.6, air_flow=air_flow), steps=200)[-1]
+    air = air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K * (out["outlet_air_temperature"][0] - 5.0)
     water = out["water_mass_flow"][0] * WATER_SPECIFIC_HEAT_J_PER_KG_K * (
         out["inlet_water_temperature"][0] - out["outlet_water_temperature"][0])
-    assert air > 10000.0
+    assert air > 2000.0
     assert air == pytest.approx(water, rel=0.005)
     assert air == pytest.approx(out["heat_rate"][0], rel=0.005)
 

@@ -325,6 +325,9 @@ def test_assemble_and_add_effect_jobs_write_their_results(client, auth, store, w
     effects = _rows(client.get("/queries/applied-effects", params={"dataset": "case+ValveLeakage"}))
     assert [e["node"]["value"] for e in effects] == [EX + "heating_valve"]
     assert any(c.signature.id == "ValveLeakage" for c in assemble(store, "case+ValveLeakage").components.values())
+    derived = store.query("PREFIX gt: <https://w3id.org/graphtwin/ontology#> SELECT ?base WHERE { ?a gt:derivedFromModel ?base }",
+                          default_graph=[store.assembly_graph("case+ValveLeakage")])
+    assert [r["base"].value for r in derived] == ["case"]
     # the same effect at another node would overwrite that version: refused, the version kept
     elsewhere = client.post("/jobs/add-effect", headers=auth, json={
         "model": "case", "effect": "ValveLeakage", "target": EX + "supply_fan"})
