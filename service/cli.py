@@ -232,7 +232,23 @@ def calibrate_command(
     console.print(table)
     for window, metrics in record.metrics.items():
         _print_metrics(f"Metrics, {window} window", metrics)
+    _print_regimes(record)
     _print_data_warnings(record.diagnostics.get("warnings", []))
+
+
+def _print_regimes(record) -> None:
+    """The test-window RMSE of each target per operating regime (a run with a test window)."""
+    if not record.regimes:
+        return
+    units = {node: m.unit for node, m in record.metrics.get("test", {}).items()}
+    sensors = list(record.regimes[0]["rmse"])
+    table = Table(title=f"Test RMSE per operating regime (rule tree accuracy {record.regime_rule_accuracy:.2f})")
+    for column in ("regime", "share", *map(_short, sensors)):
+        table.add_column(column, overflow="fold")
+    for row in record.regimes:
+        table.add_row(row["rule"], f"{100 * row['share']:.0f} %",
+                      *(f"{row['rmse'][n]:.3g} {unit_label(units.get(n, ''))}" for n in sensors))
+    console.print(table)
 
 
 def _print_data_warnings(warnings: list[str]) -> None:

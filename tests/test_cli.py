@@ -226,3 +226,16 @@ def test_query_prints_csv_or_json_with_full_iris_and_refuses_an_unknown_model(tm
     assert code == 2 and "no model 'modle' in the store" in output and "ventilation_case_study" in output
     code, output = _run(["query", "calibrated-paramters", *store])
     assert code == 2 and "error: no query 'calibrated-paramters'" in output
+
+
+def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(tmp_path):
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "2", "--seed", "3",
+                               "-o", str(data)]).exit_code == 0
+    stamps = [line.split(",")[0] for line in data.read_text().splitlines()[1:]]
+    result = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory",
+                                 "--train", f"{stamps[0]}/{stamps[143]}", "--test", f"{stamps[144]}/"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    assert "Estimates (point" in result.output and "Metrics, test window" in result.output
+    regimes = result.output[result.output.index("Test RMSE per operating regime"):]
+    assert "supply air flow meter" in regimes and " %" in regimes and "°C" in regimes  # rules, shares, units
