@@ -252,9 +252,10 @@ def _print_regimes(record) -> None:
 
 
 def _print_data_warnings(warnings: list[str]) -> None:
-    """What reading the data and assembling the model noticed (frozen points, gaps, unused columns)."""
+    """What reading the data, assembling the model and preparing its simulation noticed (frozen
+    points, gaps, unused columns; signature choices; a loop broken by a delay), as they are."""
     for warning in warnings:
-        console.print(f"[yellow]data: {warning}[/yellow]")
+        console.print(Text(f"note: {warning}", style="yellow"))
 
 
 def _plot_run(outcome, path: Path) -> Path:
@@ -448,7 +449,7 @@ def compare_strategies_command(
     if as_json:
         console.print_json(json.dumps(comparison.to_dict(), default=str))
         return
-    console.print(comparison.table(), markup=False, highlight=False)
+    console.print(comparison.table(), markup=False, highlight=False, soft_wrap=True)  # a text table: no breaks inside numbers
 
 
 @app.command("add-effect")
