@@ -470,8 +470,8 @@ def _describe_missing(triple: PatternTriple, anchor: str, signature: Signature, 
     what = " or ".join(_short(c) for c in spec.classes) or (spec.iri or "value")
     if triple.rule is Rule.TRAVERSE:
         side = "upstream of" if triple.object == anchor else "downstream of"
-        return (f"no {what} {side} {node} along {triple.predicate} (the search stops at building spaces; "
-                f"signature {signature.source_file})")
+        return (f"no {what} {side} {node} along {triple.predicate} (the search stops at building spaces, "
+                f"boilers, chillers and cooling towers; signature {signature.source_file})")
     if triple.subject == anchor:
         return f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} (signature {signature.source_file})"
     return f"no triple ?{other} <{triple.predicate}> <{node}> with ?{other} a {what} (signature {signature.source_file})"

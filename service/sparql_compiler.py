@@ -315,8 +315,10 @@ def _fewest_first(nodes: list[str], restricted: set[str], instance_counts: Mappi
 
 
 #: Nodes no traverse passes: the air that leaves a room is not the air that entered it (a fan coil's
-#: inlet across the room it serves would read its own supply air as its inlet).
-OPAQUE_CLASSES = (f"{S4BLDG}BuildingSpace",)
+#: inlet across the room it serves would read its own supply air as its inlet), nor is the water that
+#: leaves a boiler, a chiller or a cooling tower (a closed heating loop's supply water sensor would
+#: read the coil's return water as its source).
+OPAQUE_CLASSES = tuple(f"{S4BLDG}{name}" for name in ("BuildingSpace", "Boiler", "Chiller", "CoolingTower"))
 
 
 def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -> Traversal:

@@ -259,3 +259,14 @@ def test_a_traverse_does_not_pass_through_a_building_space():
     })
     assert match_signature(store, coil_inlet) == []
     assert _pairs(match_signature(store, _sensor_upstream())) == [("coil", "sat")]
+
+
+def test_a_traverse_does_not_pass_through_a_boiler():
+    # a closed heating loop: the supply water sensor's nearest upstream device is not the coil's
+    # return water sensor behind the boiler (the boiler heats the water between them)
+    store = _store("""
+        @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
+        x:supply a x:Sensor ; x:feeds x:pump . x:pump a x:Equipment ; x:feeds x:coil .
+        x:coil a x:Coil ; x:feeds x:ret . x:ret a x:Sensor ; x:feeds x:boiler .
+        x:boiler a s4bldg:Boiler ; x:feeds x:supply .""")
+    assert _pairs(match_signature(store, _sensor_upstream())) == [("coil", "ret")]
