@@ -36,14 +36,14 @@ from .assembled_model import (
 )
 from .cyclic_gc import cyclic_gc_paused
 from .measuring_device import MeasuringDevice
-from .namespaces import GTR, RDFS, local_name
+from .namespaces import GTR, RDFS, distinct_local_names, local_name
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
 from .signature_matcher import MatchSession, match_signature, missing_class_report
 from .store import GraphStore
 from .units import convert
 
-__all__ = ["AssemblyError", "IncompleteModelError", "assemble", "EffectRequest", "component_iri"]
+__all__ = ["AssemblyError", "IncompleteModelError", "assemble", "EffectRequest", "component_iri", "recorded_effects"]
 
 
 class AssemblyError(ValueError):
@@ -66,12 +66,12 @@ class EffectRequest:
     node: str
 
 
-def component_iri(model_name: str, signature: Signature, node_iri: str, *, shared_local_name: bool = False) -> str:
-    """Stable IRI of a component instance: model name, signature id and the local name of the node it
-    represents; when other nodes the same signature represents share that local name
-    (``…/unit1/supply_fan``, ``…/unit2/supply_fan``), also the first 8 hex digits of the SHA-256 of
-    the node's IRI, so no instance replaces another."""
-    return f"{GTR}model/{model_name}/component/{signature.id}/{local_name(node_iri, hashed=shared_local_name)}"
+def component_iri(model_name: str, signature: Signature, node_name: str) -> str:
+    """Stable IRI of a component instance: model name, signature id and the name of the node it
+    represents — its local name, hashed (:func:`~service.namespaces.distinct_local_names`) where
+    other nodes the same signature represents share it (``…/unit1/supply_fan``,
+    ``…/unit2/supply_fan``), so no instance replaces another."""
+    return f"{GTR}model/{model_name}/component/{signature.id}/{node_name}"
 
 
 def assemble(
@@ -126,18 +126,17 @@ def assemble(
         chosen.append((signature, match))
         for node in nodes:
             claimed[node] = (signature, nodes[0])
-    local_names = defaultdict(set)
+    anchors = defaultdict(list)
     for signature, match in chosen:
-        node = _modeled(signature, match)[0]
-        local_names[(signature.id, local_name(node))].add(node)
+        anchors[signature.id].append(_modeled(signature, match)[0])
+    node_names = {signature_id: distinct_local_names(nodes) for signature_id, nodes in anchors.items()}
     instances: dict[str, ComponentInstance] = {}
     for signature, match in chosen:
-        shared = len(local_names[(signature.id, local_name(_modeled(signature, match)[0]))]) > 1
-        instance = _instantiate(store, model_name, signature, match, shared_local_name=shared)
+        instance = _instantiate(store, model_name, signature, match, node_names[signature.id][_modeled(signature, match)[0]])
         instances[instance.iri] = instance
 
     notes += _values_without_unit(store, instances, session)
-    effect_requests = list(extra_effects) + _recorded_effects(store, model_name, library)
+    effect_requests = list(extra_effects) + recorded_effects(store, model_name, library)
     connections, unconnected = _wire(instances)
     for request in effect_requests:
         connections = _splice_effect(store, model_name, library, request, instances, connections, session)
@@ -173,14 +172,14 @@ def _best_match_per_anchor(matches: Sequence[Mapping[str, str | None]], signatur
     sorted order (several matches arise when, e.g., two sensors sit on parallel upstream branches,
     or a coil and a bypass both lie nearest upstream of a fan); a tie is said in ``notes``."""
     best: dict[tuple[str, ...], Mapping[str, str | None]] = {}
+    most_bound: dict[tuple[str, ...], int] = {}
     tied: dict[tuple[str, ...], list[Mapping[str, str | None]]] = {}
     for match in matches:  # sorted: the first of a tie is kept
         key = _modeled(signature, match)
         bound = sum(v is not None for v in match.values())
-        current = best.get(key)
-        if current is None or bound > sum(v is not None for v in current.values()):
-            best[key], tied[key] = match, []
-        elif bound == sum(v is not None for v in current.values()):
+        if bound > most_bound.get(key, -1):
+            best[key], most_bound[key], tied[key] = match, bound, []
+        elif bound == most_bound[key]:
             tied[key].append(match)
     for key in sorted(k for k, others in tied.items() if others and notes is not None):
         kept = best[key]
@@ -221,8 +220,8 @@ def _short(iri: str) -> str:
     return iri.replace("#", "/").rsplit("/", 1)[-1]
 
 
-def _instantiate(store: GraphStore, model_name: str, signature: Signature, match: Mapping[str, str | None], *,
-                 shared_local_name: bool = False) -> ComponentInstance:
+def _instantiate(store: GraphStore, model_name: str, signature: Signature, match: Mapping[str, str | None],
+                 node_name: str) -> ComponentInstance:
     model_class = load_model_class(signature)
     nodes = _modeled(signature, match)
     mapped: dict[str, float] = {}
@@ -245,7 +244,7 @@ def _instantiate(store: GraphStore, model_name: str, signature: Signature, match
     if issubclass(model_class, MeasuringDevice):
         measurement = _measurement_link(store, model_name, nodes[0])
     return ComponentInstance(
-        iri=component_iri(model_name, signature, nodes[0], shared_local_name=shared_local_name), signature=signature,
+        iri=component_iri(model_name, signature, node_name), signature=signature,
         bindings={k: v for k, v in match.items() if v is not None}, modeled_nodes=nodes,
         mapped_parameters=mapped, measurement=measurement,
     )
@@ -254,32 +253,41 @@ def _instantiate(store: GraphStore, model_name: str, signature: Signature, match
 def _values_without_unit(store: GraphStore, instances: Mapping[str, ComponentInstance], session: MatchSession) -> list[str]:
     """Parameters left to estimate although the graph states their value, without the unit its
     OPTIONAL block requires (a nominal power of 1800 with no ``saref:isMeasuredIn``): one sentence
-    each. Each is found by matching the block without its unit triples, made required, at the node."""
-    notes = []
+    each. They are found by matching the block without its unit triples, made required — once per
+    signature and parameter, whatever the number of components lacking the value."""
+    lacking: dict[tuple[str, str], list[ComponentInstance]] = defaultdict(list)
     for instance in instances.values():
-        signature = instance.signature
+        for mapping in instance.signature.parameters:
+            if mapping.unit_node is not None and mapping.node not in instance.bindings:
+                lacking[(instance.signature.id, mapping.name)].append(instance)
+    found: dict[tuple[str, str], str] = {}  # (component IRI, parameter) → the sentence
+    for (_signature_id, name), lacking_it in lacking.items():
+        signature = lacking_it[0].signature
+        mapping = next(m for m in signature.parameters if m.name == name)
         anchor = signature.modeled_nodes[0]
-        for mapping in signature.parameters:
-            if mapping.unit_node is None or mapping.node in instance.bindings:
-                continue
-            block = _optional_block(signature, mapping.node, through=anchor, without=mapping.unit_node)
-            if not block:
-                continue
-            nodes = {n for t in block for n in (t.subject, t.object)} | {anchor}
-            probe = dataclasses.replace(
-                signature, id=f"{signature.id}:{mapping.name}:without-unit", modeled_nodes=(anchor,),
-                nodes={n: signature.nodes[n] for n in nodes}, inputs=(), outputs=(), parameters=(), splice=None,
-                triples=tuple(dataclasses.replace(t, rule=Rule.EXACT, optional=False) for t in block),
-            )
-            unit_triple = next(t for t in signature.triples if mapping.unit_node in (t.subject, t.object))
-            for match in match_signature(store, probe, session=session):
-                if match[anchor] == instance.bindings[anchor]:
-                    holder = match.get(unit_triple.subject if unit_triple.object == mapping.unit_node else unit_triple.object)
-                    notes.append(f"{_short(instance.node)}: parameter {mapping.name} of {signature.id} is estimated, "
-                                 f"not mapped: the graph gives {match[mapping.node]} but no unit for it "
-                                 f"(add <{holder}> <{unit_triple.predicate}> <a QUDT unit IRI> .)")
-                    break
-    return notes
+        block = _optional_block(signature, mapping.node, through=anchor, without=mapping.unit_node)
+        if not block:
+            continue
+        nodes = {n for t in block for n in (t.subject, t.object)} | {anchor}
+        probe = dataclasses.replace(
+            signature, id=f"{signature.id}:{mapping.name}:without-unit", modeled_nodes=(anchor,),
+            nodes={n: signature.nodes[n] for n in nodes}, inputs=(), outputs=(), parameters=(), splice=None,
+            triples=tuple(dataclasses.replace(t, rule=Rule.EXACT, optional=False) for t in block),
+        )
+        unit_triple = next(t for t in signature.triples if mapping.unit_node in (t.subject, t.object))
+        holder_node = unit_triple.subject if unit_triple.object == mapping.unit_node else unit_triple.object
+        first_match: dict[str, Mapping[str, str | None]] = {}
+        for match in match_signature(store, probe, session=session):
+            first_match.setdefault(match[anchor], match)
+        for instance in lacking_it:
+            match = first_match.get(instance.bindings[anchor])
+            if match is not None:
+                found[(instance.iri, name)] = (
+                    f"{_short(instance.node)}: parameter {mapping.name} of {signature.id} is estimated, not mapped: "
+                    f"the graph gives {match[mapping.node]} but no unit for it "
+                    f"(add <{match.get(holder_node)}> <{unit_triple.predicate}> <a QUDT unit IRI> .)")
+    return [found[(iri, m.name)] for iri, instance in instances.items() for m in instance.signature.parameters
+            if (iri, m.name) in found]
 
 
 def _optional_block(signature: Signature, node: str, *, through: str, without: str) -> list[PatternTriple]:
@@ -348,7 +356,11 @@ def _wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection],
     return connections, unconnected
 
 
-def _recorded_effects(store: GraphStore, model_name: str, library: Mapping[str, Signature]) -> list[EffectRequest]:
+def recorded_effects(store: GraphStore, model_name: str, library: Mapping[str, Signature]) -> list[EffectRequest]:
+    """The effects building model ``model_name`` records (``queries/applied-effects.rq``), sorted.
+
+    :raises AssemblyError: one names an effect signature the library does not hold.
+    """
     by_iri = {sig.iri: sig.id for sig in library.values() if sig.kind == "effect"}
     requests = []
     for row in store.run_named_query("applied-effects", dataset=model_name):
@@ -388,14 +400,14 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
             f"effect {signature.id} at {request.node}: it extends {', '.join(signature.splice.host_models)}, "
             f"but {request.node} is modelled by {host.signature.model}"
         )
-    ports = host.model_class.output_names() if signature.splice.side == "output" else host.model_class.input_names()
+    ports = signature.splice.host_ports(host.model_class)
     if signature.splice.port not in ports:
         raise AssemblyError(
             f"effect {signature.id} at {request.node}: it splices {signature.splice.side} {signature.splice.port!r}, "
             f"which {host.signature.model} (modelling {request.node}) does not have; its {signature.splice.side}s: "
             f"{', '.join(ports)} ({signature.source_file})"
         )
-    effect = _instantiate(store, model_name, signature, match)
+    effect = _instantiate(store, model_name, signature, match, local_name(_modeled(signature, match)[0]))
     effect = dataclasses.replace(effect, iri=f"{effect.iri}/on/{_short(host.iri)}")
     instances[effect.iri] = effect
     port = signature.splice.port

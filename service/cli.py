@@ -30,6 +30,7 @@ from .diagnosis import DiagnosisReport, diagnose
 from .error_history import error_history
 from .effect_recording import applied_effect_triples, record_effect_in_file
 from .measurements import MeasurementError
+from .namespaces import local_name
 from .resources import examples_dir, signatures_dir
 from .signature import SignatureError, load_signature_library
 from .sparql_compiler import compile_signature
@@ -70,7 +71,7 @@ def open_store(store: Path, memory: bool) -> GraphStore:
         graph_store.ensure_ontologies()
         graph_store.ensure_signature_library()
     except (*USER_ERRORS, StoreInUseError) as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     return graph_store
 
 
@@ -92,14 +93,12 @@ def error_text(exc: BaseException) -> str:
     return str(exc)
 
 
-def fail(message: str) -> typer.Exit:
-    """Print ``message`` as an error (as it is: no markup read in it, no line breaks added) → exit 2."""
+def fail(problem: str | BaseException) -> typer.Exit:
+    """Print ``problem`` (a message, or an exception as :func:`error_text` reads it) as an error, as
+    it is (no markup read in it, no line breaks added) → exit 2."""
+    message = problem if isinstance(problem, str) else error_text(problem)
     error_console.print(Text.assemble(("error:", "bold red"), " ", message), soft_wrap=True)
     return typer.Exit(code=2)
-
-
-def _short(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
 
 
 def _load(store: GraphStore, model: Path, name: str | None) -> str:
@@ -124,7 +123,7 @@ def assemble_command(
     try:
         model_name = _load(graph_store, model, name)
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     try:
         assembled = assemble(graph_store, model_name, max_complexity=max_complexity)
     except USER_ERRORS as exc:
@@ -154,7 +153,7 @@ def brick_report_command(
     try:
         report = brick_report(graph_store, _load(graph_store, model, name))
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     if as_json:
         console.print_json(json.dumps(report.to_dict()))
     else:
@@ -187,7 +186,7 @@ def _print_metrics(title: str, metrics: dict) -> None:
     for column in ("sensor", "RMSE", "MAE", "R²", "CV(RMSE) %", "NMBE %", "unit"):
         table.add_column(column)
     for node, m in metrics.items():
-        table.add_row(_short(node), f"{m.rmse:.3g}", f"{m.mae:.3g}", f"{m.r2:.3f}", f"{m.cv_rmse_percent:.1f}",
+        table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.mae:.3g}", f"{m.r2:.3f}", f"{m.cv_rmse_percent:.1f}",
                       f"{m.nmbe_percent:+.1f}", unit_label(m.unit))
     console.print(table)
 
@@ -215,7 +214,7 @@ def calibrate_command(
                             test=parse_window(test) if test else None, method=method, seed=seed,
                             progress=not as_json, only_when=only_when or ())
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     record = outcome.record
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
@@ -227,7 +226,7 @@ def calibrate_command(
     for column in ("component", "parameter", "estimate", "16–84 %", "unit", "identified"):
         table.add_column(column, overflow="fold")
     for e in record.estimates:
-        table.add_row(_short(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", e.unit,
+        table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", e.unit,
                       "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(r"\1.\2", "; ".join(e.reasons)))
     console.print(table)
     for window, metrics in record.metrics.items():
@@ -243,7 +242,7 @@ def _print_regimes(record) -> None:
     units = {node: m.unit for node, m in record.metrics.get("test", {}).items()}
     sensors = list(record.regimes[0]["rmse"])
     table = Table(title=f"Test RMSE per operating regime (rule tree accuracy {record.regime_rule_accuracy:.2f})")
-    for column in ("regime", "share", *map(_short, sensors)):
+    for column in ("regime", "share", *map(local_name, sensors)):
         table.add_column(column, overflow="fold")
     for row in record.regimes:
         table.add_row(row["rule"], f"{100 * row['share']:.0f} %",
@@ -276,7 +275,7 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
     for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
         table.add_column(column)
     for node, s in report.sensors.items():
-        table.add_row(_short(node), f"{s['rmse']:.3g} {unit_label(s['unit'])}", f"{s['rmse_over_noise']:.1f}",
+        table.add_row(local_name(node), f"{s['rmse']:.3g} {unit_label(s['unit'])}", f"{s['rmse_over_noise']:.1f}",
                       f"{s['nmbe']:+.1f}", "[red]fails[/red]" if s["fails"] else "matches")
     console.print(table)
     for location in report.localization:
@@ -287,10 +286,10 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
                       f"[rule tree accuracy {report.regime_rule_accuracy:.2f}]")
     for node, episodes in report.episodes.items():
         for episode in episodes[:3]:
-            console.print(f"  {_short(node)}: {episode['text']}")
+            console.print(f"  {local_name(node)}: {episode['text']}")
     for node, found in report.residual_dependence.items():
         for signal in found["signals"]:
-            console.print(f"  residual of {_short(node)}: {signal['text']}")
+            console.print(f"  residual of {local_name(node)}: {signal['text']}")
     if not report.effects_tested:
         console.print(f"[bold]{report.summary}[/bold]")
         return
@@ -298,7 +297,7 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
     for column in ("effect", "at", "score", "ΔBIC", "test error removed", "significant"):
         table.add_column(column)
     for e in report.effects:
-        table.add_row(e.effect, _short(e.node), f"{e.score.statistic:.1f}", f"{e.delta_bic:.1f}",
+        table.add_row(e.effect, local_name(e.node), f"{e.score.statistic:.1f}", f"{e.delta_bic:.1f}",
                       f"{100 * e.test_improvement:.0f} %", "yes" if e.significant else "no")
     console.print(table)
     console.print(f"[bold]{report.summary}[/bold]")
@@ -335,7 +334,7 @@ def simulate_command(
         md = ModelData(assembled, measured, loop_substeps(assembled, measured.step_s))
         result = md.simulator.run(md.boundary(slice(0, measured.n_steps)), [theta])
     except (*USER_ERRORS, json.JSONDecodeError) as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     simulated = target_series(assembled, result)
     if output is not None:
         write_comparison_csv(output, measured, simulated)
@@ -347,7 +346,7 @@ def simulate_command(
         observed = measured.series[node]
         finite = np.isfinite(observed)
         rmse = float(np.sqrt(np.mean((observed[finite] - values[finite]) ** 2))) if finite.any() else float("nan")
-        table.add_row(_short(node), f"{rmse:.3g}", unit_label(measured.units[node]))
+        table.add_row(local_name(node), f"{rmse:.3g}", unit_label(measured.units[node]))
     console.print(table)
 
 
@@ -379,7 +378,7 @@ def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, m
                           seed=seed, rank_effects=rank_effects, only_when=only_when or (),
                           on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     if as_json:
         console.print_json(json.dumps(report.to_dict(), default=str))
         return
@@ -445,7 +444,7 @@ def compare_strategies_command(
                                                     test=parse_window(test) if test else None, n_folds=folds,
                                                     seed=seed)
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     if as_json:
         console.print_json(json.dumps(comparison.to_dict(), default=str))
         return
@@ -470,7 +469,7 @@ def add_effect_command(
         assemble(check, "check", library=library, extra_effects=[EffectRequest(effect, target)])
         record_effect_in_file(model, output, applied_effect_triples(signature, target))
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     console.print(f"{effect} recorded at {target} in {output}")
 
 
@@ -511,7 +510,7 @@ def example_generate(
             store, model_name, output, library=load_signature_library(signatures_dir()), hidden_effect=hidden_effect,
             node=node, seed=seed, n_days=days, operation=operation, truth=truth)
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     where = f" at {generated.node}" if generated.node else ""
     driven = f"the operation of {operation}" if operation is not None else f"{days:g} days of synthetic operation"
     given = f", {len(truth)} parameters from {truth_from}" if truth else ""
@@ -549,7 +548,7 @@ def query_command(
             bindings["model"] = model
         rows = graph_store.run_named_query(name, **bindings)
     except USER_ERRORS as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     columns = list(dict.fromkeys(k for row in rows for k in row))
     values = [{c: row[c].value for c in columns if c in row} for row in rows]
     if output_format == "json":
@@ -563,7 +562,7 @@ def query_command(
         for column in columns:
             table.add_column(column, overflow="fold")
         for row in values:
-            table.add_row(*[_short(v) if v.startswith("http") else v for v in (row.get(c, "") for c in columns)])
+            table.add_row(*[local_name(v) if v.startswith("http") else v for v in (row.get(c, "") for c in columns)])
         console.print(table)
 
 
@@ -592,7 +591,7 @@ def history_command(
     for version in history.versions:
         table.add_column(version)
     for sensor, values in history.rmse.items():
-        table.add_row(_short(sensor), *[_with_unit(v, history.units[sensor]) for v in values])
+        table.add_row(local_name(sensor), *[_with_unit(v, history.units[sensor]) for v in values])
     console.print(table)
     if history.regime_rmse:
         table = Table(title="Test RMSE per operating regime (share of the test window)")
@@ -602,7 +601,7 @@ def history_command(
             shares = history.regime_share[rule]
             share = next((f" ({100 * s:.0f} %)" for s in shares if s == s), "")
             for i, (sensor, values) in enumerate(sensors.items()):
-                table.add_row(str(number) if i == 0 else "", rule + share if i == 0 else "", _short(sensor),
+                table.add_row(str(number) if i == 0 else "", rule + share if i == 0 else "", local_name(sensor),
                               *[_with_unit(v, history.units.get(sensor, "")) for v in values])
             table.add_section()
         console.print(table)
@@ -638,7 +637,7 @@ def report_command(
     try:
         page = report_html(graph_store, run, locate_data=data_file_locator(data))
     except UnknownRunError as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     output.write_text(page, encoding="utf-8")
     console.print(f"wrote {output}")
 
@@ -675,7 +674,7 @@ def demo_command(
         console.print("No effect is significant: nothing to add.")
         return
     best = report.significant[0]
-    console.rule(f"[bold]3. Add {best.effect} at {_short(best.node)} and recalibrate")
+    console.rule(f"[bold]3. Add {best.effect} at {local_name(best.node)} and recalibrate")
     new_model = output / "model_with_effect.ttl"
     record_effect_in_file(model_path, new_model, applied_effect_triples(library[best.effect], best.node))
     version = f"{base_name}+{best.effect}"
@@ -687,13 +686,13 @@ def demo_command(
         table.add_column(column)
     for node, metrics in after_run.record.metrics["test"].items():
         old = before[node]["rmse"]
-        table.add_row(_short(node), f"{old:.3g}", f"{metrics.rmse:.3g} {unit_label(metrics.unit)}",
+        table.add_row(local_name(node), f"{old:.3g}", f"{metrics.rmse:.3g} {unit_label(metrics.unit)}",
                       f"{100 * (metrics.rmse - old) / old:+.0f} %")
     console.print(table)
     estimate = next((e for e in after_run.record.estimates if f"/{best.effect}/" in e.component), None)
     if estimate is not None:
         console.print(f"{best.effect}: {estimate.name} = {estimate.median:.3g} (16–84 %: {estimate.quantile16:.3g} – "
-                      f"{estimate.quantile84:.3g}); the truth hid {truth.effect} at {_short(truth.node or '')}.")
+                      f"{estimate.quantile84:.3g}); the truth hid {truth.effect} at {local_name(truth.node or '')}.")
     md = after_run.model_data
     window = after_run.test
     figure = plot_measured_vs_model(output / "before_after.png", md.data.timestamps[window], md.observed(window),
@@ -730,7 +729,7 @@ def serve_command(
     try:
         settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
     except ValidationError as exc:
-        raise fail(error_text(exc)) from None
+        raise fail(exc) from None
     if settings.store_dir is None and settings.sparql_endpoint is None:
         settings = settings.model_copy(update={"store_dir": Path("graphtwin-data")})
     if settings.token is None:

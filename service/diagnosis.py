@@ -51,7 +51,7 @@ from .effect_ranking import (
 )
 from .failure_episodes import find_episodes
 from .flow_path_localization import FlowTopology, localize_failures
-from .namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_names
+from .namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 from .point_calibration import PointCalibrator
 from .residual_dependence import residual_dependence
 from .signature import Signature, load_signature_library
@@ -80,10 +80,6 @@ def noise_level(values: np.ndarray, unit: str, observed: np.ndarray) -> float:
     sigma = float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
     floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.nanmean(np.abs(observed))))
     return max(sigma, floor)
-
-
-def _short(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
 
 
 @dataclass
@@ -139,7 +135,7 @@ def effect_candidates(store: GraphStore, model_name: str, library: dict[str, Sig
             try:
                 model = assemble(store, model_name, library=library, extra_effects=[EffectRequest(signature.id, node)])
             except ValueError as exc:
-                skipped.append(f"{signature.id} at {_short(node)}: {str(exc).splitlines()[0]}")
+                skipped.append(f"{signature.id} at {local_name(node)}: {str(exc).splitlines()[0]}")
                 continue
             candidates.append((signature, node, model))
     return candidates, skipped
@@ -356,7 +352,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         f"{name} = {evidence.estimates[name]:.3g} ± {evidence.standard_errors[name]:.2g}" for name in evidence.parameter_names
     )
     evidence.explanation = (
-        f"residual on {_short(best)} correlates {rho:.2f} with what {job.signature.id} at {_short(job.node)} adds; "
+        f"residual on {local_name(best)} correlates {rho:.2f} with what {job.signature.id} at {local_name(job.node)} adds; "
         f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "
         f"sensors); {estimates}; fitted as an effect {onset}"
     )
@@ -441,13 +437,13 @@ def diagnose(
         window = slice(train_slice.start, test_slice.stop) if test_slice.start >= train_slice.start else test_slice
         everything = md.simulate_all(window, base.theta)
         offset = test_slice.start - window.start
-        candidates_signals = {f"measured {_short(n)}": data.series[n][test_slice] for n in data.series}
+        candidates_signals = {f"measured {local_name(n)}": data.series[n][test_slice] for n in data.series}
         for (component, port), values in everything.outputs.items():
-            candidates_signals[f"model {_short(component)}.{port}"] = values[0][offset:]
+            candidates_signals[f"model {local_name(component)}.{port}"] = values[0][offset:]
         for node in failing:
             residual = observed[node] - predicted[node]
             ranked_signals = residual_dependence(
-                residual, {k: v for k, v in candidates_signals.items() if _short(node) not in k})
+                residual, {k: v for k, v in candidates_signals.items() if local_name(node) not in k})
             dependence[node] = {"signals": [d.to_dict() | {"text": d.describe(data.step_s)}
                                             for d in ranked_signals[:3] if d.skipped_reason is None]}
 
@@ -502,16 +498,16 @@ def _summary(report: DiagnosisReport) -> str:
     if not report.effects_tested:
         if not failing:
             return "The model matches every sensor within its noise."
-        return (f"The model fails at {', '.join(_short(n) for n in failing)}: see localization, regimes and episodes "
+        return (f"The model fails at {', '.join(local_name(n) for n in failing)}: see localization, regimes and episodes "
                 "for where, residual_dependence for what the residual follows, and graphtwin diagnose for which "
                 "effect is missing.")
     if not report.significant:
         if not failing:
             return "The model matches every sensor within its noise; nothing significant is missing."
-        return (f"The model fails at {', '.join(_short(n) for n in failing)}, but no effect in the catalog explains "
+        return (f"The model fails at {', '.join(local_name(n) for n in failing)}, but no effect in the catalog explains "
                 "it significantly: see residual_dependence for what the residual follows.")
     best = report.significant[0]
-    return f"Missing: {best.label} at {_short(best.node)}. {best.explanation}."
+    return f"Missing: {best.label} at {local_name(best.node)}. {best.explanation}."
 
 
 def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:

@@ -22,11 +22,9 @@ from collections import defaultdict, deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+from .namespaces import local_name
+
 __all__ = ["FlowTopology", "FailureLocation", "localize_failures"]
-
-
-def _short(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
 
 
 @dataclass(frozen=True)
@@ -39,11 +37,11 @@ class FailureLocation:
     components: tuple[str, ...]
 
     def describe(self) -> str:
-        where = " or ".join(_short(c) for c in self.components) or "no modelled component"
+        where = " or ".join(local_name(c) for c in self.components) or "no modelled component"
         if self.matching_sensor is None:
-            return f"The model fails at {_short(self.failing_sensor)} with no matching sensor upstream: look at {where}."
+            return f"The model fails at {local_name(self.failing_sensor)} with no matching sensor upstream: look at {where}."
         return (
-            f"The model matches {_short(self.matching_sensor)} but not {_short(self.failing_sensor)}: "
+            f"The model matches {local_name(self.matching_sensor)} but not {local_name(self.failing_sensor)}: "
             f"the missing effect sits in {where} between them."
         )
 

@@ -60,7 +60,7 @@ from urllib.parse import urlsplit
 import numpy as np
 import pyoxigraph as ox
 
-from .assembly import EffectRequest, assemble
+from .assembly import EffectRequest, assemble, recorded_effects
 from .assembly_summary import assembly_to_dict
 from .assembly_triples import assembly_iri, assembly_triples
 from .calibration_run import calibrate, parse_window
@@ -668,15 +668,6 @@ def _graph_triples(store: GraphStore, graph: ox.NamedNode) -> list[ox.Triple]:
     return parse_rdf(data, ox.RdfFormat.N_TRIPLES, str(graph)) if data else []
 
 
-def applied_effects(store: GraphStore, model: str) -> set[tuple[str, str]]:
-    """(node IRI, effect signature IRI) of every effect recorded in model ``model`` (none when the
-    store has no such model)."""
-    if not store.has_model(model):
-        return set()
-    return {(row["node"].value, row["effect_signature"].value)
-            for row in store.run_named_query("applied-effects", dataset=model)}
-
-
 def effect_version(store: GraphStore, params: dict) -> str:
     """The name of the model version an add-effect job writes: ``params["version"]``, by default
     ``<model>+<effect>``.
@@ -687,17 +678,13 @@ def effect_version(store: GraphStore, params: dict) -> str:
     model, effect, target = params["model"], params["effect"], params["target"]
     version = store.check_name(params.get("version") or f"{model}+{effect}")
     if store.has_model(version):
-        existing = applied_effects(store, version)
-        wanted = applied_effects(store, model) | {(target, load_signature_library(signatures_dir())[effect].iri)}
-        if existing != wanted:
-            recorded = "; ".join(f"{_local_name(sig)} at {node}" for node, sig in sorted(existing)) or "no effect"
+        library = load_signature_library(signatures_dir())
+        existing = recorded_effects(store, version, library)
+        if set(existing) != {*recorded_effects(store, model, library), EffectRequest(effect, target)}:
+            recorded = "; ".join(f"{r.effect} at {r.node}" for r in existing) or "no effect"
             raise FileExistsError(f"model {version} exists with {recorded}: it is not overwritten; "
                                   "give 'version' (a new model name) to keep both")
     return version
-
-
-def _local_name(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
 
 
 def add_effect_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:

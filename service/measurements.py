@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .namespaces import local_name
 from .units import UnitError, convert, unit_label
 
 __all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "write_csv",
@@ -66,7 +67,7 @@ class SeriesSpec:
     holds_values: bool = False
 
     def names(self) -> set[str]:
-        local = self.node.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
+        local = local_name(self.node)
         return {n.strip() for n in (self.node, local, self.series_id) if n and n.strip()}
 
 
@@ -140,15 +141,14 @@ def _decoded(raw: bytes, source: str, warnings: list[str]) -> str:
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as utf8:
+        where = "line %d" % (raw.count(b"\n", 0, utf8.start) + 1)
         try:
             text = raw.decode("cp1252")
         except UnicodeDecodeError:
-            line = raw.count(b"\n", 0, utf8.start) + 1
             raise MeasurementError(source, [
-                f"line {line}: byte 0x{raw[utf8.start]:02x} at offset {utf8.start} is neither UTF-8 nor "
+                f"{where}: byte 0x{raw[utf8.start]:02x} at offset {utf8.start} is neither UTF-8 nor "
                 "Windows-1252 text: is this a CSV file?"]) from None
-        line = raw.count(b"\n", 0, utf8.start) + 1
-        warnings.append(f"not UTF-8 (line {line}: byte 0x{raw[utf8.start]:02x}): read as Windows-1252")
+        warnings.append(f"not UTF-8 ({where}: byte 0x{raw[utf8.start]:02x}): read as Windows-1252")
         return text
 
 

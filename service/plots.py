@@ -16,13 +16,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .error_history import ErrorHistory  # noqa: E402
+from .namespaces import local_name
 from .units import unit_label  # noqa: E402
 
 __all__ = ["plot_measured_vs_model", "plot_residuals", "plot_error_history"]
-
-
-def _short(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
 
 
 def _save_time_panels(fig, axes, path: Path, title: str, legend_columns: int) -> Path:
@@ -63,7 +60,7 @@ def plot_measured_vs_model(
         ax.plot(timestamps, observed[sensor], color="black", lw=0.8, label="measured")
         for (name, prediction), color in zip(models.items(), ("tab:red", "tab:green", "tab:blue")):
             ax.plot(timestamps, prediction[sensor], color=color, lw=1.0, label=name)
-        ax.set_ylabel(f"{_short(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.set_ylabel(f"{local_name(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
         ax.grid(alpha=0.3)
     return _save_time_panels(fig, axes, path, title, legend_columns=4)
 
@@ -89,7 +86,7 @@ def plot_residuals(
         ax.axhspan(-band, band, color="tab:green", alpha=0.15, lw=0, label="matching band")
         ax.axhline(0.0, color="grey", lw=0.6)
         ax.plot(timestamps, residuals[sensor], color="black", lw=0.8, label="measured − model")
-        ax.set_ylabel(f"{_short(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.set_ylabel(f"{local_name(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
         ax.grid(alpha=0.3)
     return _save_time_panels(fig, axes, path, title, legend_columns=2)
 
@@ -108,7 +105,7 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
     for ax, sensor in zip(axes[0], sensors):
         ax.bar(range(len(versions)), history.rmse[sensor], color=[colours(i) for i in range(len(versions))])
         ax.set_xticks(range(len(versions)), ticks, fontsize=7)
-        ax.set_title(_short(sensor), fontsize=8)
+        ax.set_title(local_name(sensor), fontsize=8)
         ax.set_ylabel(f"test RMSE [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
     if rules:
         width = 0.8 / len(versions)

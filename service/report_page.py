@@ -49,7 +49,7 @@ from .calibration_run import model_version, predict_test
 from .calibration_triples import run_iri
 from .error_history import error_history
 from .flow_path_localization import FlowTopology
-from .namespaces import GTR
+from .namespaces import GTR, local_name
 from .operating_filter import operating_mask
 from .store import GraphStore
 from .units import unit_label
@@ -119,10 +119,6 @@ class UnknownRunError(KeyError):
         return str(self.args[0])
 
 
-def _short(iri: str) -> str:
-    return iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
-
-
 def _float(row: Mapping, key: str) -> float:
     return float(row[key].value) if key in row else float("nan")
 
@@ -177,7 +173,7 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         }
     metrics: dict[str, dict[str, dict[str, float]]] = {}
     units: dict[str, str] = {}
-    regimes = {r["regime"].value: {"regime": _short(r["regime"].value), "rule": r["rule"].value,
+    regimes = {r["regime"].value: {"regime": local_name(r["regime"].value), "rule": r["rule"].value,
                                    "share": float(r["share"].value), "rmse": {}}
                for r in store.query(_REGIMES_QUERY, substitutions={"run": run})}
     for m in store.run_named_query("sensor-metrics", model=row["model"].value):
@@ -231,7 +227,7 @@ def read_diagnosis(store: GraphStore, run_id: str) -> StoredDiagnosis | None:
     diagnosis = rows[0]["diagnosis"]
     bound = {"diagnosis": diagnosis}
     effects = [{
-        "effect": r["id"].value if "id" in r else _short(r["effect"].value),
+        "effect": r["id"].value if "id" in r else local_name(r["effect"].value),
         "label": r["label"].value if "label" in r else "", "node": r["node"].value, "rank": int(r["rank"].value),
         "significant": r["significant"].value == "true", "explanation": r["explanation"].value,
         "score": _float(r, "score"), "p_value": _float(r, "p_value"), "delta_bic": _float(r, "delta_bic"),
@@ -299,7 +295,7 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
         rmse[node] = float(np.sqrt(np.mean((observed[node][finite] - values[finite]) ** 2)))
         stored = run.metrics.get(name, {}).get(node, {}).get("rmse")
         if stored is not None and abs(rmse[node] - stored) > REPRODUCTION_TOLERANCE * stored:
-            notes.append(f"{_short(node)}: the recomputed {name} RMSE {rmse[node]:.4g} differs from the stored "
+            notes.append(f"{local_name(node)}: the recomputed {name} RMSE {rmse[node]:.4g} differs from the stored "
                          f"{stored:.4g}" + (" (a Bayesian run stores the predictive median's error; the figure "
                                             "simulates the posterior median parameters)" if run.method == "bayes"
                                             else ": the data file is not the one the run used"))
@@ -357,7 +353,7 @@ def _layers(nodes: list[str], downstream: Mapping[str, set[str]]) -> tuple[dict[
 def _label_lines(iri: str, width: int = _LABEL_CHARS) -> list[str]:
     """The node's local name, wrapped at underscores into lines of at most ``width`` characters."""
     lines: list[str] = []
-    for word in _short(iri).split("_"):
+    for word in local_name(iri).split("_"):
         if lines and len(lines[-1]) + 1 + len(word) <= width:
             lines[-1] += "_" + word
         else:
@@ -447,7 +443,7 @@ def topology_svg(
         text = "".join(f'<tspan x="{x + w / 2:.0f}" y="{first + k * _LINE_PX:.0f}">{html.escape(line)}</tspan>'
                        for k, line in enumerate(lines[n]))
         parts.append(
-            f'<g class="{" ".join(classes)}" data-node="{html.escape(_short(n))}"><title>{html.escape(n)}</title>'
+            f'<g class="{" ".join(classes)}" data-node="{html.escape(local_name(n))}"><title>{html.escape(n)}</title>'
             f'<rect x="{x:.0f}" y="{y:.0f}" width="{w:.0f}" height="{_BOX_H}" rx="{12 if n in sensors else 3}"/>'
             f'<text>{text}</text></g>')
     legend = (f'<text class="legend" x="{_MARGIN}" y="{height - 14}">red: suspects (between the last matching and the '
@@ -497,7 +493,7 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
         test = run.metrics.get("test", {}).get(sensor, {})
         train = run.metrics.get("train", {}).get(sensor, {})
         verdict = ('<span class="bad">yes</span>' if sensor in failing else "no") if diagnosis else "–"
-        rows.append([html.escape(_short(sensor)), _number(train.get("rmse")), _number(test.get("rmse")),
+        rows.append([html.escape(local_name(sensor)), _number(train.get("rmse")), _number(test.get("rmse")),
                      _number(test.get("mae")), _number(test.get("r2")), _number(test.get("cv_rmse_percent")),
                      _number(test.get("nmbe_percent")), html.escape(unit_label(run.units[sensor])), verdict])
     out = ["<h2>Measured against the model, per sensor</h2>",
@@ -516,9 +512,9 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
     for sensor in series.predicted:
         picture = _png(lambda path, s=sensor: plot_measured_vs_model(
             path, series.timestamps, {s: series.observed[s]}, {"model": {s: series.predicted[s]}}, series.units,
-            {s: series.band[s]}, title=f"{_short(s)}: {series.window} window, RMSE {series.rmse[s]:.3g} "
+            {s: series.band[s]}, title=f"{local_name(s)}: {series.window} window, RMSE {series.rmse[s]:.3g} "
                                        f"{unit_label(series.units[s])}"))
-        out.append(f'<figure>{_img(picture, "image/png", f"measured vs model: {_short(sensor)}", "series")}</figure>')
+        out.append(f'<figure>{_img(picture, "image/png", f"measured vs model: {local_name(sensor)}", "series")}</figure>')
     return "".join(out)
 
 
@@ -541,7 +537,7 @@ def _topology_section(store: GraphStore, run: StoredRun, diagnosis: StoredDiagno
     else:
         items = "".join(
             f'<li>{html.escape(loc["text"])} <span class="suspects">Suspects: '
-            f'{html.escape(", ".join(_short(c) for c in loc["components"]) or "none")}</span></li>'
+            f'{html.escape(", ".join(local_name(c) for c in loc["components"]) or "none")}</span></li>'
             for loc in diagnosis.locations)
         out.append(f'<ul class="locations">{items}</ul>')
     return "".join(out)
@@ -561,7 +557,7 @@ def _regimes_section(run: StoredRun) -> str:
     rows = [[html.escape(r["regime"]), html.escape(r["rule"]), f"{100 * r['share']:.0f} %"]
             + [f"{_number(r['rmse'][s])} {html.escape(unit_label(run.units.get(s, '')))}" if s in r["rmse"] else "–"
                for s in sensors] for r in run.regimes]
-    header = ["regime", "rule", "share of the test window"] + [f"RMSE {_short(s)}" for s in sensors]
+    header = ["regime", "rule", "share of the test window"] + [f"RMSE {local_name(s)}" for s in sensors]
     return (out + "<p>Clusters of the boundary inputs (mini-batch k-means), each described by the rule of a "
             "shallow decision tree, and the test RMSE of every sensor in each: where the model fails.</p>"
             + _table(header, rows, "regimes"))
@@ -574,7 +570,7 @@ def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
         ["rank", "effect", "at", "significant", "test error removed", "ΔBIC", "score", "p", "evidence"],
         [[str(e["rank"]), f'<span class="effect">{html.escape(e["effect"])}</span><br>'
                           f'<small>{html.escape(e["label"])}</small>',
-          html.escape(_short(e["node"])), '<span class="good">yes</span>' if e["significant"] else "no",
+          html.escape(local_name(e["node"])), '<span class="good">yes</span>' if e["significant"] else "no",
           f"{100 * e['test_improvement']:.0f} %" if np.isfinite(e["test_improvement"]) else "–",
           _number(e["delta_bic"], 4), _number(e["score"]), _number(e["p_value"], 2), html.escape(e["explanation"])]
          for e in diagnosis.effects], "effects")
@@ -594,10 +590,10 @@ def _history_section(store: GraphStore, run: StoredRun) -> str:
     def cells(values: list[float], sensor: str) -> list[str]:
         return [f"{_number(v)} {html.escape(unit_label(units.get(sensor, '')))}" if v == v else "–" for v in values]
 
-    rows = [[html.escape(_short(s))] + cells(values, s) for s, values in history.rmse.items()]
+    rows = [[html.escape(local_name(s))] + cells(values, s) for s, values in history.rmse.items()]
     out.append(_table(["sensor"] + versions, rows, "history"))
     if history.regime_rmse:
-        rows = [[str(number), html.escape(rule), html.escape(_short(s))] + cells(values, s)
+        rows = [[str(number), html.escape(rule), html.escape(local_name(s))] + cells(values, s)
                 for number, (rule, sensors) in enumerate(history.regime_rmse.items()) for s, values in sensors.items()]
         out.append(_table(["regime", "rule", "sensor"] + versions, rows, "history-regimes"))
     picture = _png(lambda path: plot_error_history(path, history))

@@ -148,6 +148,10 @@ class EffectSplice:
     side: str  # "input" or "output"
     host_models: tuple[str, ...] = ()
 
+    def host_ports(self, model_class: type[ComponentModel]) -> tuple[str, ...]:
+        """The ports of ``model_class`` on this splice's side (one of them must be :attr:`port`)."""
+        return model_class.input_names() if self.side == "input" else model_class.output_names()
+
 
 @dataclass(frozen=True)
 class Signature:
@@ -465,8 +469,7 @@ def load_signature(path: Path) -> Signature:
         splice = signature.splice
         for i, host in enumerate(splice.host_models):
             host_class = import_model_class(path, f"splice.host_models[{i}]", host)
-            ports = host_class.input_names() if splice.side == "input" else host_class.output_names()
-            _undeclared(path, f"splice.{splice.side}", host, f"{splice.side} port", splice.port, ports)
+            _undeclared(path, f"splice.{splice.side}", host, f"{splice.side} port", splice.port, splice.host_ports(host_class))
     return signature
 
 

@@ -4,11 +4,10 @@ import csv
 import gc
 import io
 import json
-import subprocess
-import sys
 
 import pyoxigraph as ox
 from case_study import CASE_STUDY, EX
+from store_holder import held_by_another_process
 from typer.testing import CliRunner
 
 from service.assembly import assemble
@@ -173,15 +172,8 @@ def test_compare_strategies_prints_both_fits_per_regime_and_their_cross_validati
 
 def test_a_store_another_process_holds_is_a_one_line_error(tmp_path):
     path = tmp_path / "data"
-    GraphStore.embedded(path)  # created, then closed
-    holder = subprocess.Popen(
-        [sys.executable, "-c", f"import sys, pyoxigraph; s = pyoxigraph.Store({str(path)!r}); print('open', flush=True); sys.stdin.read()"],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout.readline().strip() == "open"
+    with held_by_another_process(path):
         result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--store", str(path)])
-    finally:
-        holder.communicate("", timeout=30)
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert f"error: store {path} is in use by another process (a running graphtwin serve?)" in result.output
 

@@ -1,8 +1,6 @@
 """The store: named-graph layout, atomic loads with clear parse errors, value binding."""
 
 import re
-import subprocess
-import sys
 import threading
 
 import pyoxigraph as ox
@@ -13,6 +11,7 @@ from service.store import (
 )
 
 from case_study import CASE_STUDY, EX
+from store_holder import held_by_another_process
 
 BROKEN = b"""@prefix ex: <https://example.org/x#> .
 ex:a ex:b ex:c .
@@ -132,17 +131,10 @@ def test_two_loads_of_a_new_model_at_once_leave_one_of_them_whole():
 
 def test_a_store_another_process_holds_is_refused_with_a_clear_error(tmp_path):
     path = tmp_path / "data"
-    GraphStore.embedded(path)  # created, then closed
-    holder = subprocess.Popen(
-        [sys.executable, "-c", f"import sys, pyoxigraph; s = pyoxigraph.Store({str(path)!r}); print('open', flush=True); sys.stdin.read()"],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout.readline().strip() == "open"
+    with held_by_another_process(path):
         with pytest.raises(StoreInUseError, match=r"in use by another process \(a running graphtwin serve\?\)") as info:
             GraphStore.embedded(path)
         assert isinstance(info.value, OSError) and str(path) in str(info.value)
-    finally:
-        holder.communicate("", timeout=30)
     held_here = EmbeddedBackend(path)
     with pytest.raises(StoreInUseError, match="open already in this process"):
         EmbeddedBackend(path)
