@@ -101,6 +101,39 @@ def test_brick_1_3_location_classes_align_like_the_1_4_ones(both):
     assert structure(assemble(both, "brick13")) == structure(assemble(both, "saref"))
 
 
+def test_unit_level_feeds_and_dampers_nested_in_an_economizer_align_to_the_same_model(both):
+    """As many BMS models write a unit: the unit itself feeds the room and the room feeds the unit
+    (brick:feeds at unit level, beside the unit's parts), and the dampers are parts of an
+    economizer that is the unit's part. The unit's edges are carried to its supply outlet and to
+    its return damper, the nested dampers are the unit's: the same model, the same flow path."""
+    text = (examples_dir() / "flexlab_ahu_brick" / "model.ttl").read_text(encoding="utf-8")
+    for old, new in [
+        ("brick:hasPart ex:outdoor_air_damper, ex:return_air_damper, ex:exhaust_air_damper, ex:mixing_box,",
+         "brick:feeds ex:test_cell ;\n    brick:hasPart ex:economizer, ex:mixing_box,"),
+        ("brick:feeds ex:return_air_damper, ex:exhaust_air_damper .", "brick:feeds ex:ahu ."),
+        ("    brick:feeds ex:test_cell ;\n    brick:hasPoint ex:supply_fan_speed_command .",
+         "    brick:hasPoint ex:supply_fan_speed_command ."),
+    ]:
+        assert old in text
+        text = text.replace(old, new)
+    text += ("\nex:economizer a brick:Economizer ;\n"
+             "    brick:hasPart ex:outdoor_air_damper, ex:return_air_damper, ex:exhaust_air_damper .\n")
+    both.load_model("brick-unit-level", text.encode())
+    assert structure(assemble(both, "brick-unit-level")) == structure(assemble(both, "saref"))
+
+    def edges(name):
+        return {(r["from"].value, r["to"].value) for r in both.run_named_query("flow-edges", dataset=name)}
+
+    unit_level = edges("brick-unit-level")
+    assert {e for e in edges("saref") if "exhaust" not in e[1]} <= unit_level
+    assert not {e for e in unit_level if EX + "ahu" in e}
+    [fix] = [r["fix"].value for r in both.query("""
+        PREFIX gt: <https://w3id.org/graphtwin/ontology#>
+        SELECT ?fix WHERE { ?a a gt:AlignmentAssumption ; gt:assumptionAbout ?unit ; gt:resolvedBy ?fix }""",
+        model="brick-unit-level", substitutions={"unit": ox.NamedNode(EX + "ahu")})]
+    assert fix == f"<{EX}supply_fan> brick:feeds <{EX}test_cell> ."
+
+
 @pytest.mark.slow
 def test_diagnose_on_the_leak_day_finds_the_same_for_brick_and_saref(both):
     """The heating-coil valve leak (9/12/2017) against a base model calibrated on the unfaulted 9/20,
