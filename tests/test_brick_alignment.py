@@ -102,6 +102,10 @@ def test_every_minted_node_is_an_assumption_with_the_triples_that_remove_it(stor
               "chw_cmd_coil", "chw_cmd_valve", "ahu_supply_fan", "ahu_served_zone"}
     assert mentioned == minted | {"ahu"}
     assert {r["rule"].value for r in rows} == {"00-brick-ahu-equipment.rq"}
+    texts = defaultdict(set)
+    for r in rows:
+        texts[r["fix"].value].add(r["text"].value)
+    assert {fix: len(t) for fix, t in texts.items()} == {fix: 1 for fix in texts}  # the mixing section: two points imply it
 
 
 def test_columns_and_units_stated_the_brick_way_or_assumed(store):
