@@ -1,8 +1,10 @@
 """The measured-data contract: a CSV of time stamps and sensor columns, matched to graph nodes.
 
 **Format.** The first column is the time stamp: ISO 8601 (``2025-01-01 00:15:00``,
-``2025-01-01T00:15:00+01:00``; an offset is converted to UTC) or the BMS format ``m/d/yyyy h:mm`` /
-``m/d/yy h:mm`` (the LBNL FLEXLAB export). Every other column is a series; a column is matched to a
+``2025-01-01T00:15:00+01:00``; an offset is converted to UTC, and a file either gives every stamp an
+offset or none), the BMS format ``m/d/yyyy h:mm`` / ``m/d/yy h:mm`` (the LBNL FLEXLAB export) or the
+European ``d.m.yyyy h:mm``. Columns are separated by commas, or by semicolons when the header has
+semicolons and no comma; a semicolon file may write decimal commas (``20,5``). Every other column is a series; a column is matched to a
 measuring device of the model by the device's full IRI, its local name, or the literal it gives as
 ``gt:timeSeriesId`` (header whitespace stripped). Empty cells, ``NaN``, ``NA`` and ``null`` are
 missing values, and so are spreadsheet error cells (``#VALUE!``, ``#N/A``, ``#DIV/0!`` …, counted
@@ -14,11 +16,13 @@ non-numeric cells, unparseable, duplicate or unsorted time stamps, columns missi
 input or a target. Columns no device claims are listed in ``warnings`` (an error with ``strict``),
 and so are frozen points: a sensor whose value holds exactly for 12 hours or more
 (:func:`frozen_spans`; not for devices whose signature says ``holds_values``, schedules and commands).
+A position, command or speed (a fraction 0–1 in the model) above 1.5 after conversion is an error
+(percent declared as a fraction); one never above 0.01 from a percent column is a warning.
 
-**Regular step.** The step is the median spacing of the time stamps. An irregular file is resampled
-to that step by linear interpolation, with a warning. Gaps (missing values or missing rows) of up to
-``max_gap_steps`` steps are interpolated linearly; longer gaps stay NaN and are reported: they are
-never silently filled. The simulator holds a boundary input's last value through a gap and the
+**Regular step.** The step is the median spacing of the time stamps, in whole seconds. An irregular
+file is resampled to that step by linear interpolation, with a warning; a grid point on a row keeps
+the row's value. Gaps (missing values or missing rows) of up to ``max_gap_steps`` steps are
+interpolated linearly; longer gaps stay NaN and are reported: they are never silently filled. The simulator holds a boundary input's last value through a gap and the
 calibration leaves the affected target steps out.
 """
 
@@ -40,7 +44,8 @@ __all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements"
            "write_comparison_csv", "frozen_spans"]
 
 _MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
-_BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S")
+_BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S",
+                "%d.%m.%Y %H:%M", "%d.%m.%Y %H:%M:%S")
 
 
 class MeasurementError(ValueError):
@@ -153,23 +158,29 @@ def _decoded(raw: bytes, source: str, warnings: list[str]) -> str:
 
 
 def parse_timestamp(text: str) -> datetime:
-    """ISO 8601 (an offset is converted to UTC and dropped) or the BMS ``m/d/yy h:mm`` format.
+    """ISO 8601 (an offset is converted to UTC and dropped), the BMS ``m/d/yy h:mm`` or the European
+    ``d.m.yyyy h:mm`` format.
 
     :raises ValueError: naming the text.
     """
+    return _parsed_timestamp(text)[0]
+
+
+def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
+    """:func:`parse_timestamp`, and whether the text gave a UTC offset."""
     value = text.strip()
     try:
         parsed = datetime.fromisoformat(value.replace("Z", "+00:00"))
     except ValueError:
         for fmt in _BMS_FORMATS:
             try:
-                return datetime.strptime(value, fmt)
+                return datetime.strptime(value, fmt), False
             except ValueError:
                 continue
-        raise ValueError(f"time stamp {text!r} is neither ISO 8601 nor m/d/yyyy h:mm") from None
+        raise ValueError(f"time stamp {text!r} is neither ISO 8601 nor m/d/yyyy h:mm nor d.m.yyyy h:mm") from None
     if parsed.tzinfo is not None:
-        parsed = parsed.astimezone(timezone.utc).replace(tzinfo=None)
-    return parsed
+        return parsed.astimezone(timezone.utc).replace(tzinfo=None), True
+    return parsed, False
 
 
 def _fill_short_gaps(values: np.ndarray, max_gap: int) -> tuple[np.ndarray, int]:
@@ -190,6 +201,27 @@ def _fill_short_gaps(values: np.ndarray, max_gap: int) -> tuple[np.ndarray, int]
         else:
             long_runs += 1
     return out, long_runs
+
+
+#: A position, command or speed (a fraction in the model) above this after conversion is an error:
+#: its column is in percent but declared as a fraction (BMS exports write 0–100).
+_FRACTION_MAX = 1.5
+
+
+def _check_fraction(values: np.ndarray, where: str, unit: str, problems: list[str], warnings: list[str]) -> None:
+    """A series the model reads as a fraction 0–1: an error when it reaches above
+    :data:`_FRACTION_MAX` (percent declared as a fraction), a warning when it never exceeds 0.01 but
+    is not all zero (a fraction declared as percent)."""
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return
+    peak, label = float(np.max(np.abs(finite))), unit_label(unit)
+    if peak > _FRACTION_MAX:
+        problems.append(f"{where}: reaches {peak:g} as a fraction (0–1) after conversion from {label}: "
+                        f"is it in percent? Declare saref:isMeasuredIn unit:PERCENT")
+    elif 0 < peak <= 0.01 and unit.endswith("/PERCENT"):
+        warnings.append(f"{where}: never above {peak:g} as a fraction (0–1) after conversion from {label}: "
+                        f"is it a fraction already? Then declare saref:isMeasuredIn unit:UNITLESS")
 
 
 def read_measurements(
@@ -214,7 +246,10 @@ def read_measurements(
         raw = path.read_bytes()
     except OSError as exc:
         raise MeasurementError(source, [str(exc)]) from None
-    reader = csv.reader(io.StringIO(_decoded(raw, source, warnings), newline=""))
+    text = _decoded(raw, source, warnings)
+    first_line = text.split("\n", 1)[0]
+    delimiter = ";" if ";" in first_line and "," not in first_line else ","
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
@@ -239,6 +274,7 @@ def read_measurements(
         (problems if strict else warnings).append(message)
 
     times: list[datetime] = []
+    first_with_offset: dict[bool, tuple[int, str]] = {}
     values = {node: np.full(len(rows), np.nan) for node in claimed}
     error_cells: dict[str, int] = {}
     for line, row in enumerate(rows, start=2):
@@ -246,7 +282,9 @@ def read_measurements(
             problems.append(f"line {line}: empty row")
             continue
         try:
-            times.append(parse_timestamp(row[0]))
+            stamp, with_offset = _parsed_timestamp(row[0])
+            times.append(stamp)
+            first_with_offset.setdefault(with_offset, (line, row[0].strip()))
         except ValueError as exc:
             problems.append(f"line {line}, column {header[0]!r}: {exc}")
             times.append(datetime.min)
@@ -258,7 +296,7 @@ def read_measurements(
                 error_cells[header[column]] = error_cells.get(header[column], 0) + 1
                 continue
             try:
-                value = float(cell)
+                value = float(cell.replace(",", ".") if delimiter == ";" else cell)
             except ValueError:
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a number")
                 continue
@@ -268,6 +306,10 @@ def read_measurements(
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a finite number")
     if len(times) < 2:
         problems.append("fewer than two data rows")
+    if len(first_with_offset) == 2:
+        (with_line, with_text), (without_line, without_text) = first_with_offset[True], first_with_offset[False]
+        problems.append(f"line {with_line}: time stamp {with_text!r} has a UTC offset but line {without_line}'s "
+                        f"{without_text!r} has none: give every stamp an offset, or none")
     warnings += [f"column {name!r}: {count} spreadsheet error cell(s) read as missing" for name, count in error_cells.items()]
     stamps = np.array(times, dtype="datetime64[s]")
     if len(times) >= 2:
@@ -286,9 +328,12 @@ def read_measurements(
             converted[node] = convert(values[node], spec.unit, spec.port_unit, where=f"column {header[column]!r}")
         except UnitError as exc:
             problems.append(str(exc))
+            continue
+        if spec.port_unit == "1":
+            _check_fraction(converted[node], f"column {header[column]!r}", spec.unit, problems, warnings)
     if problems:
         raise MeasurementError(source, problems)
-    step_s = float(np.median(np.diff(stamps).astype(np.int64)))
+    step_s = float(round(np.median(np.diff(stamps).astype(np.int64))))  # whole seconds, as the grid
     for node, column in claimed.items():
         if not specs[node].holds_values:
             warnings += [f"column {header[column]!r}: {text}" for text in frozen_spans(
@@ -305,16 +350,22 @@ def read_measurements(
             f"irregular time stamps ({n_irregular} spacings differ from the median step {step_s:g} s): "
             f"resampled linearly to {grid.size} steps"
         )
-        # a row gap longer than the limit must stay a gap: interpolate only between close rows
-        nearest_gap = np.diff(t_old)
+        # a gap longer than the limit stays a gap: interpolate a grid point only between two of the
+        # series' own values at most max_gap_steps + 1 steps apart (a run of empty cells is as much
+        # a gap as a run of missing rows); a grid point on a row keeps the row's value
+        limit_s = (max_gap_steps + 1) * step_s
         for node, series in converted.items():
             finite = np.isfinite(series)
-            resampled = np.interp(t_new, t_old[finite], series[finite]) if finite.sum() >= 2 else np.full(grid.size, np.nan)
-            after = np.clip(np.searchsorted(t_old, t_new, side="right") - 1, 0, t_old.size - 1)
-            too_far = np.zeros(grid.size, dtype=bool)
-            inner = after < t_old.size - 1
-            too_far[inner] = nearest_gap[after[inner]] > max_gap_steps * step_s
-            resampled[too_far] = np.nan
+            t_known, y_known = t_old[finite], series[finite]
+            resampled = np.full(grid.size, np.nan)
+            if t_known.size:
+                after = np.searchsorted(t_known, t_new, side="right")  # first known value after the point
+                before = np.clip(after - 1, 0, None)
+                on_row = (after > 0) & (t_known[before] == t_new)
+                between = (after > 0) & (after < t_known.size)
+                close = between & (t_known[np.clip(after, 0, t_known.size - 1)] - t_known[before] <= limit_s)
+                resampled[close] = np.interp(t_new[close], t_known, y_known)
+                resampled[on_row] = y_known[before[on_row]]
             converted[node] = resampled
         stamps = grid
     for node in list(converted):

@@ -159,3 +159,74 @@ def test_two_equal_readings_across_a_missing_day_are_no_frozen_point(tmp_path):
     rows += [f"2017-09-14 00:{m:02d},{60.0 + 0.1 * ((m + 3) % 7):.1f},10" for m in range(0, 10)]  # 9/13 absent
     data = read_measurements(_write(tmp_path, "time,SAT,valve\n" + "\n".join(rows) + "\n"), SPECS)
     assert not [w for w in data.warnings if "frozen" in w]
+
+
+SAT_ONLY = {"https://example.org/x#sat": SPECS["https://example.org/x#sat"]}
+
+
+def _sat_csv(stamps: list[str], cells: list[str]) -> str:
+    return "time,SAT \n" + "".join(f"{t},{c}\n" for t, c in zip(stamps, cells, strict=True))
+
+
+def _ten_minute_stamps(n: int, skip: int | None = None) -> list[str]:
+    return [f"2025-01-01 {i * 10 // 60:02d}:{i * 10 % 60:02d}" for i in range(n) if i != skip]
+
+
+def test_empty_cells_stay_a_gap_in_an_irregular_file_as_in_a_regular_one(tmp_path):
+    """20 empty cells (200 min) and, in the second file, one row missing elsewhere: the resampling
+    must not bridge the empty cells with a straight line, nor hold the last value past the end."""
+    cells = [f"{68 + 0.1 * i:.1f}" for i in range(40)]
+    cells[10:30] = [""] * 20
+    cells[-3:] = ["", "", ""]
+    sat = "https://example.org/x#sat"
+    regular = read_measurements(_write(tmp_path, _sat_csv(_ten_minute_stamps(40), cells)), SAT_ONLY)
+    irregular = read_measurements(_write(tmp_path, _sat_csv(_ten_minute_stamps(40, skip=35), cells[:35] + cells[36:])), SAT_ONLY)
+    assert any("resampled" in w for w in irregular.warnings)
+    for data in (regular, irregular):
+        assert np.isnan(data.series[sat][10:30]).all() and np.isfinite(data.series[sat][:10]).all()
+        assert np.isnan(data.series[sat][-3:]).all()
+        assert any("gap(s) longer than 5 steps left unfilled" in w for w in data.warnings)
+    assert irregular.series[sat][35] == pytest.approx((regular.series[sat][34] + regular.series[sat][36]) / 2)
+
+
+def test_a_row_just_before_a_long_row_gap_keeps_its_measured_value(tmp_path):
+    stamps = ["2025-01-01 00:00", "2025-01-01 00:30", "2025-01-01 01:00", "2025-01-01 05:00", "2025-01-01 05:30",
+              "2025-01-01 06:00"]
+    data = read_measurements(_write(tmp_path, _sat_csv(stamps, ["68", "68.9", "69.08", "70", "71", "72"])), SAT_ONLY)
+    sat = data.series["https://example.org/x#sat"]
+    assert data.step_s == 1800 and sat[2] == pytest.approx(20.6) and np.isnan(sat[3:10]).all() and sat[10] == pytest.approx(21.1111, abs=1e-3)
+
+
+def test_the_step_is_whole_seconds_and_the_grid_has_that_step(tmp_path):
+    stamps = np.datetime64("2025-01-01T00:00") + np.cumsum([0] + [600, 601] * 10).astype("timedelta64[s]")
+    data = read_measurements(_write(tmp_path, _sat_csv([str(t).replace("T", " ") for t in stamps], ["68"] * 21)), SAT_ONLY)
+    assert data.step_s == 600 and set(np.diff(data.timestamps).astype(np.int64)) == {600}
+
+
+def test_stamps_with_and_without_an_offset_in_one_file_are_refused(tmp_path):
+    path = _write(tmp_path, _sat_csv(["2025-01-01T00:00:00+01:00", "2025-01-01T00:10:00", "2025-01-01T00:20:00"],
+                                     ["68", "69", "70"]))
+    with pytest.raises(MeasurementError, match="line 2: time stamp '2025-01-01T00:00:00\\+01:00' has a UTC offset "
+                                               "but line 3's '2025-01-01T00:10:00' has none"):
+        read_measurements(path, SAT_ONLY)
+
+
+def test_a_semicolon_export_with_decimal_commas_and_european_dates_is_read(tmp_path):
+    path = _write(tmp_path, "Zeit;SAT ;valve\n01.02.2025 00:00;68;50\n01.02.2025 00:10;69,8;75,5\n")
+    data = read_measurements(path, SPECS)
+    assert str(data.timestamps[0]) == "2025-02-01T00:00:00"
+    assert data.series["https://example.org/x#sat"] == pytest.approx([20.0, 21.0])
+    assert data.series["https://example.org/x#valve"] == pytest.approx([0.5, 0.755])
+
+
+def test_a_percent_column_declared_as_a_fraction_is_refused_and_the_reverse_is_warned(tmp_path):
+    valve = "https://example.org/x#valve"
+    as_fraction = {valve: replace(SPECS[valve], unit="http://qudt.org/vocab/unit/UNITLESS")}
+    path = _write(tmp_path, "time,valve\n2025-01-01 00:00,20\n2025-01-01 00:10,40\n")
+    with pytest.raises(MeasurementError, match="column 'valve': reaches 40 as a fraction .* is it in percent"):
+        read_measurements(path, as_fraction)
+    path = _write(tmp_path, "time,valve\n2025-01-01 00:00,0.2\n2025-01-01 00:10,0.4\n")
+    data = read_measurements(path, {valve: SPECS[valve]})
+    assert data.series[valve] == pytest.approx([0.002, 0.004])
+    assert any("never above 0.004 as a fraction" in w and "UNITLESS" in w for w in data.warnings)
+    assert read_measurements(path, as_fraction).warnings == ()
