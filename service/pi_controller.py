@@ -1,4 +1,5 @@
-"""PI controller, reverse acting, output limited to 0–1, conditional-integration anti-windup."""
+"""PI controller, output limited to 0–1, conditional-integration anti-windup: reverse acting (a
+heating valve) or direct acting (a cooling valve)."""
 
 from __future__ import annotations
 
@@ -6,13 +7,14 @@ import numpy as np
 
 from .component import ComponentModel, Parameter, Port
 
-__all__ = ["PIController"]
+__all__ = ["PIController", "DirectActingPIController"]
 
 
 class PIController(ComponentModel):
-    """u = clip(K_p · (e + I / T_i), 0, 1),  e = w − y   [1]
+    """u = clip(K_p · (e + I / T_i), 0, 1),  e = a · (w − y)   [1]
 
-    Reverse acting (heating: the output rises while the measured value y is below the setpoint w).
+    Reverse acting, a = +1 (heating: the output rises while the measured value y is below the
+    setpoint w); :class:`DirectActingPIController` has a = −1 (cooling: it rises while y is above w).
     The integral I [K·s] advances by e·Δt each step **unless** the output is saturated and the error
     would drive it further into saturation (conditional integration): after a long saturation the
     controller leaves the limit as soon as the error changes sign, without unwinding a huge integral.
@@ -34,15 +36,24 @@ class PIController(ComponentModel):
         Parameter("integral_time", "s", 1200.0, 600.0, 3600.0, "integral time, T_i"),
     )
     states = ("integral",)
+    #: a in the error e = a · (w − y): +1 reverse acting, −1 direct acting
+    action = 1.0
 
     def initial_state(self, params, inputs, dt_s):
         return {"integral": np.zeros_like(np.asarray(inputs["setpoint"], dtype=float) + params["proportional_gain"])}
 
     def step(self, params, inputs, state, dt_s):
-        error = inputs["setpoint"] - inputs["measured_value"]
+        error = self.action * (inputs["setpoint"] - inputs["measured_value"])
         gain, integral = params["proportional_gain"], state["integral"]
         raw = gain * (error + integral / params["integral_time"])
         signal = np.minimum(np.maximum(raw, 0.0), 1.0)
         winding = ((raw >= 1.0) & (error > 0.0)) | ((raw <= 0.0) & (error < 0.0))
         integral += np.where(winding, 0.0, error * dt_s)
         return {"control_signal": signal}
+
+
+class DirectActingPIController(PIController):
+    """:class:`PIController` acting directly (a = −1): the output rises while the measured value is
+    above the setpoint, as a chilled-water valve opens when the supply air is too warm."""
+
+    action = -1.0

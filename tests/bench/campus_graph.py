@@ -16,12 +16,13 @@ running the alignment rules. One unit, in flow order::
       → coil inlet water sensor → heating coil (water side) → coil outlet water sensor
       → check valve → return pipe → substation           (a second loop)
 
-plus commands for the dampers and the cooling valve, power meters on both fans and the pump, a
+plus commands for the dampers, power meters on both fans and the pump, a
 valve position sensor, a room sensor per room, and a plant room that contains the heating coil (with
 its air temperature sensor). Even-numbered units heat like the case study (the water loop above, a PI
-controller on the heating valve with its setpoint schedule); odd-numbered units like the FLEXLAB AHU
-(``service/examples/flexlab_ahu``): a ``gt:HeatingCoil`` fed by a commanded valve, no water loop, and a
-supply fan with a commanded speed. Ducts and pipes (``fso:Segment``) sit between equipment, so
+controller on the heating valve with its setpoint schedule) and cool under a second controller on the
+cooling valve; odd-numbered units like the FLEXLAB AHU (``service/examples/flexlab_ahu``): a
+``gt:HeatingCoil`` fed by a commanded valve, no water loop, a commanded cooling valve and a supply fan
+with a commanded speed. Ducts and pipes (``fso:Segment``) sit between equipment, so
 traverses take several hops, and every signature of ``signatures/`` has matches.
 
     python tests/bench/campus_graph.py --ahus 2 > campus.ttl
@@ -120,7 +121,6 @@ def ahu_turtle(index: int, n_rooms: int = 8) -> str:
         "a:cooling_coil a gt:CoolingCoil ;\n    fso:suppliesFluidTo a:supply_flow_meter .\n",
         "a:cooling_valve a s4bldg:Valve ;\n    saref:hasProperty a:cooling_valve_position ;\n"
         "    fso:suppliesFluidTo a:cooling_coil .\n",
-        _command("a:cooling_valve_position", f"{tag}/cooling_valve_command"),
         _sensor("a:supply_flow_meter", "a:supply_air_flow", "gt:FlowRate", "s4bldg:FlowMeter, gt:FlowSensor",
                 "unit:M3-PER-SEC", f"{tag}/supply_air_flow", "a:supply_fan"),
         _fan("supply_fan", f"{tag}/supply_fan", "a:supply_fan_duct", flow),
@@ -168,6 +168,7 @@ def _flexlab_heating(tag: str) -> list[str]:
         "a:heating_valve a s4bldg:Valve ;\n    saref:hasProperty a:heating_valve_position ;\n"
         "    fso:suppliesFluidTo a:heating_coil_air_side .\n",
         _command("a:heating_valve_position", f"{tag}/heating_valve_command"),
+        _command("a:cooling_valve_position", f"{tag}/cooling_valve_command"),
         "a:supply_fan saref:hasProperty a:supply_fan_speed .\na:supply_fan_speed a gt:Speed .\n",
         f'a:supply_fan_speed_command a gt:CommandSignal ;\n    saref:controls a:supply_fan_speed ;\n'
         f'    saref:isMeasuredIn unit:UNITLESS ;\n    gt:timeSeriesId "{tag}/supply_fan_speed_command" .\n',
@@ -203,6 +204,11 @@ def _case_study_heating(tag: str) -> list[str]:
         "    saref:controls a:heating_valve_position ;\n    saref:hasProfile a:setpoint_schedule .\n",
         'a:setpoint_schedule a gt:SetpointSchedule ;\n    saref:isMeasuredIn unit:DEG_C ;\n'
         f'    gt:timeSeriesId "{tag}/supply_air_temperature_setpoint" .\n',
+        "a:cooling_valve_position a gt:OpeningPosition .\n",
+        "a:cooling_controller a s4bldg:Controller ;\n    saref:observes a:supply_air_sensor_temperature ;\n"
+        "    saref:controls a:cooling_valve_position ;\n    saref:hasProfile a:cooling_setpoint_schedule .\n",
+        'a:cooling_setpoint_schedule a gt:SetpointSchedule ;\n    saref:isMeasuredIn unit:DEG_C ;\n'
+        f'    gt:timeSeriesId "{tag}/supply_air_cooling_setpoint" .\n',
     ]
 
 

@@ -112,3 +112,45 @@ def test_the_coil_valve_dead_band_shuts_small_commands_and_rescales_the_rest(run
     assert heat(0.5, 0.0) > 0.0
     assert heat(0.625, 0.25) == pytest.approx(heat(0.5, 0.0), rel=1e-12)
     assert heat(1.0, 0.25) == pytest.approx(heat(1.0, 0.0), rel=1e-12)
+
+
+def test_a_controller_of_the_cooling_valve_acts_directly_and_holds_the_supply_air_at_its_setpoint(tmp_path):
+    """The cooling valve commanded by a PI controller on the supply air (setpoint 20 °C) instead of a
+    logged command, on a steady hot day (outdoor 30 °C, return 23.9 °C): the controller must open
+    the chilled-water valve while the air is too warm, so the supply air settles at 20 °C with the
+    valve part open (a reverse acting controller stays shut and leaves it at the 25.7 °C of the mixed
+    air; fully open, the coil cools it to 18.6 °C)."""
+    from service.simulator import loop_substeps
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    logged = """ex:cooling_coil_valve_command a gt:CommandSignal ;
+    rdfs:label "Cooling coil valve control signal" ;
+    saref:controls ex:cooling_coil_valve_position ;
+    saref:isMeasuredIn unit:UNITLESS ;
+    gt:timeSeriesId "AHU: Cooling Coil Valve Control Signal" ."""
+    assert logged in text
+    text = text.replace(logged, """ex:cooling_coil_valve_command a s4bldg:Controller ;
+    saref:observes ex:supply_air_temperature ; saref:controls ex:cooling_coil_valve_position ;
+    saref:hasProfile ex:supply_air_setpoint .
+ex:supply_air_setpoint a gt:SetpointSchedule ; saref:isMeasuredIn unit:DEG_C ; gt:timeSeriesId "SAT setpoint" .""")
+    assert "ex:supply_air_temperature_sensor" in text and "saref:observes ex:supply_air_temperature" in text
+    store = GraphStore.embedded(None)
+    store.load_model("cooling_pi", text.encode())
+    model = assemble(store, "cooling_pi")
+    controller = model.component_for_node(EX + "cooling_coil_valve_command")
+    assert controller.signature.id == "CoolingPIController"
+    header = ["time", "AHU: Outdoor Air Temperature", "AHU: Outdoor Air Damper Control Signal",
+              "AHU: Return Air Temperature", "AHU: Return Air Damper Control Signal",
+              "AHU: Exhaust Air Damper Control Signal", "AHU: Mixed Air Temperature", "SAT setpoint",
+              "AHU: Heating Coil Valve Control Signal", "AHU: Supply Air Fan Speed Control Signal",
+              "AHU: Supply Air Temperature"]
+    rows = [[f"2025-07-01 {i // 6:02d}:{i % 6 * 10:02d}", "86", "0.3", "75", "0.7", "0.3", "78.3", "20", "0", "0.8", "68"]
+            for i in range(144)]
+    path = tmp_path / "hot.csv"
+    path.write_text("\n".join(",".join(r) for r in [header, *rows]) + "\n")
+    data = read_model_data(model, path)
+    model_data = ModelData(model, data, loop_substeps(model, data.step_s))
+    outputs = model_data.simulator.run(model_data.boundary(slice(0, data.n_steps)), [model_data.default_theta()]).outputs
+    signal = outputs[(controller.iri, "control_signal")][0]
+    supply = outputs[(model.component_for_node(EX + "supply_air_temperature_sensor").iri, "measured_value")][0]
+    assert 0.05 < signal[-1] < 0.95 and supply[-1] == pytest.approx(20.0, abs=0.2)

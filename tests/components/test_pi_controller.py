@@ -1,9 +1,9 @@
-"""PI controller: reverse action, the integral by hand, output limits, conditional-integration anti-windup."""
+"""PI controller: reverse and direct action, the integral by hand, output limits, conditional-integration anti-windup."""
 
 import numpy as np
 import pytest
 
-from service.pi_controller import PIController
+from service.pi_controller import DirectActingPIController, PIController
 
 PARAMS = {"proportional_gain": np.array([0.02]), "integral_time": np.array([600.0])}
 
@@ -53,3 +53,14 @@ def test_a_long_closure_does_not_delay_the_opening():
     assert _drive(controller, state, 21.0, 27.0, 500)[-1] == 0.0
     assert _drive(controller, state, 21.0, 20.5, 1)[0] == pytest.approx(0.02 * 0.5, rel=1e-12)
 
+
+
+def test_direct_acting_opens_while_the_measured_value_is_above_the_setpoint():
+    # e = −(w − y) = 1 K with w = 20 °C, y = 21 °C: the same sequence as reverse action with y 1 K below w
+    controller = DirectActingPIController()
+    state = controller.initial_state(PARAMS, _signals(20.0, 21.0), 60.0)
+    signals = _drive(controller, state, 20.0, 21.0, 11, dt=60.0)
+    np.testing.assert_allclose(signals, [0.02 * (1 + 0.1 * k) for k in range(11)], rtol=1e-12)
+    too_cold = DirectActingPIController()
+    state = too_cold.initial_state(PARAMS, _signals(20.0, 19.0), 60.0)
+    assert _drive(too_cold, state, 20.0, 19.0, 1)[0] == 0.0  # measured below setpoint: closes
