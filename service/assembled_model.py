@@ -114,13 +114,15 @@ def load_model_class(signature: Signature) -> type[ComponentModel]:
     maps (:func:`~service.signature.check_model_names`; a Python model was checked when the library
     was loaded).
 
-    :raises SignatureError: the model cannot be imported, or the FMU lacks a port or parameter.
+    :raises SignatureError: the model cannot be imported, or the FMU lacks a port or parameter, or
+        declares a mapped port in another unit than the simulator passes.
     """
     if signature.fmu is not None:
-        from .fmu_component import fmu_model_class
+        from .fmu_component import check_port_units, fmu_model_class
 
         model_class = fmu_model_class(signature.fmu)
         check_model_names(signature, model_class)
+        check_port_units(signature, model_class)
         return model_class
     assert signature.model is not None
     cached = _MODEL_CACHE.get(signature.model)

@@ -20,7 +20,11 @@ from .calibration_problem import CalibrationProblem
 from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .simulator import Simulator
 
-__all__ = ["QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+__all__ = ["GAP_RECOVERY_S", "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+
+#: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
+#: the model's states come out of the gap off (as at a window's start, ``ModelData.problem``'s warm-up).
+GAP_RECOVERY_S = 3600.0
 
 #: Simulator unit of each quantity a signature output may carry (``signatures/README.md``).
 QUANTITY_UNITS = {
@@ -101,14 +105,20 @@ class ModelData:
         return {c: self.data.series[node][window] for c, node in self.node_of.items()}
 
     def observed(self, window: slice) -> dict[str, np.ndarray]:
-        """Target node → observed series in ``window``: NaN where not measured, and NaN where a
+        """Target node → observed series in ``window``: NaN where not measured; NaN where a
         boundary input is missing (a gap longer than the interpolation limit: the simulator holds
-        the input's last value there, so the model is not compared with the measurement), and
-        NaN outside the operating filter (``compared``)."""
-        inputs_measured = (np.ones(self.data.n_steps, dtype=bool) if self.compared is None else self.compared)[window]
+        the input's last value there, so the model is not compared with the measurement) and for
+        :data:`GAP_RECOVERY_S` after such a gap (the model's states — thermal masses, a controller's
+        integral — come out of it off, and take that long to follow the inputs again); and NaN
+        outside the operating filter (``compared``)."""
+        inputs_missing = np.zeros(window.stop - window.start, dtype=bool)
         for component in self.model.boundary_inputs:
-            inputs_measured &= np.isfinite(self.data.series[self.node_of[component]][window])
-        return {self.node_of[c]: np.where(inputs_measured, self.data.series[self.node_of[c]][window], np.nan)
+            inputs_missing |= ~np.isfinite(self.data.series[self.node_of[component]][window])
+        recovery = int(round(GAP_RECOVERY_S / self.data.step_s))
+        after_gap = np.convolve(inputs_missing, np.ones(recovery + 1, dtype=bool))[: inputs_missing.size] > 0
+        compared = (np.ones(self.data.n_steps, dtype=bool) if self.compared is None else self.compared)[window]
+        keep = compared & ~after_gap
+        return {self.node_of[c]: np.where(keep, self.data.series[self.node_of[c]][window], np.nan)
                 for c in self.model.targets}
 
     def simulate_targets(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:

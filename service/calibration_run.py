@@ -147,11 +147,15 @@ def calibrate(
     progress: bool = False,
     on_progress: Callable[[dict], None] | None = None,
     only_when: Sequence[str] = (),
+    min_test_steps: int = 1,
 ) -> CalibrationOutcome:
-    """Calibrate ``model_name`` against the CSV at ``data_path`` and store the run.
+    """Calibrate ``model_name`` against the CSV at ``data_path`` and store the run. A test window
+    that overlaps the training window is noted in the run's warnings (its metrics are then partly on
+    data the fit saw).
 
     :param only_when: operating conditions (``"SF Spd Cmd (%) > 5"``, :mod:`service.operating_filter`):
         the targets are compared only at the steps where all hold.
+    :param min_test_steps: a test window with fewer steps of data is refused.
 
     :raises ValueError: a bad window, a target without measurements, NaN-only series, an unknown
         method; nothing is written to the store then.
@@ -166,12 +170,21 @@ def calibrate(
     md = ModelData(model, data, substeps, operating_mask(data, only_when))
     train_slice = data.window(*train)
     test_slice = data.window(*test) if test is not None else None
+    window_notes = []
+    if test_slice is not None:
+        if test_slice.stop - test_slice.start < min_test_steps:
+            raise ValueError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "
+                             f"steps of data: at least {min_test_steps} are needed")
+        overlap = min(train_slice.stop, test_slice.stop) - max(train_slice.start, test_slice.start)
+        if overlap > 0:
+            window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
+                                "partly on data the calibration fitted")
     problem = md.problem(train_slice)
     n_par = problem.n_parameters
     settings = {"substeps": substeps, "step_s": data.step_s}
     if only_when:
         settings["only_when"] = list(only_when)
-    diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes) + list(md.simulator.notes)}
+    diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes) + list(md.simulator.notes) + window_notes}
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None
     if method == "point":

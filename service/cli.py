@@ -269,7 +269,9 @@ def _plot_run(outcome, path: Path) -> Path:
                                   title=f"{outcome.record.model_name}: {key} window")
 
 
-def _print_diagnosis(report: DiagnosisReport) -> None:
+def _print_diagnosis(report: DiagnosisReport, *, stored: bool = True) -> None:
+    """The diagnosis as tables and sentences; ``stored``: the run is in a store that outlives this
+    command (not ``--memory``), so its report can be made later."""
     _print_data_warnings(report.data_warnings)
     table = Table(title="Test window: model vs measurements")
     for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
@@ -301,7 +303,11 @@ def _print_diagnosis(report: DiagnosisReport) -> None:
                       f"{100 * e.test_improvement:.0f} %", "yes" if e.significant else "no")
     console.print(table)
     console.print(f"[bold]{report.summary}[/bold]")
-    console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis -o report.html")
+    if stored:
+        console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis -o report.html")
+    else:
+        console.print(f"run {report.run_id} was in a throw-away store (--memory): run again with --store DIR to keep "
+                      "it and make its report (graphtwin report)")
 
 
 @app.command("simulate")
@@ -382,7 +388,7 @@ def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, m
     if as_json:
         console.print_json(json.dumps(report.to_dict(), default=str))
         return
-    _print_diagnosis(report)
+    _print_diagnosis(report, stored=not memory)
     console.print("plots: " + ", ".join(str(p) for p in _save_diagnosis_plots(report, plots)))
 
 

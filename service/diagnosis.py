@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import pyoxigraph as ox
 
-from .assembly import EffectRequest, assemble
+from .assembly import EffectRequest, assemble, recorded_effects
 from .calibration_data import ModelData
 from .calibration_problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR, CalibrationProblem
 from .calibration_run import Window, calibrate
@@ -61,6 +61,11 @@ from .store import GraphStore
 from .units import unit_label
 
 __all__ = ["DiagnosisReport", "diagnose", "noise_level", "effect_candidates"]
+
+
+#: Fewer test steps than this give no verdict (diagnose refuses the window before calibrating): the
+#: noise level comes from second differences and the effects are judged on the window's second half.
+MIN_TEST_STEPS = 12
 
 
 def noise_level(values: np.ndarray, unit: str, observed: np.ndarray) -> float:
@@ -122,9 +127,10 @@ class DiagnosisReport:
 
 
 def effect_candidates(store: GraphStore, model_name: str, library: dict[str, Signature]):
-    """(effect signature, node, assembled model with it) for every applicable pair; and the reasons
-    the others do not apply."""
+    """(effect signature, node, assembled model with it) for every applicable pair the model does
+    not record already; and the reasons the others do not apply."""
     dataset = store.matching_dataset(model_name)
+    applied = set(recorded_effects(store, model_name, library))
     candidates, skipped = [], []
     for signature in sorted((s for s in library.values() if s.kind == "effect"), key=lambda s: s.id):
         nodes = sorted({m[signature.splice.node] for m in match_signature(store, signature, default_graph=dataset)
@@ -132,6 +138,9 @@ def effect_candidates(store: GraphStore, model_name: str, library: dict[str, Sig
         if not nodes:
             skipped.append(f"{signature.id}: its pattern ({signature.source_file.name}) matches nowhere")
         for node in nodes:
+            if EffectRequest(signature.id, node) in applied:
+                skipped.append(f"{signature.id} at {local_name(node)}: already in the model (gt:hasEffect)")
+                continue
             try:
                 model = assemble(store, model_name, library=library, extra_effects=[EffectRequest(signature.id, node)])
             except ValueError as exc:
@@ -297,6 +306,16 @@ def _host_columns(job: _CandidateJob) -> list[int]:
     return columns if columns and all(refs[j].key in job.train_unidentified for j in columns) else []
 
 
+def _bound_note(value: float, spec) -> str:
+    """`` (at its lower/upper bound B)`` when ``value`` sits within 10⁻⁶ of the range of a bound of
+    ``spec`` (a :class:`~service.component.Parameter`): the data push it further than the prior allows."""
+    tolerance = 1e-6 * (spec.upper - spec.lower)
+    for side, bound in (("lower", spec.lower), ("upper", spec.upper)):
+        if abs(value - bound) <= tolerance:
+            return f" (at its {side} bound {bound:g})"
+    return ""
+
+
 def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     md = ModelData(job.model, job.data, job.substeps, job.compared)
@@ -324,16 +343,23 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
             theta, standard_errors, mean_square = onset_fit
             onset = "appearing in the test window"
     n = problem.n_observations
+    # The refit moves the base parameters too. What it gains with them alone (the effect set back to
+    # its null) is the base model's, not the effect's: the effect is judged against the better of
+    # the base refit and that, in ΔBIC on the fit windows and out of sample on the evaluation half.
+    theta_null = theta.copy()
+    theta_null[effect_columns] = _null(refs, effect_columns)
+    base_rss = min(job.base_rss, float(np.sum(problem.weighted_residuals(problem.run(theta_null[None, :])) ** 2)))
+    observed = md.observed(job.evaluation)
+    before = min((job.base_evaluation_prediction, _predict_evaluation(md, job.run_window, job.evaluation, theta_null)),
+                 key=lambda prediction: weighted_test_error(observed, prediction, job.target_scales))
     evidence = EffectEvidence(
         effect=job.signature.id, effect_iri=job.signature.iri, node=job.node, label=job.signature.label,
         parameter_names=tuple(refs[j].name for j in effect_columns), score=score,
-        delta_bic=delta_bic(job.base_rss, mean_square * n, job.sample_fraction * n, len(effect_columns)),
+        delta_bic=delta_bic(base_rss, mean_square * n, job.sample_fraction * n, len(effect_columns)),
         estimates={refs[j].name: float(theta[j]) for j in effect_columns},
         standard_errors={refs[j].name: float(standard_errors[j]) for j in effect_columns},
     )
     after = _predict_evaluation(md, job.run_window, job.evaluation, theta)
-    before = job.base_evaluation_prediction
-    observed = md.observed(job.evaluation)
     before_error = weighted_test_error(observed, before, job.target_scales)
     after_error = weighted_test_error(observed, after, job.target_scales)
     evidence.test_improvement = 1.0 - after_error / before_error if before_error > 0 else 0.0
@@ -349,7 +375,8 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     evidence.residual_correlation = (best, rho)
     removed = 1.0 - evidence.rmse_after[best] ** 2 / max(evidence.rmse_before[best] ** 2, 1e-300)
     estimates = "; ".join(
-        f"{name} = {evidence.estimates[name]:.3g} ± {evidence.standard_errors[name]:.2g}" for name in evidence.parameter_names
+        f"{refs[j].name} = {theta[j]:.3g} ± {standard_errors[j]:.2g}" + _bound_note(theta[j], refs[j].spec)
+        for j in effect_columns
     )
     evidence.explanation = (
         f"residual on {local_name(best)} correlates {rho:.2f} with what {job.signature.id} at {local_name(job.node)} adds; "
@@ -384,7 +411,7 @@ def diagnose(
     library = library or load_signature_library(signatures_dir())
     say("calibrating the base model")
     base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps,
-                     only_when=only_when)
+                     only_when=only_when, min_test_steps=MIN_TEST_STEPS)
     md, model = base.model_data, base.model
     substeps = md.substeps
     data = md.data

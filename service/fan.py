@@ -10,12 +10,14 @@ __all__ = ["Fan", "part_load_power_fraction"]
 
 
 def part_load_power_fraction(flow_fraction, c1, c2, c3, c4):
-    """c1 + c2·f + c3·f² + c4·f³ (Horner), clipped at 0 [1]."""
-    return np.maximum(c1 + flow_fraction * (c2 + flow_fraction * (c3 + flow_fraction * c4)), 0.0)
+    """c1 + c2·f + c3·f² + c4·f³ (Horner), clipped at 0, and 0 where f ≤ 0 (the fan is off: c1 is the
+    curve's constant term while it runs, not a stand-by draw) [1]."""
+    fraction = np.maximum(c1 + flow_fraction * (c2 + flow_fraction * (c3 + flow_fraction * c4)), 0.0)
+    return np.where(flow_fraction > 0.0, fraction, 0.0)
 
 
 class Fan(ComponentModel):
-    """P = P_nom · (c1 + c2·f + c3·f² + c4·f³),  f = max(V̇, 0) / V̇_nom   [W]
+    """P = P_nom · (c1 + c2·f + c3·f² + c4·f³),  f = max(V̇, 0) / V̇_nom   [W];  P = 0 at f = 0 (off)
 
     ṁ = ρ_air · V̇ [kg/s] with ρ_air = 1.204 kg/m³; the air leaves at its inlet temperature (motor
     heat in the air stream is the FanMotorHeat effect, not part of this base model). Defaults: the

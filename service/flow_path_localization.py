@@ -1,8 +1,11 @@
 """Where along the flow path the model fails: between the last sensor it matches and the first it doesn't.
 
 The building graph's flow topology (``fso:suppliesFluidTo`` for air and water, ``fso:transfersHeatTo``
-from a coil's water side to its air side; ``queries/flow-edges.rq``) is a directed graph, possibly
-with loops (return air mixed back into the supply). For a failing sensor ``f``:
+between a coil's water side and its air side; ``queries/flow-edges.rq``) is a directed graph,
+possibly with loops (return air mixed back into the supply). A heat transfer couples both ways — the
+air a coil heats decides the water leaving it as much as the water decides the air — so it is an
+edge in both directions: a coil's water outlet sensor has the air side's upstream among its suspects
+(a fan's motor heat upstream of the coil shows at the water outlet). For a failing sensor ``f``:
 
 1. its place ``p`` is ``f`` itself when ``f`` sits in the flow path, else the node that has the
    property it observes (a valve position sensor sits at its valve, a power meter at its fan;
@@ -54,12 +57,14 @@ class FlowTopology:
 
     :param edges: (upstream IRI, downstream IRI) pairs.
     :param observed_owner: sensor IRI → IRI of the node whose property it observes.
+    :param heat_couplings: (IRI, IRI) pairs that exchange heat (``fso:transfersHeatTo``), edges both ways.
     """
 
-    def __init__(self, edges: Iterable[tuple[str, str]], observed_owner: Mapping[str, str] | None = None):
+    def __init__(self, edges: Iterable[tuple[str, str]], observed_owner: Mapping[str, str] | None = None,
+                 heat_couplings: Iterable[tuple[str, str]] = ()):
         self.downstream: dict[str, set[str]] = defaultdict(set)
         self.upstream: dict[str, set[str]] = defaultdict(set)
-        for source, target in edges:
+        for source, target in [*edges, *((b, a) for a, b in heat_couplings), *heat_couplings]:
             self.downstream[source].add(target)
             self.upstream[target].add(source)
         self.observed_owner = dict(observed_owner or {})
@@ -67,12 +72,14 @@ class FlowTopology:
     @classmethod
     def from_store(cls, store, model_name: str) -> FlowTopology:
         """Read the topology of ``model_name`` with ``queries/flow-edges.rq`` and ``observed-node.rq``."""
-        edges = [(r["from"].value, r["to"].value) for r in store.run_named_query("flow-edges", dataset=model_name)]
+        rows = store.run_named_query("flow-edges", dataset=model_name)
+        edges = [(r["from"].value, r["to"].value) for r in rows if r["kind"].value == "fluid"]
+        couplings = [(r["from"].value, r["to"].value) for r in rows if r["kind"].value == "heat"]
         owners: dict[str, str] = {}
         for row in store.run_named_query("observed-node", dataset=model_name):
             if row.get("owner") is not None:
                 owners.setdefault(row["device"].value, row["owner"].value)
-        return cls(edges, owners)
+        return cls(edges, owners, couplings)
 
     def in_flow_path(self, node: str) -> bool:
         return node in self.downstream or node in self.upstream

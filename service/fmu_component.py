@@ -6,7 +6,9 @@ class from it:
 
 * **ports**: every ``Real`` variable with causality ``input`` / ``output`` becomes a
   :class:`~service.component.Port` with the variable's unit (or its declared type's unit, else ``""``).
-  FMU units are taken as written: an FMU that works in K where the library uses °C needs a wrapper.
+  A port the signature maps must declare the unit the simulator passes for its quantity (or none):
+  :func:`check_port_units` refuses an FMU whose flow input is in m³/h or whose temperatures are in
+  absolute K where the library passes °C (it would read the values unconverted); such an FMU needs a wrapper.
 * **parameters**: every ``Real`` variable with causality ``parameter`` and variability ``fixed`` or
   ``tunable`` becomes a :class:`~service.component.Parameter` with ``default = start`` and bounds
   ``[min, max]`` from the modelDescription. **When ``min`` or ``max`` is missing the bound is
@@ -66,7 +68,7 @@ import numpy as np
 
 from .component import ComponentModel, Parameter, Params, Port, Signals, State
 
-__all__ = ["FMUComponent", "fmu_model_class", "live_instance_count"]
+__all__ = ["FMUComponent", "fmu_model_class", "live_instance_count", "check_port_units"]
 
 _FMI_OK_OR_WARNING = 1  # fmi2Status above this is Discard / Error / Fatal / Pending
 
@@ -341,3 +343,32 @@ def _ensemble_size(params: Params, inputs: Signals) -> int:
 def _instance_for(path: str) -> FMUComponent:
     return fmu_model_class(Path(path))()
 
+
+def check_port_units(signature, model_class: type[ComponentModel]) -> None:
+    """Every port of an FMU class that ``signature`` maps declares the unit the simulator passes for
+    the mapping's quantity (``service.calibration_data.QUANTITY_UNITS``), or no unit.
+
+    :raises SignatureError: naming the signature file, the port, the FMU's unit and the expected one.
+    """
+    from .calibration_data import QUANTITY_UNITS
+    from .signature import SignatureError
+    from .units import UnitError, unit_spec
+
+    declared = {port.name: port.unit for port in (*model_class.inputs, *model_class.outputs)}
+    for side, mappings in (("inputs", signature.inputs), ("outputs", signature.outputs)):
+        for mapping in mappings:
+            unit, expected = declared[mapping.port], QUANTITY_UNITS[mapping.quantity]
+            try:
+                same = not unit or _conversion(unit_spec(unit)) == _conversion(unit_spec(expected))
+            except UnitError:
+                same = False
+            if not same:
+                raise SignatureError(
+                    f"{signature.source_file or '<signature>'}: {side}.{mapping.port}: {signature.fmu} declares "
+                    f"{mapping.port!r} in {unit!r}, the simulator passes {mapping.quantity} in {expected!r}: the FMU "
+                    f"would read the values unconverted (declare the variable in {expected!r}, or wrap the FMU)")
+
+
+def _conversion(spec) -> tuple:
+    """What makes two unit specs the same unit (their label aside)."""
+    return spec.dimension, spec.multiplier, spec.offset, spec.difference

@@ -167,9 +167,12 @@ def residual_dependence(
             break
         e, xr = residual[rows], x[rows]
         above = np.column_stack([np.ones(int(rows.sum()))] + [c[rows] for c in columns])
+        e_left = _residual_of(e, above)
+        if np.sum(e_left ** 2) <= 1e-12 * np.sum((e - e.mean()) ** 2):
+            break  # the signals above explain the residual whole: nothing is left to correlate with
         x_cleared = _residual_of(xr, above)
         new = x_cleared @ x_cleared > COLLINEAR_SHARE * np.sum((xr - xr.mean()) ** 2)
-        partial = _correlation(_residual_of(e, above), x_cleared) if new else 0.0
+        partial = _correlation(e_left, x_cleared) if new else 0.0
         r2 = 1.0 - np.sum(_residual_of(e, np.column_stack([above, xr])) ** 2) / np.sum((e - e.mean()) ** 2)
         ranked[k] = replace(dependence, partial_correlation=partial, cumulative_r2=float(r2))
         columns.append(x)

@@ -433,9 +433,16 @@ def _undeclared(path: Path | None, where: str, model: str, what: str, name: str,
         raise _fail(path, where, f"{model} has no {what} {name!r}; its {what}s: {', '.join(declared) or 'none'}")
 
 
+#: Input ports the simulator feeds without a mapping: a measuring device's ``measured_value`` (its
+#: measurement, replayed when it is a boundary input) and an effect's ``value_in`` (what the spliced port carries).
+_FED_WITHOUT_MAPPING = {"component": ("measured_value",), "effect": ("value_in",)}
+
+
 def check_model_names(signature: Signature, model_class: type[ComponentModel]) -> None:
     """Every input, output and parameter ``signature`` maps is one that ``model_class`` (the class
-    its ``model`` names, or the class built for its ``fmu``) declares.
+    its ``model`` names, or the class built for its ``fmu``) declares, and every input port of the
+    class is mapped (but those the simulator feeds itself, :data:`_FED_WITHOUT_MAPPING`): an
+    unmapped input would run on NaN.
 
     :raises SignatureError: naming the file, the key and the names the class declares.
     """
@@ -447,6 +454,12 @@ def check_model_names(signature: Signature, model_class: type[ComponentModel]) -
         _undeclared(path, f"outputs.{mapping.port}", model, "output port", mapping.port, model_class.output_names())
     for parameter in signature.parameters:
         _undeclared(path, f"parameters.{parameter.name}", model, "parameter", parameter.name, parameter_names)
+    mapped = {mapping.port for mapping in signature.inputs} | set(_FED_WITHOUT_MAPPING.get(signature.kind, ()))
+    unmapped = [name for name in model_class.input_names() if name not in mapped]
+    if unmapped:
+        raise _fail(path, f"inputs.{unmapped[0]}", f"{model} has input port(s) {', '.join(map(repr, unmapped))} the "
+                    "signature does not map: add [inputs.NAME] with its source node and quantity (an input left "
+                    "unfed would run on NaN)")
 
 
 def load_signature(path: Path) -> Signature:

@@ -70,7 +70,9 @@ def fan_lag_model(fmu: Path, signature_file: Path | None = None) -> AssembledMod
     on ``lagged_power``); :data:`FAN_CURVE` mapped, θ = (nominal_power [W], time_constant [s])."""
     device = signature_from_dict({"id": "Device", "modeled_nodes": ["n"], "nodes": {"n": {"classes": ["urn:Device"]}},
                                   "model": "service.measuring_device:MeasuringDevice"})
-    fan = signature_from_dict({"id": "FanFMU", "modeled_nodes": ["n"], "nodes": {"n": {"classes": ["urn:Fan"]}},
+    fan = signature_from_dict({"id": "FanFMU", "modeled_nodes": ["n"],
+                               "nodes": {"n": {"classes": ["urn:Fan"]}, "flow": {"classes": ["urn:Device"]}},
+                               "inputs": {"air_volume_flow": {"source": "flow", "quantity": "volume_flow"}},
                                "fmu": str(Path(fmu).resolve())}, signature_file)
     cls = load_model_class(fan)
     components = {

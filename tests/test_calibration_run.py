@@ -92,6 +92,19 @@ def test_bad_windows_and_targets_write_nothing(synthetic, tmp_path):
         parse_window("2026-01-12")
 
 
+def test_a_too_short_test_window_is_refused_before_anything_is_written_and_an_overlap_is_noted(synthetic):
+    from service.diagnosis import MIN_TEST_STEPS, diagnose
+
+    store, path, _ = synthetic
+    graphs_before = set(store.backend.graphs())
+    with pytest.raises(ValueError, match=f"the test window 2026-01-14T00:00/2026-01-14T00:10 holds 2 steps of data: "
+                                         f"at least {MIN_TEST_STEPS} are needed"):
+        diagnose(store, "case", path, train=TRAIN, test=("2026-01-14T00:00", "2026-01-14T00:10"))
+    assert set(store.backend.graphs()) == graphs_before
+    overlapping = calibrate(store, "case", path, train=("2026-01-12", "2026-01-14T11:59"), test=TEST)
+    assert any("overlaps the training window by 72 steps" in w for w in overlapping.record.diagnostics["warnings"])
+
+
 def _edited_csv(source, target, column, rows):
     """A copy of the CSV at ``source`` with ``column`` emptied on the data rows ``rows`` (0 = first)."""
     lines = source.read_text().splitlines()
@@ -137,7 +150,8 @@ def test_bounds_that_exclude_a_mapped_value_are_refused_before_anything_is_writt
 
 def test_nan_gaps_are_left_out_not_filled(synthetic, tmp_path):
     """A long gap in a target leaves those steps out of that target; a long gap in a boundary input
-    leaves them out of every target (the simulator only holds the input there); the fit is unharmed."""
+    leaves them out of every target (the simulator only holds the input there), and the hour after
+    it (the model's states catch up); the fit is unharmed."""
     store, path, _ = synthetic
     day = range(144)
     target_gap, input_gap = range(40, 60), range(90, 110)  # 20 steps each, beyond the 5-step interpolation
@@ -145,8 +159,8 @@ def test_nan_gaps_are_left_out_not_filled(synthetic, tmp_path):
     gappy = _edited_csv(gappy, gappy, "supply_air_flow", input_gap)
     outcome = calibrate(store, "case", gappy, train=("2026-01-12", "2026-01-12T23:59"), seed=0)
     metrics = outcome.record.metrics["train"]
-    warmup = 6  # the first hour is simulated, not compared
-    compared = len(day) - warmup - len(input_gap)
+    warmup = recovery = 6  # the first hour, and the hour after the input's gap, are simulated, not compared
+    compared = len(day) - warmup - len(input_gap) - recovery
     assert metrics[EX + "valve_position_sensor"].n == compared - len(target_gap)
     assert metrics[EX + "coil_outlet_air_temperature_sensor"].n == compared
     assert metrics[EX + "fan_power_meter"].rmse < 0.03 * metrics[EX + "fan_power_meter"].mean_observed

@@ -166,3 +166,22 @@ def test_an_fmu_signature_mapping_a_port_the_fmu_lacks_names_file_key_and_ports(
     with pytest.raises(SignatureError, match=r"fan_fmu\.toml: outputs\.lagged_powr: .* has no output port "
                                              r"'lagged_powr'; its output ports: .*lagged_power"):
         load_model_class(signature)
+
+
+def test_an_fmu_input_the_signature_does_not_map_is_refused_not_run_on_nan(fan_lag_fmu, tmp_path):
+    signature = signature_from_dict({"id": "FanFMU", "modeled_nodes": ["n"], "nodes": {"n": {"classes": ["urn:Fan"]}},
+                                     "fmu": str(fan_lag_fmu.resolve())}, tmp_path / "fan_fmu.toml")
+    with pytest.raises(SignatureError, match=r"fan_fmu.toml: inputs.air_volume_flow: .*FanLag.fmu has input port\(s\) "
+                                             r"'air_volume_flow' the signature does not map"):
+        load_model_class(signature)
+
+
+@pytest.mark.parametrize("unit", ["m3/h", "furlong/s"])
+def test_an_fmu_port_in_another_unit_than_the_simulator_passes_is_refused(build, tmp_path, unit):
+    folder, binary, description = build
+    flow_input = '<Real unit="m3/s" start="0"/></ScalarVariable>'
+    assert description.count(flow_input) == 1
+    fmu = package_fmu(tmp_path, "FanLagPerHour.fmu", description.replace(flow_input, flow_input.replace("m3/s", unit)), binary)
+    with pytest.raises(SignatureError, match=rf"fan_fmu.toml: inputs.air_volume_flow: .*FanLagPerHour.fmu declares "
+                                             rf"'air_volume_flow' in '{unit}', the simulator passes volume_flow in 'm3/s'"):
+        fan_lag_model(fmu, tmp_path / "fan_fmu.toml")

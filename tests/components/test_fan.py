@@ -25,11 +25,13 @@ def test_half_flow_follows_the_cubic(run_model, params_for):
     assert _fan(run_model, params_for(Fan), 0.75)["electric_power"] == pytest.approx(1800.0 * 0.299975, rel=1e-12)
 
 
-def test_no_or_reversed_flow_draws_the_constant_term_and_moves_no_air(run_model, params_for):
+def test_no_or_reversed_flow_is_a_fan_that_is_off_it_draws_nothing_and_moves_no_air(run_model, params_for):
     for flow in (0.0, -0.3):
         out = _fan(run_model, params_for(Fan), flow)
-        assert out["electric_power"] == pytest.approx(1800.0 * 0.0013, rel=1e-12)
+        assert out["electric_power"] == 0.0
         assert out["outlet_air_mass_flow"] == 0.0
+    # running at the smallest flow, it draws the curve's constant term
+    assert _fan(run_model, params_for(Fan), 1e-9)["electric_power"] == pytest.approx(1800.0 * 0.0013, rel=1e-6)
 
 
 def test_a_negative_curve_value_gives_zero_power(run_model, params_for):

@@ -19,10 +19,10 @@ def test_half_speed_moves_half_the_nominal_flow_at_the_curve_power(run_model, pa
     assert out["outlet_air_temperature"][0] == 16.0
 
 
-def test_commands_outside_zero_to_one_are_clipped(run_model, params_for):
+def test_commands_outside_zero_to_one_are_clipped_and_a_fan_at_speed_zero_is_off(run_model, params_for):
     out = _fan(run_model, params_for(SpeedControlledFan, n=2), np.array([1.2, -0.04]))
     np.testing.assert_allclose(out["outlet_air_mass_flow"], [1.204 * 1.5, 0.0], rtol=1e-12)
-    np.testing.assert_allclose(out["electric_power"], [1800.0 * 0.9991, 1800.0 * 0.0013], rtol=1e-12)
+    np.testing.assert_allclose(out["electric_power"], [1800.0 * 0.9991, 0.0], rtol=1e-12)
 
 
 def test_equals_the_fan_at_the_flow_its_speed_gives(run_model):

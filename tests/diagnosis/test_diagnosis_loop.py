@@ -133,3 +133,33 @@ def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():
     # a temperature keeps its absolute floor of 0.1 K, whatever the reading
     assert noise_level(rng.normal(0.0, 0.01, 288), "degC", observed) == pytest.approx(0.1)
 
+
+
+def test_an_effect_the_model_records_is_not_offered_again():
+    import pyoxigraph as ox
+
+    from service.diagnosis import effect_candidates
+    from service.effect_recording import applied_effect_triples
+
+    store = GraphStore.embedded(None)
+    triples = applied_effect_triples(LIBRARY["FanMotorHeat"], EX + "supply_fan")
+    store.load_model("case", CASE_STUDY.read_bytes() + b"\n" + ox.serialize(triples, format=ox.RdfFormat.N_TRIPLES))
+    candidates, skipped = effect_candidates(store, "case", LIBRARY)
+    offered = {(signature.id, node) for signature, node, _model in candidates}
+    assert ("FanMotorHeat", EX + "supply_fan") not in offered and ("ValveLeakage", EX + "heating_valve") in offered
+    assert "FanMotorHeat at supply_fan: already in the model (gt:hasEffect)" in skipped
+
+
+@pytest.mark.slow
+def test_an_effect_is_not_credited_with_what_the_refit_base_parameters_gain(tmp_path):
+    """Fan motor heat hidden (3 days, seed 1): a valve stuck with a weight of ~0.0002 improves the
+    evaluation half mostly through the base parameters its refit moves (set the weight back to 0 and
+    most of the gain stays). Judged against the better of the base refit and its own base parameters
+    with the effect nulled, it is not significant; the hidden effect is, and alone."""
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    data = tmp_path / "data.csv"
+    generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="FanMotorHeat", seed=1, n_days=3.0)
+    report = diagnose(store, "case", data, train=("2026-01-12", "2026-01-13T23:50"), test=TEST, seed=0)
+    assert [(e.effect, e.node) for e in report.effects if e.significant] == [("FanMotorHeat", EX + "supply_fan")], \
+        [(e.effect, e.estimates, e.delta_bic, e.test_improvement) for e in report.effects[:3]]

@@ -45,3 +45,20 @@ def test_off_path_sensor_is_placed_at_the_node_it_observes():
     assert location.matching_sensor == "swt"
     assert location.components == ("hw_valve",)
     assert "hw_valve" in location.describe() and "valve_pos" in location.describe()
+
+
+def test_a_coils_water_outlet_has_the_air_side_upstream_among_its_suspects():
+    """The case study: a coil's water side transfers heat to its air side. The air the coil heats
+    decides the water leaving it, so a failing water outlet sensor is located between the coil
+    inlet water sensor and it, and between the fan's inlet air sensor and it (the fan among the suspects)."""
+    fluid = [("fan_inlet", "fan"), ("fan", "coil_air"), ("coil_air", "coil_outlet_air"),
+             ("swt", "valve"), ("valve", "pump"), ("pump", "coil_inlet_water"), ("coil_inlet_water", "coil_water"),
+             ("coil_water", "coil_outlet_water")]
+    topology = FlowTopology(fluid, heat_couplings=[("coil_water", "coil_air")])
+    sensors = {"fan_inlet", "coil_outlet_air", "swt", "coil_inlet_water", "coil_outlet_water"}
+    matches = {s: s != "coil_outlet_water" for s in sensors}
+    locations = {loc.matching_sensor: set(loc.components) for loc in localize_failures(topology, matches, sensors)}
+    assert locations == {"coil_inlet_water": {"coil_water", "coil_air"}, "fan_inlet": {"fan", "coil_air", "coil_water"}}
+    air_fails = {s: s != "coil_outlet_air" for s in sensors}  # the water side is still a suspect of the air outlet
+    located = {loc.matching_sensor: set(loc.components) for loc in localize_failures(topology, air_fails, sensors)}
+    assert located == {"fan_inlet": {"fan", "coil_air", "coil_water"}, "coil_inlet_water": {"coil_water", "coil_air"}}

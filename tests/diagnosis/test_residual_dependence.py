@@ -77,3 +77,11 @@ def test_bad_input_is_refused():
         residual_dependence(np.ones(N), signals)
     with pytest.raises(ValueError, match="valid has shape"):
         residual_dependence(residual, signals, valid=np.ones(3, dtype=bool))
+
+
+def test_a_residual_the_first_signal_explains_whole_gets_no_partial_correlation_after_it():
+    t = np.arange(200.0)
+    first, second = np.sin(t / 10.0), np.cos(t / 7.0)
+    ranked = residual_dependence(2.0 * first, {"first": first, "second": second}, max_lag_steps=0)
+    assert ranked[0].signal == "first" and ranked[0].cumulative_r2 == pytest.approx(1.0)
+    assert ranked[1].partial_correlation is None and "nan" not in ranked[1].describe()

@@ -1,6 +1,6 @@
 /* FanLag: a tiny FMI 2.0 co-simulation FMU for tests/test_fmu_component.py.
  *
- *   electric_power = P_nom * max(c1 + f (c2 + f (c3 + f c4)), 0),  f = max(V, 0) / V_nom   [W]
+ *   electric_power = P_nom * max(c1 + f (c2 + f (c3 + f c4)), 0),  f = max(V, 0) / V_nom   [W]; 0 at f = 0 (off)
  *   lagged_power   = x,  x <- x + (1 - exp(-h / tau)) * (electric_power - x) in fmi2DoStep
  *
  * the same polynomial (Horner, clipped at 0) as service.fan.Fan and the exact discretisation of a
@@ -36,6 +36,7 @@ static double power(const Instance *m) {
     double flow = m->r[VR_FLOW] > 0.0 ? m->r[VR_FLOW] : 0.0;
     double f = flow / m->r[VR_NOMINAL_FLOW];
     double fraction = m->r[VR_C1] + f * (m->r[VR_C2] + f * (m->r[VR_C3] + f * m->r[VR_C4]));
+    if (f <= 0.0) return 0.0;  /* the fan is off */
     return m->r[VR_NOMINAL_POWER] * (fraction > 0.0 ? fraction : 0.0);
 }
 
