@@ -93,3 +93,13 @@ def test_ranking_prefers_significant_then_larger_improvement_then_fewer_paramete
     ranked = rank_evidence([stuck, offset, weak, leak])
     assert [e.effect for e in ranked] == ["ValveLeakage", "ValveStuck", "SensorLag", "SensorOffset"]
     assert [e.significant for e in ranked] == [True, True, True, False]
+
+
+def test_an_estimate_at_a_bound_of_its_prior_is_flagged_in_the_explanation():
+    from service.component import Parameter
+    from service.diagnosis import _bound_note
+
+    offset = Parameter("offset", "K", 0.0, -5.0, 5.0, "sensor offset", null=0.0)
+    assert _bound_note(4.99999999961, offset) == " (at its upper bound 5)"
+    assert _bound_note(-5.0, offset) == " (at its lower bound -5)"
+    assert _bound_note(4.9, offset) == ""
