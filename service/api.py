@@ -270,7 +270,7 @@ class MeasurementUploads:
 
 
 # ====================================================================== SPARQL protocol
-_PROLOGUE = re.compile(r"\s*(?:#[^\n]*(?:\n|$)|BASE\s*<[^>]*>|PREFIX\s*[A-Za-z0-9_.\-]*:\s*<[^>]*>)", re.IGNORECASE)
+_PROLOGUE = re.compile(r"\s*(?:#[^\n]*(?:\n|$)|BASE\s*<[^>]*>|PREFIX\s*[^\s:<>]*:\s*<[^>]*>)", re.IGNORECASE)  # any PN_PREFIX
 _KEYWORD = re.compile(r"\s*([A-Za-z]+)")
 UPDATE_KEYWORDS = frozenset({"INSERT", "DELETE", "LOAD", "CLEAR", "CREATE", "DROP", "COPY", "MOVE", "ADD", "WITH"})
 RESULT_TYPES = {
@@ -305,7 +305,13 @@ _TOKEN = re.compile(
 def calls_a_service(sparql: str) -> bool:
     """Whether ``sparql`` has a ``SERVICE`` clause (a federated query: the engine would fetch another
     URL), read as tokens: the word in a string, an IRI, a comment or a name does not count."""
-    return any(token.upper() == "SERVICE" for token in _TOKEN.findall(sparql))
+    return fetching_keyword(sparql) == "SERVICE"
+
+
+def fetching_keyword(sparql: str) -> str | None:
+    """``SERVICE`` or ``LOAD`` when ``sparql`` has one (the engine would fetch another URL on the
+    caller's behalf), read as tokens as :func:`calls_a_service` does; None otherwise."""
+    return next((word for token in _TOKEN.findall(sparql) if (word := token.upper()) in ("SERVICE", "LOAD")), None)
 
 
 def negotiate(accept: str | None, offers: list[str]) -> str | None:
@@ -467,7 +473,7 @@ def health(service: ServiceDep) -> dict:
             "jobs_active": service.runner.active_count()}
 
 
-@router.get("/models", response_model=ModelList, tags=["models"], dependencies=[ReadAccess])
+@router.get("/models", response_model=ModelList, tags=["models"], dependencies=[ReadAccess], responses=_errors(401, 403))
 def list_models(service: ServiceDep) -> dict:
     """The building models in the store."""
     names = service.store.models()
@@ -475,7 +481,7 @@ def list_models(service: ServiceDep) -> dict:
 
 
 @router.get("/models/{name}", response_model=ModelInfo, tags=["models"], dependencies=[ReadAccess],
-            responses=_errors(404))
+            responses=_errors(401, 403, 404))
 def get_model(name: str, service: ServiceDep) -> dict:
     """A model: its graph, sizes, whether it was assembled, its measurement uploads."""
     store = service.store
@@ -539,7 +545,7 @@ async def post_measurements(name: str, request: Request, service: ServiceDep,
 
 
 @router.get("/models/{name}/measurements", response_model=MeasurementsList, tags=["models"],
-            dependencies=[ReadAccess], responses=_errors(404))
+            dependencies=[ReadAccess], responses=_errors(401, 403, 404))
 def list_measurements(name: str, service: ServiceDep) -> dict:
     """The measurement uploads of model ``name``."""
     _require_model(service.store, name)
@@ -548,7 +554,7 @@ def list_measurements(name: str, service: ServiceDep) -> dict:
 
 
 # ====================================================================== routes: SPARQL
-_SPARQL_ERRORS = _errors(400, 401, 403, 406, 415, 422, 503)
+_SPARQL_ERRORS = _errors(400, 401, 403, 406, 413, 415, 422, 503)
 _QUERY_BODY = {"requestBody": {"content": {
     "application/sparql-query": {"schema": {"type": "string"}},
     "application/x-www-form-urlencoded": {"schema": {"type": "object", "properties": {
@@ -596,6 +602,8 @@ def _update(store: GraphStore, text: str) -> None:
         store.backend.update(text)
     except (SyntaxError, ValueError) as exc:
         raise ApiError(400, f"SPARQL Update syntax error: {exc}") from None
+    except (RuntimeError, OSError) as exc:  # the store refused it as it ran (DROP of a graph that does not exist)
+        raise ApiError(400, f"the update failed, nothing was changed: {exc}") from None
 
 
 @router.post("/sparql/update", status_code=204, tags=["sparql"], dependencies=[WriteAccess],
@@ -615,6 +623,9 @@ async def sparql_update(request: Request, service: ServiceDep) -> Response:
         raise ApiError(415, "send the update as application/sparql-update or as the form field 'update'")
     if not text.strip():
         raise ApiError(400, "no update given")
+    if (keyword := fetching_keyword(text)) is not None:
+        raise ApiError(403, f"{keyword} is refused here: the service would fetch other URLs on the caller's behalf; "
+                            "load data with PUT /models/NAME")
     await run_in_threadpool(_update, service.store, text)
     return Response(status_code=204)
 
@@ -653,14 +664,14 @@ def _binding(name: str, value: str):
     return ox.Literal(value)
 
 
-@router.get("/queries", response_model=NamedQueryList, tags=["queries"], dependencies=[ReadAccess])
+@router.get("/queries", response_model=NamedQueryList, tags=["queries"], dependencies=[ReadAccess], responses=_errors(401, 403))
 def list_queries() -> dict:
     """The named queries (``queries/*.rq``) with their description and variables."""
     items = [{k: v for k, v in _describe_query(p).items() if k != "text"} for p in sorted(queries_dir().glob("*.rq"))]
     return {"data": items, "count": len(items)}
 
 
-@router.get("/queries/{name}", tags=["queries"], dependencies=[ReadAccess], responses=_errors(404, 406, 422, 503))
+@router.get("/queries/{name}", tags=["queries"], dependencies=[ReadAccess], responses=_errors(401, 403, 404, 406, 422, 503))
 async def run_named_query(
     name: str, request: Request, service: ServiceDep,
     dataset: Annotated[str | None, Query(description="model whose graphs are the default graph")] = None,
@@ -741,7 +752,7 @@ def submit_diagnose(body: DiagnoseRequest, response: Response, service: ServiceD
 
 
 @router.post("/jobs/add-effect", response_model=JobPublic, status_code=202, tags=["jobs"],
-             dependencies=[WriteAccess], responses=_JOB_ERRORS)
+             dependencies=[WriteAccess], responses=_errors(401, 403, 404, 409, 422))
 def submit_add_effect(body: AddEffectRequest, response: Response, service: ServiceDep) -> dict:
     """Record an effect at a building node as a new model version (``version``, by default
     ``<model>+<effect>``); 409 when that version exists with other effects."""
@@ -761,7 +772,7 @@ def submit_add_effect(body: AddEffectRequest, response: Response, service: Servi
     return _submit(service, "add-effect", body.model_dump(), response)
 
 
-@router.get("/jobs", response_model=JobList, tags=["jobs"], dependencies=[ReadAccess])
+@router.get("/jobs", response_model=JobList, tags=["jobs"], dependencies=[ReadAccess], responses=_errors(401, 403))
 def list_jobs(service: ServiceDep) -> dict:
     """Every job, oldest first."""
     records = service.runner.list()
@@ -769,7 +780,7 @@ def list_jobs(service: ServiceDep) -> dict:
 
 
 @router.get("/jobs/{job_id}", response_model=JobPublic, tags=["jobs"], dependencies=[ReadAccess],
-            responses=_errors(404))
+            responses=_errors(401, 403, 404))
 def get_job(job_id: str, service: ServiceDep) -> dict:
     """A job's status, progress messages, result and links."""
     return _public(_job(service, job_id))

@@ -122,7 +122,7 @@ class CalibrateRequest(_ModelRequest):
     train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
     test: str | None = Field(default=None, description="test window START/END")
     method: Literal["point", "bayes"] = "point"
-    seed: int = 0
+    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
     only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
 
     _windows = field_validator("train", "test")(_check_window)
@@ -133,7 +133,7 @@ class DiagnoseRequest(_ModelRequest):
     measurements: str = Field(description="id of a measurement upload")
     train: str = Field(description="training window START/END")
     test: str = Field(description="test window START/END")
-    seed: int = 0
+    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
     only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
 
     _windows = field_validator("train", "test")(_check_window)

@@ -49,19 +49,23 @@ def parse_window(text: str | None) -> Window:
     """``"START/END"`` (time stamps :func:`~service.measurements.parse_timestamp` reads, either side
     may be empty) → (start, end), checked before any data is read.
 
-    :raises ValueError: without exactly one ``/``, or naming the side whose time stamp is unreadable.
+    :raises ValueError: without exactly one ``/``, naming the side whose time stamp is unreadable,
+        or when the end is before the start.
     """
     if text is None:
         return (None, None)
     if text.count("/") != 1:
         raise ValueError(f"window {text!r}: write START/END, e.g. 2026-01-12/2026-01-15T23:50")
     start, end = (part.strip() or None for part in text.split("/"))
+    parsed = {}
     for side, stamp in (("start", start), ("end", end)):
         if stamp is not None:
             try:
-                parse_timestamp(stamp)
+                parsed[side] = parse_timestamp(stamp)
             except ValueError as exc:
                 raise ValueError(f"window {text!r}, its {side}: {exc}") from None
+    if len(parsed) == 2 and parsed["end"] < parsed["start"]:
+        raise ValueError(f"window {text!r}: the end is before the start")
     return start, end
 
 
@@ -164,6 +168,7 @@ def calibrate(
         raise ValueError(f"unknown method {method!r}: use point or bayes")
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     started = datetime.now(timezone.utc)
+    version = model_version(store, model_name)  # of the model calibrated, read before anything else
     model = assemble(store, model_name)
     data = read_model_data(model, data_path)
     substeps = substeps or loop_substeps(model, data.step_s)
@@ -241,7 +246,7 @@ def calibrate(
     as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime)  # noqa: E731
     record = CalibrationRecord(
         run_id=f"{model_name}-{method}-{uuid.uuid4().hex[:8]}", model_name=model_name,
-        model_version=model_version(store, model_name), method=method, seed=seed,
+        model_version=version, method=method, seed=seed,
         data_source=Path(data_path).name,
         train_window=(as_datetime(train_slice.start), as_datetime(train_slice.stop - 1)),
         test_window=(as_datetime(test_slice.start), as_datetime(test_slice.stop - 1)) if test_slice else None,

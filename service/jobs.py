@@ -50,6 +50,7 @@ import threading
 import uuid
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from enum import StrEnum
@@ -63,7 +64,7 @@ import pyoxigraph as ox
 from .assembly import EffectRequest, assemble, recorded_effects
 from .assembly_summary import assembly_to_dict
 from .assembly_triples import assembly_iri, assembly_triples
-from .calibration_run import calibrate, parse_window
+from .calibration_run import calibrate, model_version, parse_window
 from .effect_recording import applied_effect_triples
 from .namespaces import GT
 from .ntriples import triple_list
@@ -255,6 +256,10 @@ class DeferredWrites:
     def triple_count(self, graph):
         return self.backend.triple_count(graph)
 
+    def written_graphs(self) -> list[ox.NamedNode]:
+        """The graphs kept for the commit (written or dropped)."""
+        return list(self._graphs)
+
     def shipped(self) -> tuple[bytes, list[str]]:
         """The kept graphs as one N-Quads document (blank nodes shared between graphs stay shared)
         and the IRIs of the graphs kept empty (drops): what shipped work sends back."""
@@ -274,6 +279,15 @@ class DeferredWrites:
             return
         self.backend.replace_graphs(self._graphs)
         self._graphs.clear()
+
+
+def _public(message: str, params: Mapping) -> str:
+    """``message`` with the server's file path of the job's measurement upload (where the service or a
+    worker keeps it) written as the upload's id, all a client knows of it."""
+    upload = params.get("measurements")
+    if not upload:
+        return message
+    return re.sub(r"\S*" + re.escape(str(upload)) + r"\.csv", f"upload {upload}", message)
 
 
 class JobContext:
@@ -387,14 +401,27 @@ def ship_job(store: GraphStore, job_id: str, params: dict,
 
 class ProcessJobExecutor:
     """Shipped work in a local pool of ``max_workers`` processes (started with ``spawn``: the server's
-    threads and its open store are not copied into them)."""
+    threads and its open store are not copied into them). A pool whose worker died (killed, out of
+    memory) cannot take work: the job that ran there fails, and the next one gets a new pool."""
 
     def __init__(self, max_workers: int = 1):
         self.name = f"a local process pool ({max_workers} process{'es' if max_workers > 1 else ''})"
-        self._pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=get_context("spawn"))
+        self._max_workers = max_workers
+        self._pool = self._new_pool()
+        self._lock = threading.Lock()
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=self._max_workers, mp_context=get_context("spawn"))
 
     def submit(self, function, *args):
-        return self._pool.submit(function, *args)
+        with self._lock:
+            try:
+                return self._pool.submit(function, *args)
+            except BrokenProcessPool:
+                log.warning("the job process pool broke (a worker died): starting a new one")
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = self._new_pool()
+                return self._pool.submit(function, *args)
 
     def shutdown(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
@@ -533,6 +560,28 @@ class JobRunner:
                 self.executor.shutdown()
 
     # ------------------------------------------------------------------ internals
+    def _model_state(self, params: Mapping) -> tuple[str | None, frozenset[str]]:
+        """What a job's results rest on: the version of the model it reads (None without one) and the
+        model graphs the store holds."""
+        version = model_version(self.store, params["model"]) if "model" in params and self.store.has_model(
+            params["model"]) else None
+        prefix = self.store.model_graph("x").value[:-1]
+        return version, frozenset(g.value for g in self.store.backend.graphs() if g.value.startswith(prefix))
+
+    def _conflict(self, params: Mapping, before: tuple[str | None, frozenset[str]], writes: DeferredWrites) -> str | None:
+        """Why the job's results must not be written (called under the lock, before the commit): its
+        model changed while it ran (another load replaced it), or a model graph it would create was
+        created meanwhile (two add-effect jobs naming the same version); None when they may be."""
+        version, models = self._model_state(params)
+        if version != before[0]:
+            return (f"the model {params['model']!r} changed while the job ran (version {before[0]} → {version}): its "
+                    "results would describe a model the store no longer holds; resubmit the job")
+        created = sorted(g.value for g in writes.written_graphs() if g.value in models - before[1])
+        if created:
+            return (f"{', '.join(created)} was written by another job while this one ran: not overwritten; resubmit "
+                    "with another version name")
+        return None
+
     def _progress(self, job_id: str, message: str) -> None:
         with self._lock:
             record = self._jobs[job_id]
@@ -576,6 +625,7 @@ class JobRunner:
             kind, params = record.kind, dict(record.params)
         writes = DeferredWrites(self.store.backend)
         try:
+            before = self._model_state(params)
             if self.executor is None:
                 outcome = self.kinds[kind](GraphStore(writes), params, JobContext(self, job_id))
             else:
@@ -583,8 +633,8 @@ class JobRunner:
         except JobCancelled:
             self._finish(job_id, JobStatus.CANCELLED, message="cancelled; nothing was written")
             return
-        except (ValueError, KeyError, FileNotFoundError) as exc:
-            message = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+        except (ValueError, KeyError, FileNotFoundError, FileExistsError) as exc:
+            message = _public(str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc), params)
             self._finish(job_id, JobStatus.FAILED, error=message, message="failed; nothing was written")
             return
         except Exception as exc:  # a bug, not the user's input: keep the service up and say so
@@ -597,6 +647,10 @@ class JobRunner:
             record = self._jobs[job_id]
             if record.cancel_requested:
                 self._finish(job_id, JobStatus.CANCELLED, message="cancelled; the results were discarded")
+                return
+            conflict = self._conflict(params, before, writes)
+            if conflict:
+                self._finish(job_id, JobStatus.FAILED, error=conflict, message="failed; nothing was written")
                 return
             record.result = json_safe(outcome.result)
             try:

@@ -16,15 +16,18 @@ def _drive(controller, state, setpoint, measured, steps, dt=300.0):
     return [controller.step(PARAMS, _signals(setpoint, measured), state, dt)["control_signal"][0] for _ in range(steps)]
 
 
-def test_reverse_acting_with_the_integral_by_hand():
-    # e = 1 K, K_p = 0.02 /K, T_i = 600 s, Δt = 60 s: u_k = 0.02·(1 + k·60/600) (integral before its update)
-    controller = PIController()
-    state = controller.initial_state(PARAMS, _signals(21.0, 20.0), 60.0)
-    signals = _drive(controller, state, 21.0, 20.0, 11, dt=60.0)
+@pytest.mark.parametrize("model, opening_error", [(PIController, -1.0), (DirectActingPIController, +1.0)],
+                         ids=["reverse acting: opens below the setpoint", "direct acting: opens above it"])
+def test_the_action_with_the_integral_by_hand(model, opening_error):
+    # |e| = 1 K, K_p = 0.02 /K, T_i = 600 s, Δt = 60 s: u_k = 0.02·(1 + k·60/600) (integral before its update)
+    controller = model()
+    measured = 21.0 + opening_error
+    state = controller.initial_state(PARAMS, _signals(21.0, measured), 60.0)
+    signals = _drive(controller, state, 21.0, measured, 11, dt=60.0)
     np.testing.assert_allclose(signals, [0.02 * (1 + 0.1 * k) for k in range(11)], rtol=1e-12)
-    too_warm = PIController()
-    state = too_warm.initial_state(PARAMS, _signals(21.0, 22.0), 60.0)
-    assert _drive(too_warm, state, 21.0, 22.0, 1)[0] == 0.0  # measured above setpoint: closes
+    closing = model()
+    state = closing.initial_state(PARAMS, _signals(21.0, 21.0 - opening_error), 60.0)
+    assert _drive(closing, state, 21.0, 21.0 - opening_error, 1)[0] == 0.0  # the other side of the setpoint: closes
 
 
 def test_output_stays_within_zero_and_one():
@@ -52,15 +55,3 @@ def test_a_long_closure_does_not_delay_the_opening():
     state = controller.initial_state(PARAMS, _signals(21.0, 27.0), 300.0)
     assert _drive(controller, state, 21.0, 27.0, 500)[-1] == 0.0
     assert _drive(controller, state, 21.0, 20.5, 1)[0] == pytest.approx(0.02 * 0.5, rel=1e-12)
-
-
-
-def test_direct_acting_opens_while_the_measured_value_is_above_the_setpoint():
-    # e = −(w − y) = 1 K with w = 20 °C, y = 21 °C: the same sequence as reverse action with y 1 K below w
-    controller = DirectActingPIController()
-    state = controller.initial_state(PARAMS, _signals(20.0, 21.0), 60.0)
-    signals = _drive(controller, state, 20.0, 21.0, 11, dt=60.0)
-    np.testing.assert_allclose(signals, [0.02 * (1 + 0.1 * k) for k in range(11)], rtol=1e-12)
-    too_cold = DirectActingPIController()
-    state = too_cold.initial_state(PARAMS, _signals(20.0, 19.0), 60.0)
-    assert _drive(too_cold, state, 20.0, 19.0, 1)[0] == 0.0  # measured below setpoint: closes

@@ -56,6 +56,11 @@ def test_health_and_the_openapi_document_list_every_resource(client):
                  "/jobs/calibrate", "/jobs/diagnose", "/jobs/add-effect", "/jobs/assemble", "/jobs/{job_id}/cancel"):
         assert path in paths
     assert "text/turtle" in paths["/models/{name}"]["put"]["requestBody"]["content"]
+    # the statuses a route can answer are documented: reads need a token when reads are not open
+    for path in ("/models", "/models/{name}", "/queries", "/queries/{name}", "/jobs", "/jobs/{job_id}", "/sparql"):
+        assert {"401", "403"} <= set(paths[path]["get"]["responses"]), path
+    assert "409" in paths["/jobs/add-effect"]["post"]["responses"]
+    assert "413" in paths["/sparql"]["post"]["responses"]
 
 
 @pytest.mark.parametrize("fmt", [ox.RdfFormat.TURTLE, ox.RdfFormat.N_TRIPLES, ox.RdfFormat.RDF_XML, ox.RdfFormat.JSON_LD])
@@ -224,6 +229,17 @@ def test_bad_sparql_requests_get_their_status_and_change_nothing(client, auth, s
     assert refused.status_code == 403 and "SERVICE" in refused.json()["detail"]
     named = client.get("/sparql", params={"query": 'SELECT * WHERE { ?service ?p "SERVICE" } LIMIT 1'})
     assert named.status_code == 200  # the word as a variable or a literal is no federated query
+    headers = {**auth, "Content-Type": "application/sparql-update"}
+    for keyword, fetching in [
+        ("LOAD", "LOAD <http://127.0.0.1:9/x.nt> INTO GRAPH <https://example.org/g>"),
+        ("SERVICE", "INSERT { GRAPH <https://example.org/g> { ?s ?p ?o } } WHERE { SERVICE <http://127.0.0.1:9/q> { ?s ?p ?o } }"),
+    ]:
+        refused = client.post("/sparql/update", content=fetching, headers=headers)
+        assert refused.status_code == 403 and refused.json()["detail"].startswith(f"{keyword} is refused here")
+    failing = client.post("/sparql/update", content="DROP GRAPH <https://example.org/absent>", headers=headers)
+    assert failing.status_code == 400 and "does not exist" in failing.json()["detail"]
+    unicode_prefix = "PREFIX é: <http://example.org/> CONSTRUCT { é:a é:b ?x } WHERE { BIND(1 AS ?x) }"
+    assert client.get("/sparql", params={"query": unicode_prefix}, headers={"Accept": "text/turtle"}).status_code == 200
     too_many = client.get("/sparql", params={"query": "SELECT * WHERE { GRAPH ?g { ?s ?p ?o } }"})
     assert too_many.status_code == 422 and "LIMIT" in too_many.json()["detail"]
     assert snapshot(store) == before
@@ -298,6 +314,12 @@ def test_job_requests_for_unknown_things_are_refused(client, auth, case_csv):
                                                      "train": "2026-01-12/2026-13-45"}, headers=auth)
     assert bad_stamp.status_code == 422  # refused before a job is queued, naming the side
     assert "window '2026-01-12/2026-13-45', its end: time stamp '2026-13-45'" in bad_stamp.json()["detail"]
+    reversed_window = client.post("/jobs/calibrate", json={"model": "case", "measurements": upload,
+                                                           "train": "2026-01-12T10:00/2026-01-12T09:00"}, headers=auth)
+    assert reversed_window.status_code == 422 and "the end is before the start" in reversed_window.json()["detail"]
+    for seed in (-1, 2**64):
+        bad_seed = client.post("/jobs/calibrate", json={"model": "case", "measurements": upload, "seed": seed}, headers=auth)
+        assert bad_seed.status_code == 422 and "seed" in bad_seed.json()["detail"]
     effect = client.post("/jobs/add-effect", json={"model": "case", "effect": "Nope", "target": EX + "supply_fan"}, headers=auth)
     assert effect.status_code == 422 and "FanMotorHeat" in effect.json()["detail"]
     assert client.post("/jobs/diagnose", json={"model": "case", "measurements": upload, "train": "/"}, headers=auth).status_code == 422

@@ -53,6 +53,27 @@ def test_a_process_pool_job_failing_on_bad_input_fails_clearly_and_the_pool_runs
         runner.shutdown(wait=True)
 
 
+def test_after_a_pool_worker_dies_the_next_job_runs_in_a_new_pool(case_store, tmp_path):
+    """A worker killed (the OOM killer) breaks a process pool for good; the executor starts a new
+    one for the next job instead of failing every job until the service restarts."""
+    import os
+    import signal
+
+    executor = ProcessJobExecutor(1)
+    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), {"assemble": assemble_job}, executor=executor)
+    try:
+        assert _wait(runner, runner.submit("assemble", {"model": "case"}).id).status == "succeeded"
+        for pid in list(executor._pool._processes):
+            os.kill(pid, signal.SIGKILL)
+        deadline = time.monotonic() + 30
+        while not executor._pool._broken and time.monotonic() < deadline:
+            time.sleep(0.05)
+        done = [_wait(runner, runner.submit("assemble", {"model": "case"}).id) for _ in range(2)]
+        assert [job.status for job in done] == ["succeeded", "succeeded"], [job.error for job in done]
+    finally:
+        runner.shutdown(wait=True)
+
+
 distributed = pytest.importorskip("distributed", reason="the Dask executor needs distributed (the test extra has it)")
 
 SHORT_TRAIN = "2026-01-12T06:00/2026-01-12T09:00"  # 3 h of the synthetic day: a calibration of a few seconds

@@ -293,3 +293,63 @@ def test_work_that_raises_job_cancelled_ends_cancelled(records, runners):
     store = GraphStore.embedded(None)
     runner = runners(store, records, {"give-up": give_up})
     assert _wait(runner, runner.submit("give-up", {}).id).status == "cancelled" and store.backend.graphs() == []
+
+
+MODEL_TTL = b"<https://example.org/jobs#fan> a <https://saref.etsi.org/saref4bldg/Fan> ."
+
+
+def test_a_job_whose_model_is_replaced_while_it_runs_writes_nothing(records, runners):
+    """The model is replaced (PUT /models/NAME) while a job on it runs: its results describe a model
+    the store no longer holds, so they are not written and the job says why."""
+    store = GraphStore.embedded(None)
+    store.load_model("m", MODEL_TTL)
+    started, release = threading.Event(), threading.Event()
+
+    def work(job_store, params, context):
+        job_store.write_graph(job_store.assembly_graph(params["model"]), [_triple(ox.NamedNode(EX + "a"), "old")])
+        started.set()
+        release.wait(10)
+        return JobResult({})
+
+    runner = runners(store, records, {"work": work})
+    job = runner.submit("work", {"model": "m"})
+    assert started.wait(10)
+    store.load_model("m", MODEL_TTL + b'\n<https://example.org/jobs#fan> <http://www.w3.org/2000/01/rdf-schema#label> "new" .')
+    release.set()
+    done = _wait(runner, job.id)
+    assert done.status == "failed" and "the model 'm' changed while the job ran" in done.error
+    assert store.assembly_graph("m") not in store.backend.graphs()
+
+
+def test_of_two_jobs_creating_the_same_model_version_the_second_does_not_overwrite_the_first(records, runners):
+    store = GraphStore.embedded(None)
+    store.load_model("m", MODEL_TTL)
+    both_started, release = threading.Barrier(2), threading.Event()
+
+    def work(job_store, params, context):
+        job_store.write_graph(job_store.model_graph("m+Effect"), [_triple(ox.NamedNode(EX + "a"), params["label"])])
+        both_started.wait(10)
+        release.wait(10)
+        return JobResult({})
+
+    runner = runners(store, records, {"work": work}, max_workers=2)
+    first, second = (runner.submit("work", {"model": "m", "label": label}) for label in ("first", "second"))
+    time.sleep(0.2)
+    release.set()
+    done = sorted((_wait(runner, job.id) for job in (first, second)), key=lambda r: r.status)
+    assert [r.status for r in done] == ["failed", "succeeded"]
+    assert "was written by another job while this one ran: not overwritten" in done[0].error
+    [label] = [t.object.value for t in store.graph_triples(store.model_graph("m+Effect"))]
+    assert label == done[1].params["label"]
+
+
+def test_a_job_error_names_the_upload_not_the_servers_file_path(records, runners, tmp_path):
+    upload = "0123456789abcdef"
+    csv = tmp_path / "measurements" / "m" / f"{upload}.csv"
+
+    def work(job_store, params, context):
+        raise ValueError(f"window 2030-01-01 – 2030-02-01 lies outside the data {csv} (2026-01-12 – 2026-01-13)")
+
+    runner = runners(GraphStore.embedded(None), records, {"work": work})
+    done = _wait(runner, runner.submit("work", {"measurements": upload}).id)
+    assert done.error == f"window 2030-01-01 – 2030-02-01 lies outside the data upload {upload} (2026-01-12 – 2026-01-13)"
