@@ -481,7 +481,8 @@ def _describe_missing(triple: PatternTriple, anchor: str, signature: Signature, 
     spec = signature.nodes[other]
     what = " or ".join(_short(c) for c in spec.classes) or (spec.iri or "value")
     if triple.rule is Rule.TRAVERSE:
-        side = "upstream of" if triple.object == anchor else "downstream of"
+        side = ("downstream or upstream of" if triple.or_reverse
+                else "upstream of" if triple.object == anchor else "downstream of")
         return (f"no {what} {side} {node} along {triple.predicate} (the search stops at building spaces, "
                 f"boilers, chillers and cooling towers; signature {signature.source_file})")
     if triple.subject == anchor:

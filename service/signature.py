@@ -102,6 +102,9 @@ class PatternTriple:
     object: str
     rule: Rule = Rule.EXACT
     optional: bool = False  # True for an optional traverse (rule TRAVERSE); OPTIONAL rule implies it
+    #: a traverse from the subject that, where nothing lies along the predicate, takes the nearest
+    #: match against it (a coil's fan: downstream in a draw-through unit, upstream in a blow-through one)
+    or_reverse: bool = False
 
     @property
     def is_optional(self) -> bool:
@@ -191,7 +194,7 @@ _TOP_KEYS = {
     "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values",
 }
 _NODE_KEYS = ("classes", "iri", "literal", "any")
-_TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional"}
+_TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_reverse"}
 _SPLICE_KEYS = {"node", "input", "output", "host_models"}
 
 
@@ -315,7 +318,7 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     triples = []
     for i, spec in enumerate(_array(path, "triples", data.get("triples", []), "an array of tables ([[triples]])")):
         where = f"triples[{i}]"
-        spec = _table(path, where, spec, "a table with 'subject', 'predicate', 'object', optional 'rule' and 'optional'")
+        spec = _table(path, where, spec, "a table with 'subject', 'predicate', 'object', optional 'rule', 'optional' and 'or_reverse'")
         _only_keys(path, where, spec, _TRIPLE_KEYS)
         rule_text = spec.get("rule", "exact")
         try:
@@ -330,9 +333,13 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
             raise _fail(path, where, "traverse needs class-restricted nodes at both ends")
         predicate = _curie(path, where + ".predicate", spec.get("predicate"))
         optional = spec.get("optional", False)
-        if not isinstance(optional, bool):
-            raise _fail(path, where + ".optional", "must be true or false")
-        triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL))
+        or_reverse = spec.get("or_reverse", False)
+        for key, flag in (("optional", optional), ("or_reverse", or_reverse)):
+            if not isinstance(flag, bool):
+                raise _fail(path, f"{where}.{key}", "must be true or false")
+        if or_reverse and rule is not Rule.TRAVERSE:
+            raise _fail(path, where + ".or_reverse", "only a traverse can fall back to the reverse direction")
+        triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL, or_reverse))
 
     modeled = tuple(known(n, f"modeled_nodes[{i}]") for i, n in enumerate(_array(
         path, "modeled_nodes", data["modeled_nodes"], "a non-empty array of node ids", empty_ok=False)))

@@ -9,7 +9,9 @@ blocking nodes; the nodes it reaches are that end's nearest partners. Searches n
 twice, so loops (return air mixed back into the supply) terminate and give the right answer: a
 sensor on a loop finds the equipment right before it, not everything on the loop. A node is not its
 own partner: a loop that comes back to the start without meeting another instance gives no pair
-(a fan whose only upstream equipment is itself has no inlet to wire, and is reported).
+(a fan whose only upstream equipment is itself has no inlet to wire, and is reported). A traverse
+with ``or_reverse`` is not symmetric (a subject's partners against the predicate count only where it
+has none along it), so it is searched from its subject: the join binds the subject first.
 
 A :class:`MatchSession` reads each traversed predicate's edge list, each class's instances and
 subclasses ONCE, runs each distinct part query once (signatures share sensor and device parts) and
@@ -255,6 +257,19 @@ class MatchSession:
                 searches[start] = frozenset(seen)
         return searches
 
+    def partners(self, traversal: Traversal, subjects: Iterable[str]) -> dict[str, frozenset[str]]:
+        """Each of ``subjects`` → its nearest partners along the traversal's predicate; with
+        ``or_reverse``, the instances of its object classes among them, and for a subject that has
+        none, those against the predicate."""
+        subjects = set(subjects)
+        along = self.nearest(traversal, subjects, True)
+        if not traversal.or_reverse:
+            return along
+        objects = self.instance_terms(traversal.object_classes)
+        found = {s: along[s] & objects for s in subjects}
+        against = self.nearest(traversal, [s for s in subjects if not found[s]], False)
+        return {s: found[s] or against[s] & objects for s in subjects}
+
 
 def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: list[QueryPart],
           traversals: list[Traversal]) -> tuple[list[Row], list[str]]:
@@ -267,14 +282,15 @@ def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: lis
         check = next((t for t in checks if t.subject in bound and t.object in bound), None)
         if check is not None:
             subject, obj = columns.index(check.subject), columns.index(check.object)
-            nearest = session.nearest(check, (r[subject] for r in rows), True)
+            nearest = session.partners(check, (r[subject] for r in rows))
             rows = [r for r in rows if r[obj] in nearest[r[subject]]]
             checks.remove(check)
             continue
         part = next((p for p in pending if bound & set(p.nodes)), None)
         via = far = None
         if part is None:
-            via = next((t for t in checks if (t.subject in bound) != (t.object in bound)), None)
+            via = next((t for t in checks if t.subject in bound and t.object not in bound
+                        or t.object in bound and t.subject not in bound and not t.or_reverse), None)
             if via is not None:
                 far = via.object if via.subject in bound else via.subject
                 part = next(p for p in pending if far in p.nodes)
@@ -282,9 +298,12 @@ def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: lis
         pending.remove(part)
         if via is not None:
             checks.remove(via)
-            near, forward = (via.subject, True) if via.subject in bound else (via.object, False)
-            start = columns.index(near)
-            nearest = session.nearest(via, (r[start] for r in rows), forward)
+            if via.subject in bound:
+                start = columns.index(via.subject)
+                nearest = session.partners(via, (r[start] for r in rows))
+            else:
+                start = columns.index(via.object)
+                nearest = session.nearest(via, (r[start] for r in rows), False)
         shared = sorted(bound & set(part.nodes))
         if part.text is None:  # one class's instances
             node, instances = part.nodes[0], session.instance_terms(part.classes)

@@ -15,7 +15,7 @@ every other resource is minted under it, no blank nodes, so two writes of one li
     <sig/node/v> a gt:PatternNode, gt:LiteralPatternNode ; gt:nodeId "v" .                  # literal
     <sig/node/u> a gt:PatternNode, gt:AnyTermPatternNode ; gt:nodeId "u" .                  # any
     <sig/triple/0> a gt:PatternTriple ; gt:patternSubject <sig/node/a> ; gt:patternPredicate fso:suppliesFluidTo ;
-          gt:patternObject <sig/node/b> ; gt:rule gt:Exact | gt:Traverse | gt:Optional ; [gt:mayBeAbsent true] .
+          gt:patternObject <sig/node/b> ; gt:rule gt:Exact | gt:Traverse | gt:Optional ; [gt:mayBeAbsent true] ; [gt:orReverse true] .
     <sig/input/P> a gt:PortMapping ; gt:portName "P" ; gt:sourceNode <sig/node/s> ; gt:quantity "temperature" .
     <sig/output/P> a gt:PortMapping ; gt:portName "P" ; gt:atNode <sig/node/n> ; gt:quantity "power" .
     <sig/parameter/N> a gt:ParameterMapping ; gt:parameterName "N" ; gt:valueNode <sig/node/v> ;
@@ -102,6 +102,8 @@ def signature_triples(signature: Signature) -> list[ox.Triple]:
         ]
         if pattern.is_optional:
             triples.append(ox.Triple(iri, GT.mayBeAbsent, ox.Literal(True)))
+        if pattern.or_reverse:
+            triples.append(ox.Triple(iri, GT.orReverse, ox.Literal(True)))
 
     for mapping in signature.inputs:
         iri = ox.NamedNode(f"{signature.iri}/input/{mapping.port}")

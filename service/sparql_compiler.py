@@ -12,7 +12,8 @@
   classes (the end the signature does not model; both ends' when both or neither are modelled) — is
   not expressible on property paths: written as ``FILTER NOT EXISTS`` or ``MINUS`` over two paths it
   is either explosive (> 600 s at 100k triples) or wrong on recirculation loops (every candidate on
-  a loop lies "behind" another).
+  a loop lies "behind" another). A traverse with ``or_reverse`` becomes ``?s (P+|^P+) ?o``: the
+  nearest match along ``P`` from ``?s``, and only where there is none, the nearest against it.
 
 :attr:`CompiledQuery.text` is that whole query (``graphtwin signature explain`` prints it): run on
 any SPARQL endpoint it returns every *reachable* combination, a superset of the matches. The matcher
@@ -52,6 +53,10 @@ class Traversal:
     object: str
     blocking_classes: tuple[str, ...]
     block: int | None = None
+    #: where the subject reaches no instance of ``object_classes`` along the predicate, take the
+    #: nearest against it
+    or_reverse: bool = False
+    object_classes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -130,6 +135,12 @@ class _Writer:
     def triple(self, triple: PatternTriple) -> list[str]:
         predicate = _short(_iri(triple.predicate, self.where))
         subject, obj = self.term(triple.subject), self.term(triple.object)
+        if triple.rule is Rule.TRAVERSE and triple.or_reverse:
+            return [
+                f"# traverse: {triple.subject} {predicate}+ {triple.object}, or where there is none "
+                f"{triple.object} {predicate}+ {triple.subject} (nearest: joined by the matcher)",
+                f"{subject} ({predicate}+|^{predicate}+) {obj} .",
+            ]
         if triple.rule is Rule.TRAVERSE:
             return [
                 f"# traverse: {triple.subject} {predicate}+ {triple.object} (nearest: joined by the matcher)",
@@ -330,4 +341,5 @@ def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -
     if len(searched) == 2:
         searched = ends
     classes = tuple(c for n in searched for c in signature.nodes[n].classes) + OPAQUE_CLASSES
-    return Traversal(triple.subject, triple.predicate, triple.object, tuple(dict.fromkeys(classes)), block)
+    return Traversal(triple.subject, triple.predicate, triple.object, tuple(dict.fromkeys(classes)), block,
+                     triple.or_reverse, signature.nodes[triple.object].classes if triple.or_reverse else ())

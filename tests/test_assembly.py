@@ -182,3 +182,40 @@ def test_an_effect_splicing_a_port_its_host_lacks_is_refused_by_name(case_store)
                                             r"\(modelling .*coil_outlet_air_temperature_sensor\) does not have; its inputs: measured_value"):
         assemble(case_store, "case", library=library,
                  extra_effects=[EffectRequest("SensorOffset", EX + "coil_outlet_air_temperature_sensor")])
+
+
+FLEXLAB = "https://example.org/flexlab-x3a#"
+
+
+def _fed_by(model, node: str, port: str) -> set[str]:
+    component = model.component_for_node(FLEXLAB + node).iri
+    return {model.components[c.source].node.removeprefix(FLEXLAB)
+            for c in model.connections if c.target == component and c.target_port == port}
+
+
+def test_coils_take_their_air_flow_from_the_fan_downstream_or_else_upstream():
+    """The FLEXLAB unit draws its air through the coils; moved to blow through them (mixed air →
+    fan → cooling coil → heating coil → supply air), its coils read the fan upstream."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    blow_through = (text.replace('"AHU: Mixed Air Temperature" ;\n    fso:suppliesFluidTo ex:cooling_coil .',
+                                 '"AHU: Mixed Air Temperature" ;\n    fso:suppliesFluidTo ex:supply_fan .')
+                    .replace("fso:suppliesFluidTo ex:supply_fan .\nex:heating_coil_valve",
+                             "fso:suppliesFluidTo ex:supply_air_temperature_sensor .\nex:heating_coil_valve")
+                    .replace("saref:hasProperty ex:supply_fan_speed ;\n    fso:suppliesFluidTo ex:supply_air_temperature_sensor .",
+                             "saref:hasProperty ex:supply_fan_speed ;\n    fso:suppliesFluidTo ex:cooling_coil ."))
+    assert blow_through.count("fso:suppliesFluidTo ex:supply_fan .") == 1  # every replacement took
+    store = GraphStore.embedded(None)
+    store.ensure_ontologies()
+    store.load_model("draw", text.encode())
+    store.load_model("blow", blow_through.encode())
+    draw, blow = assemble(store, "draw"), assemble(store, "blow")
+    for model in (draw, blow):
+        assert _fed_by(model, "heating_coil", "air_mass_flow") == {"supply_fan"}
+        assert _fed_by(model, "cooling_coil", "air_mass_flow") == {"supply_fan"}
+    assert _fed_by(blow, "cooling_coil", "inlet_air_temperature") == {"supply_fan"}
+    assert _fed_by(draw, "cooling_coil", "inlet_air_temperature") == {"mixed_air_temperature_sensor"}
+    # the effects that need the air flow apply to a draw-through coil too
+    with_gain = assemble(store, "draw", extra_effects=[EffectRequest("ConstantHeatGain", FLEXLAB + "heating_coil")])
+    assert len(with_gain.components) == len(draw.components) + 1

@@ -129,3 +129,13 @@ def test_check_model_names_takes_the_class_an_fmu_signature_builds(tmp_path):
     with pytest.raises(SignatureError, match=re.escape(f"{tmp_path / 'lag.toml'}: outputs.z: {tmp_path / 'lag.fmu'} "
                                                        "has no output port 'z'; its output ports: y")):
         check_model_names(signature, Lag)
+
+
+@pytest.mark.parametrize("rule, flag, problem", [
+    ("exact", "true", "only a traverse can fall back to the reverse direction"),
+    ("traverse", '"yes"', "must be true or false"),
+])
+def test_or_reverse_is_a_boolean_of_traverses(tmp_path, rule, flag, problem):
+    text = (TOP + NODES + 'coil = { classes = ["s4bldg:Coil"] }\n[[triples]]\nsubject = "coil"\n'
+            f'predicate = "fso:suppliesFluidTo"\nobject = "fan"\nrule = "{rule}"\nor_reverse = {flag}\n')
+    _refused(tmp_path, text, "triples[0].or_reverse", problem)

@@ -197,7 +197,8 @@ def test_every_library_signature_compiles_and_runs(case_store):
         assert f"signature {signature.id}" in text
         for triple in signature.triples:  # Traverse stays a property path in the query explain prints
             if triple.rule.value == "traverse":
-                assert f"?{triple.subject} fso:suppliesFluidTo+ ?{triple.object} ." in text
+                path = "(fso:suppliesFluidTo+|^fso:suppliesFluidTo+)" if triple.or_reverse else "fso:suppliesFluidTo+"
+                assert f"?{triple.subject} {path} ?{triple.object} ." in text
         match_signature(case_store, signature, default_graph=case_store.matching_dataset("case"))
 
 
@@ -270,3 +271,50 @@ def test_a_traverse_does_not_pass_through_a_boiler():
         x:coil a x:Coil ; x:feeds x:ret . x:ret a x:Sensor ; x:feeds x:boiler .
         x:boiler a s4bldg:Boiler ; x:feeds x:supply .""")
     assert _pairs(match_signature(store, _sensor_upstream())) == [("coil", "ret")]
+
+
+def _coil_fan(optional: bool = False):
+    triple = {"subject": "coil", "predicate": X + "feeds", "object": "fan", "rule": "traverse", "or_reverse": True}
+    if optional:
+        triple["optional"] = True
+    return signature_from_dict({
+        "id": "CoilFan", "modeled_nodes": ["coil"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"coil": {"classes": [X + "Coil"]}, "fan": {"classes": [X + "Fan"]}},
+        "triples": [triple],
+    })
+
+
+def test_or_reverse_takes_the_fan_downstream_and_upstream_only_where_there_is_none():
+    # unit a draws through (return fan → mixing box → coil → supply fan): the supply fan, not the
+    # return fan behind the mixing box; unit b blows through (fan → coil → room): the fan upstream,
+    # though the sensor downstream reaches nothing; unit c has no fan at all: no match
+    store = _store("""
+        x:rfan_a a x:Fan ; x:feeds x:mix_a . x:mix_a a x:MixingBox ; x:feeds x:coil_a .
+        x:coil_a a x:Coil ; x:feeds x:sensor_a . x:sensor_a a x:Sensor ; x:feeds x:sfan_a . x:sfan_a a x:Fan .
+        x:mix_b a x:MixingBox ; x:feeds x:fan_b . x:fan_b a x:Fan ; x:feeds x:coil_b .
+        x:coil_b a x:Coil ; x:feeds x:sensor_b . x:sensor_b a x:Sensor ; x:feeds x:room_b . x:room_b a x:Room .
+        x:mix_c a x:MixingBox ; x:feeds x:coil_c . x:coil_c a x:Coil ; x:feeds x:sensor_c . x:sensor_c a x:Sensor .""")
+    signature = _coil_fan()
+    assert _pairs(match_signature(store, signature), "fan", "coil") == [("fan_b", "coil_b"), ("sfan_a", "coil_a")]
+    # optional: the fanless coil stays, unbound
+    assert _pairs(match_signature(store, _coil_fan(optional=True)), "fan", "coil") == [
+        (None, "coil_c"), ("fan_b", "coil_b"), ("sfan_a", "coil_a")]
+    assert "(x:feeds+|^x:feeds+)" in compile_signature(signature).text.replace(f"<{X}feeds>", "x:feeds")
+
+
+def test_or_reverse_is_searched_from_the_subject_when_the_pattern_binds_the_object_first():
+    # the signature models the fan, so the fans are bound first; a blow-through coil lies downstream
+    # of its fan, so a search from the fan against the predicate would miss it: the coil is found
+    # from its side
+    store = _store("""
+        x:rfan a x:Fan ; x:feeds x:coil_a ; x:label "return" . x:coil_a a x:Coil ; x:feeds x:sfan .
+        x:sfan a x:Fan ; x:label "supply" .
+        x:fan_b a x:Fan ; x:feeds x:coil_b ; x:label "blow-through" . x:coil_b a x:Coil .""")
+    signature = signature_from_dict({
+        "id": "LabelledFan", "modeled_nodes": ["fan"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"fan": {"classes": [X + "Fan"]}, "label": {"literal": True}, "coil": {"classes": [X + "Coil"]}},
+        "triples": [{"subject": "fan", "predicate": X + "label", "object": "label"},
+                    {"subject": "coil", "predicate": X + "feeds", "object": "fan", "rule": "traverse", "or_reverse": True}],
+    })
+    assert sorted((m["coil"].rsplit("#")[-1], m["label"]) for m in match_signature(store, signature)) == [
+        ("coil_a", "supply"), ("coil_b", "blow-through")]
