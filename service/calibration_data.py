@@ -131,6 +131,26 @@ class ModelData:
         """Every output of every component (for plots and the residual-dependence search)."""
         return self.simulator.run(self.boundary(window), np.atleast_2d(theta))
 
+    def non_finite_source(self, window: slice, theta: np.ndarray) -> str | None:
+        """Where the simulation of ``window`` at θ ``ndarray[n_estimated]`` first gives NaN or an
+        infinite value: the component output with the earliest such step (the most upstream one, in
+        simulation order, on a tie), named with its signature and model; None when all is finite."""
+        result = self.simulate_all(window, theta)
+        first = None
+        for order, iri in enumerate(self.simulator.order):
+            for port in self.model.components[iri].model_class.output_names():
+                bad = np.flatnonzero(~np.isfinite(result.outputs[(iri, port)][0]))
+                if bad.size and (first is None or (bad[0], order) < first[:2]):
+                    first = (int(bad[0]), order, iri, port)
+        if first is None:
+            return None
+        step, _, iri, port = first
+        instance = self.model.components[iri]
+        model = instance.signature.fmu.name if instance.signature.fmu is not None else instance.signature.model
+        stamp = self.data.timestamps[window][step]
+        return (f"{instance.node} (component {iri}, signature {instance.signature.id}, model {model}): output {port} is "
+                f"{result.outputs[(iri, port)][0][step]} from step {step} ({stamp}) at the default parameters")
+
     def default_theta(self) -> np.ndarray:
         return np.array([ref.spec.default for ref in self.model.estimated_parameters])
 

@@ -18,6 +18,7 @@ import hashlib
 import os
 import uuid
 from collections.abc import Callable, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -34,7 +35,7 @@ from .calibration_triples import calibration_triples
 from .measurements import parse_timestamp
 from .metrics import TargetMetrics, target_metrics
 from .operating_filter import operating_mask
-from .point_calibration import PointCalibrator
+from .point_calibration import NonFiniteSimulationError, PointCalibrator
 from .regime_breakdown import RegimeBreakdown, regime_breakdown
 from .simulator import loop_substeps
 from .store import GraphStore
@@ -103,7 +104,19 @@ def fit_point(md: ModelData, train: slice, *, seed: int, default: np.ndarray | N
     """Point calibration on ``train``; returns the fitted calibrator and the problem."""
     problem = md.problem(train, default=default)
     calibrator = PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev)
-    return calibrator.fit(problem), problem
+    with _non_finite_named(md, train, problem.default):
+        return calibrator.fit(problem), problem
+
+
+@contextmanager
+def _non_finite_named(md: ModelData, window: slice, theta: np.ndarray):
+    """Add to a :class:`NonFiniteSimulationError` the component output where the simulation of
+    ``window`` at ``theta`` first gives NaN or an infinite value."""
+    try:
+        yield
+    except NonFiniteSimulationError as exc:
+        source = md.non_finite_source(window, theta)
+        raise NonFiniteSimulationError(f"{exc}; it starts at {source}" if source else str(exc)) from None
 
 
 @dataclass
@@ -193,7 +206,8 @@ def calibrate(
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None
     if method == "point":
-        calibrator = PointCalibrator(n_starts=2, n_candidates=32, random_state=seed, max_nfev=40).fit(problem)
+        with _non_finite_named(md, train_slice, problem.default):
+            calibrator = PointCalibrator(n_starts=2, n_candidates=32, random_state=seed, max_nfev=40).fit(problem)
         theta = calibrator.theta_
         se = calibrator.standard_errors_
         lower, upper = problem.lower, problem.upper
@@ -206,7 +220,8 @@ def calibrate(
 
         options = {"n_temperatures": 4, "max_steps": 4000, "check_interval": 100, "progress": progress}
         options.update(bayes_settings or {})
-        calibrator = BayesianCalibrator(random_state=seed, **options).fit(problem)
+        with _non_finite_named(md, train_slice, problem.default):
+            calibrator = BayesianCalibrator(random_state=seed, **options).fit(problem)
         theta = calibrator.median_
         q16, q84, theta_map = calibrator.quantile16_, calibrator.quantile84_, calibrator.map_
         se = calibrator.samples_.std(axis=0)

@@ -43,7 +43,7 @@ from threadpoolctl import threadpool_limits
 
 from .calibration_problem import CalibrationProblem
 
-__all__ = ["PointCalibrator", "ParameterIdentifiability"]
+__all__ = ["PointCalibrator", "ParameterIdentifiability", "NonFiniteSimulationError"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +56,10 @@ class ParameterIdentifiability:
 
     def to_dict(self) -> dict:
         return {"name": self.name, "identified": self.identified, "reasons": list(self.reasons)}
+
+
+class NonFiniteSimulationError(ValueError):
+    """Every start candidate's simulation gave NaN or infinite values where targets are compared."""
 
 
 class PointCalibrator(BaseEstimator):
@@ -152,11 +156,15 @@ class PointCalibrator(BaseEstimator):
             candidates = np.vstack([problem.to_unit(np.atleast_2d(extra)), candidates])
         if problem.default is not None:
             candidates = np.vstack([problem.to_unit(problem.default)[None, :], candidates])
-        residuals = problem.weighted_residuals(self._run(problem, problem.from_unit(candidates)))
-        costs = 0.5 * np.sum(residuals**2, axis=1)
+        outputs = self._run(problem, problem.from_unit(candidates))
+        costs = 0.5 * np.sum(problem.weighted_residuals(outputs)**2, axis=1)
         finite = np.flatnonzero(np.isfinite(costs))
         if not finite.size:
-            raise ValueError("simulate gave non-finite outputs for every start candidate")
+            first = {key: int(np.argmax(~np.isfinite(outputs[key][0]) & masks))
+                     for key, masks in problem.masks.items() if not np.isfinite(outputs[key][0][masks]).all()}
+            raise NonFiniteSimulationError(
+                "the simulation gave NaN or infinite values for every start candidate, at "
+                + ", ".join(f"target {key} (first at step {step})" for key, step in first.items()))
         return candidates[finite[np.argsort(costs[finite], kind="stable")[: self.n_starts]]]
 
     def _local_fit(self, problem: CalibrationProblem, start: np.ndarray):

@@ -266,3 +266,26 @@ def test_metrics_of_two_sensors_sharing_a_local_name_stay_apart(point_run):
     names = distinct_local_names([sensor, twin, EX + "fan_power_meter"])
     assert names[EX + "fan_power_meter"] == "fan_power_meter" and names[sensor] != names[twin]
     assert names[sensor].startswith("coil_outlet_air_temperature_sensor-") and len(names[sensor].rsplit("-", 1)[1]) == 8
+
+
+def test_a_model_that_returns_nan_is_named_with_its_output_and_step(synthetic, monkeypatch):
+    """A component giving NaN (an FMU dividing by zero, say) fails every start: the error names the
+    component, its signature and model, the output and where it starts, and nothing is written."""
+    from service.fan import Fan
+
+    store, path, _ = synthetic
+    step = Fan.step
+
+    def nan_power(self, params, inputs, state, dt):
+        outputs = step(self, params, inputs, state, dt)
+        return {**outputs, "electric_power": outputs["electric_power"] * np.nan}
+
+    monkeypatch.setattr(Fan, "step", nan_power)
+    graphs_before = set(store.backend.graphs())
+    with pytest.raises(ValueError, match="NaN or infinite") as caught:
+        calibrate(store, "case", path, train=TRAIN, seed=0)
+    message = str(caught.value)
+    assert f"target {EX}fan_power_meter" in message, message
+    assert f"it starts at {EX}supply_fan (component " in message, message
+    assert "signature Fan, model service.fan:Fan): output electric_power is nan from step 0 (2026-01-12T00:00:00)" in message
+    assert set(store.backend.graphs()) == graphs_before
