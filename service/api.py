@@ -358,10 +358,19 @@ class _Query:
     substitutions: dict[str, ox.NamedNode | ox.Literal] | None = None  # a named query's parameters
 
 
+def _tsv_term(term) -> str:
+    """A term as SPARQL TSV writes it (RDF 1.2: a triple term as ``<<( s p o )>>``; unbound: empty)."""
+    if term is None:
+        return ""
+    if isinstance(term, ox.Triple):
+        return f"<<( {_tsv_term(term.subject)} {_tsv_term(term.predicate)} {_tsv_term(term.object)} )>>"
+    return str(term)
+
+
 def _solutions_bytes(variables: list[str], rows: list[tuple], fmt: ox.QueryResultsFormat) -> bytes:
     """Rows of terms → ``fmt``, through pyoxigraph's TSV parser and its serialiser."""
     lines = ["\t".join(f"?{v}" for v in variables)]
-    lines += ["\t".join("" if term is None else str(term) for term in row) for row in rows]
+    lines += ["\t".join(map(_tsv_term, row)) for row in rows]
     return ox.parse_query_results("\n".join(lines) + "\n", ox.QueryResultsFormat.TSV).serialize(format=fmt)
 
 

@@ -95,7 +95,9 @@ def _term(binding: Mapping[str, str]) -> Term:
         if "datatype" in binding:
             return ox.Literal(value, datatype=ox.NamedNode(binding["datatype"]))
         return ox.Literal(value)
-    raise SparqlEndpointError(f"unsupported term {binding!r} in SPARQL JSON results (expected uri, bnode or literal)")
+    if kind == "triple" and isinstance(value, Mapping):  # RDF 1.2 / SPARQL 1.2 triple term
+        return ox.Triple(*(_term(value[part]) for part in ("subject", "predicate", "object")))
+    raise SparqlEndpointError(f"unsupported term {binding!r} in SPARQL JSON results (expected uri, bnode, literal or triple)")
 
 
 class SparqlEndpointBackend:

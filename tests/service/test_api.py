@@ -199,6 +199,18 @@ def test_sparql_select_by_get_and_post_in_every_result_format(client):
     assert int(scoped[0]["n"]["value"]) == graphs[one]
 
 
+def test_rdf_12_triple_terms_in_select_results_come_back_in_every_format(client):
+    query = ("SELECT ?t WHERE { BIND(TRIPLE(<urn:s>, <urn:p>, TRIPLE(<urn:a>, <urn:b>, \"x\"@en)) AS ?t) }")
+    [row] = _rows(client.get("/sparql", params={"query": query}))
+    assert row["t"]["type"] == "triple"
+    nested = row["t"]["value"]["object"]["value"]
+    assert (row["t"]["value"]["subject"]["value"], nested["object"]) == ("urn:s", {"type": "literal", "value": "x", "xml:lang": "en"})
+    as_tsv = client.get("/sparql", params={"query": query}, headers={"Accept": "text/tab-separated-values"})
+    assert as_tsv.text.splitlines()[1] == '<<( <urn:s> <urn:p> <<( <urn:a> <urn:b> "x"@en )>> )>>'
+    for media in ("application/sparql-results+xml", "text/csv"):
+        assert client.get("/sparql", params={"query": query}, headers={"Accept": media}).status_code == 200, media
+
+
 def test_sparql_construct_and_ask(client):
     construct = "CONSTRUCT { ?s ?p ?o } WHERE { GRAPH ?g { ?s ?p ?o } } LIMIT 7"
     turtle = client.get("/sparql", params={"query": construct})
@@ -477,6 +489,9 @@ def test_the_service_answers_the_same_on_a_remote_sparql_endpoint(endpoint_backe
         assert int(union[0]["n"]["value"]) == sum(endpoint_backend.triple_count(g) for g in endpoint_backend.graphs())
         assert client.get("/sparql", params={"query": "SELECT * WHERE { GRAPH ?g { ?s ?p ?o } }"}).status_code == 422
         assert client.get("/sparql", params={"query": "SELECT ?x WHERE { ?x"}).status_code == 400
+        triple_term = "SELECT ?t WHERE { BIND(TRIPLE(<urn:s>, <urn:p>, 1) AS ?t) }"
+        as_tsv = client.get("/sparql", params={"query": triple_term}, headers={"Accept": "text/tab-separated-values"})
+        assert as_tsv.text.splitlines()[1] == "<<( <urn:s> <urn:p> 1 )>>"
 
 
 def test_settings_never_show_the_token():
