@@ -14,10 +14,11 @@ loop of components, not of physics) is broken at a connection carrying a flow (k
 commands, slow) if the cycle has one, else at the connection whose target comes first in IRI order,
 with a warning naming it. A delayed input at step ``k`` receives the producer's output of
 step ``k − 1``; at ``k = 0`` it receives the producer's measured value when the producer is a
-measuring device with a series in ``boundary`` (the sensor's first reading), else 0. Not a value
-from the producer's ``initial_state``: a state is not an output, and the producer's output at
-``t_0`` depends on the loop that is being broken; the measured reading is what the real controller
-saw.
+measuring device with a series in ``boundary`` (the sensor's first reading: what the real
+controller saw); else, on a feedback port, 0 (not a value from the producer's ``initial_state``: a
+state is not an output, and the output at ``t_0`` depends on the loop being broken); else the
+producer's output of a first pass over step 0 (a draw-through fan's air flow, which does not depend
+on the coils that read it: they saw still air at step 0 before).
 
 **Sub-steps.** ``substeps = S`` runs the components at ``step_s / S`` (a PI loop sampled every few
 minutes would oscillate where the real controller, sampled every second, does not) with the
@@ -330,7 +331,9 @@ class Simulator:
             start = series.get(iri)
             previous[(iri, _port)] = start[0].copy() if start is not None else np.zeros(n_ens)
         states: dict[str, dict] = {}
-        for i in range(n_internal if plan else 0):
+
+        def advance(i: int, record: bool) -> None:
+            """Step every stepped component from internal step ``i`` (initialising it at 0)."""
             k, offset = divmod(i, substeps)
             for key in feeding_steps:
                 current[key] = early[key][i]
@@ -347,9 +350,21 @@ class Simulator:
                 outputs = instance.step(p, inputs, states[iri], dt)
                 for port, value in outputs.items():
                     current[(iri, port)] = value
-                if offset == 0:
+                if record and offset == 0:
                     for port in keep:
                         buffers[(iri, port)][k] = outputs[port]
+
+        # a delayed input off a feedback port and without a measured seed starts from its source's
+        # output of a first pass over step 0 (module docstring)
+        unseeded = {(c.source, c.source_port) for c in self.delayed if series.get(c.source) is None
+                    and not components[c.target].model_class.port(c.target_port).feedback}
+        if plan and unseeded:
+            advance(0, record=False)
+            for key in unseeded:
+                previous[key] = current[key]
+            states.clear()  # free the first pass's states (an FMU's instances) before step 0 makes new ones
+        for i in range(n_internal if plan else 0):
+            advance(i, record=True)
             for key in previous:
                 previous[key] = current[key]
 

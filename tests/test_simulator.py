@@ -226,3 +226,22 @@ def test_memoryless_ends_are_evaluated_at_once_and_agree_with_stepping():
         if i % 3 == 0:
             expected.append(0.5 * y)
     assert at_once.target("urn:out")[0] == pytest.approx(expected)
+
+
+def test_a_draw_through_unit_s_coils_see_the_fan_s_air_flow_from_step_0():
+    """FLEXLAB draws its air through the coils: the fan's air flow reaches them a step late (the
+    cycle is broken at that flow). With constant inputs, step 0 equals every later step (before,
+    the coils saw no air at step 0 and the supply air read the heating water's 60 °C)."""
+    from service.assembly import assemble
+    from service.resources import examples_dir
+    from service.store import GraphStore
+
+    store = GraphStore.embedded(None)
+    store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+    model = assemble(store, "flexlab")
+    simulator = Simulator(model, 60.0)
+    assert {(c.source_port, c.target_port) for c in simulator.delayed} == {("outlet_air_mass_flow", "air_mass_flow")}
+    boundary = {c: np.full(5, 0.5 if "command" in c else 15.0) for c in model.boundary_inputs}
+    result = simulator.run(boundary, np.array([[r.spec.default for r in model.estimated_parameters]]))
+    for (iri, port), values in result.outputs.items():
+        np.testing.assert_allclose(values[0], values[0, -1], rtol=1e-12, err_msg=f"{iri} {port}")
