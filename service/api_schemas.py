@@ -124,6 +124,8 @@ class CalibrateRequest(_ModelRequest):
     method: Literal["point", "bayes"] = "point"
     seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
     only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
+    gp_inputs: list[str] = Field(default=["time"], min_length=1, description=(
+        "inputs of the discrepancy GP (method bayes): 'time' and boundary inputs by node IRI, local name or CSV column"))
 
     _windows = field_validator("train", "test")(_check_window)
     _conditions = field_validator("only_when")(_check_conditions)

@@ -174,14 +174,15 @@ class BayesianCalibrator(BaseEstimator):
                 raise ValueError(f"gp_inputs={choice!r}: expected 'auto', 'time' or column indices")
             if choice == "time" or problem.gp_inputs is None:
                 return np.arange(time_offset, time_offset + problem.n_steps, dtype=float)[:, None], ("time",)
-            return problem.gp_inputs, None
+            return problem.gp_inputs, problem.gp_input_names
         if problem.gp_inputs is None:
             raise ValueError(f"gp_inputs={list(choice)} selects columns, but the problem has no gp_inputs")
         columns = [int(c) for c in choice]
         n_features = problem.gp_inputs.shape[1]
         if not columns or min(columns) < -n_features or max(columns) >= n_features:
             raise ValueError(f"gp_inputs columns {columns} out of range for {n_features} problem gp_inputs")
-        return problem.gp_inputs[:, columns], tuple(f"gp_input{c}" for c in columns)
+        names = problem.gp_input_names or tuple(f"gp_input{c}" for c in range(n_features))
+        return problem.gp_inputs[:, columns], tuple(names[c] for c in columns)
 
     def fit(self, problem: CalibrationProblem) -> BayesianCalibrator:
         """Sample the posterior of θ and the discrepancy hyperparameters; returns ``self``."""

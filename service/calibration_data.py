@@ -18,7 +18,8 @@ import numpy as np
 from .assembled_model import AssembledModel
 from .calibration_problem import CalibrationProblem
 from .measurements import MeasuredData, SeriesSpec, read_measurements
-from .simulator import Simulator
+from .namespaces import local_name
+from .simulator import Simulator, held_over_gaps
 
 __all__ = ["GAP_RECOVERY_S", "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
 
@@ -151,6 +152,33 @@ class ModelData:
         return (f"{instance.node} (component {iri}, signature {instance.signature.id}, model {model}): output {port} is "
                 f"{result.outputs[(iri, port)][0][step]} from step {step} ({stamp}) at the default parameters")
 
+    def gp_input_nodes(self, names: Sequence[str]) -> tuple[str, ...]:
+        """The discrepancy GP's inputs named by the user: ``"time"``, or a boundary input's node IRI,
+        local name or CSV column, each → ``"time"`` or the node IRI.
+
+        :raises ValueError: naming what is not one, with the names that are.
+        """
+        boundary = [self.node_of[c] for c in self.model.boundary_inputs]
+        known = {"time": "time"} | {n: n for n in boundary} | {local_name(n): n for n in boundary} | {
+            self.data.columns[n]: n for n in boundary if n in self.data.columns}
+        unknown = [name for name in names if name not in known]
+        if unknown:
+            offered = ", ".join(["time"] + sorted(local_name(n) for n in boundary))
+            raise ValueError(f"GP input(s) {', '.join(map(repr, unknown))} are no boundary input of the model "
+                             f"(a target's measurements would feed the discrepancy of what it measures): "
+                             f"use {offered}, a node IRI or its CSV column")
+        return tuple(dict.fromkeys(known[name] for name in names))
+
+    def _gp_input_series(self, name: str, window: slice) -> np.ndarray:
+        """One GP input over ``window``: hours since the data's first step for ``"time"``, else the
+        boundary node's series with a gap holding the last value (the first value before it)."""
+        if name == "time":
+            return np.arange(window.start, window.stop) * self.data.step_s / 3600.0
+        values = self.data.series[name][window]
+        if not np.isfinite(values).any():
+            raise ValueError(f"GP input {name} has no measured value in the window")
+        return held_over_gaps(values)
+
     def default_theta(self) -> np.ndarray:
         return np.array([ref.spec.default for ref in self.model.estimated_parameters])
 
@@ -161,7 +189,7 @@ class ModelData:
     def problem(
         self, window: slice | Sequence[slice], *, default: np.ndarray | None = None,
         fixed: Mapping[str, float] | None = None, target_scales: Mapping[str, float] | None = None,
-        gp_time_column: bool = True, warmup_s: float = 3600.0,
+        gp_inputs: Sequence[str] = ("time",), warmup_s: float = 3600.0,
     ) -> CalibrationProblem:
         """The calibration problem of ``window`` (or of several windows, concatenated; each is
         simulated on its own): θ = the model's estimated parameters.
@@ -170,6 +198,9 @@ class ModelData:
             defaults when None).
         :param target_scales: residual scales per target node (e.g. the training window's, so a
             test window weighs alike).
+        :param gp_inputs: the discrepancy GP's inputs (:meth:`gp_input_nodes`): ``"time"`` (hours
+            since the data's first step) and boundary input nodes (their measured series, in the
+            simulator's unit; a gap holds the last value); empty: none (the calibrator's time index).
         :param warmup_s: the first ``warmup_s`` seconds of each window are simulated but not
             compared: the model starts in steady state with the first inputs, the building did not.
         """
@@ -183,7 +214,7 @@ class ModelData:
                 values = values.copy()
                 values[:warmup] = np.nan
                 observed.setdefault(node, []).append(values)
-        hours = np.concatenate([np.arange(w.start, w.stop) for w in windows]) * self.data.step_s / 3600.0
+        columns = [np.concatenate([self._gp_input_series(name, w) for w in windows]) for name in gp_inputs]
 
         def simulate(theta: np.ndarray) -> dict[str, np.ndarray]:
             runs = [self.simulate_targets(part, theta, fixed) for part in windows]
@@ -194,6 +225,7 @@ class ModelData:
             lower=lower, upper=upper, simulate=simulate,
             observed={node: np.concatenate(parts) for node, parts in observed.items()}, units=self.units,
             default=start, target_scales=dict(target_scales or {}),
-            gp_inputs=hours if gp_time_column else None,
+            gp_inputs=np.column_stack(columns) if columns else None,
+            gp_input_names=tuple(name if name == "time" else local_name(name) for name in gp_inputs) or None,
             vectorised_simulate=all(c.model_class.vectorised for c in self.model.components.values()),
         )

@@ -84,6 +84,8 @@ class CalibrationProblem:
         :func:`default_target_scale`.
     :param gp_inputs: ``ndarray[n_steps, n_features]`` (or ``[n_steps]``) inputs of the discrepancy
         GP, e.g. time and boundary inputs; None lets the Bayesian calibrator use the time index.
+    :param gp_input_names: one name per ``gp_inputs`` column (the GP's length scales are named by
+        them); None: ``gp_input<j>``.
     :param units: ``{target: unit}`` (``"degC"``, ``"1"``, ``"W"``, …); missing entries are ``""``.
     :param default: a θ known to be plausible (the components' defaults), ``ndarray[n_parameters]``
         within the bounds; the point calibrator screens it with its start candidates.
@@ -99,6 +101,7 @@ class CalibrationProblem:
     observed: Mapping[str, np.ndarray]
     target_scales: Mapping[str, float] = field(default_factory=dict)
     gp_inputs: np.ndarray | None = None
+    gp_input_names: tuple[str, ...] | None = None
     units: Mapping[str, str] = field(default_factory=dict)
     default: np.ndarray | None = None
     vectorised_simulate: bool = True
@@ -186,6 +189,8 @@ class CalibrationProblem:
         bad_rows = np.flatnonzero(~np.isfinite(inputs).all(axis=1))
         if bad_rows.size:
             raise ValueError(f"gp_inputs is not finite in row {bad_rows[0]}")
+        if self.gp_input_names is not None and len(self.gp_input_names) != inputs.shape[1]:
+            raise ValueError(f"{len(self.gp_input_names)} gp_input_names for {inputs.shape[1]} gp_inputs columns")
         inputs.setflags(write=False)
         object.__setattr__(self, "gp_inputs", inputs)
 

@@ -165,6 +165,7 @@ def calibrate(
     on_progress: Callable[[dict], None] | None = None,
     only_when: Sequence[str] = (),
     min_test_steps: int = 1,
+    gp_inputs: Sequence[str] = ("time",),
 ) -> CalibrationOutcome:
     """Calibrate ``model_name`` against the CSV at ``data_path`` and store the run. A test window
     that overlaps the training window is noted in the run's warnings (its metrics are then partly on
@@ -173,6 +174,8 @@ def calibrate(
     :param only_when: operating conditions (``"SF Spd Cmd (%) > 5"``, :mod:`service.operating_filter`):
         the targets are compared only at the steps where all hold.
     :param min_test_steps: a test window with fewer steps of data is refused.
+    :param gp_inputs: the inputs of the discrepancy GP (``method="bayes"``): ``"time"`` and boundary
+        inputs by node IRI, local name or CSV column (:meth:`ModelData.gp_input_nodes`).
 
     :raises ValueError: a bad window, a target without measurements, NaN-only series, an unknown
         method; nothing is written to the store then.
@@ -197,11 +200,17 @@ def calibrate(
         if overlap > 0:
             window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
                                 "partly on data the calibration fitted")
-    problem = md.problem(train_slice)
+    gp_nodes = md.gp_input_nodes(gp_inputs)
+    if method == "point" and gp_nodes != ("time",):
+        raise ValueError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
+                         "a point calibration has no discrepancy")
+    problem = md.problem(train_slice, gp_inputs=gp_nodes)
     n_par = problem.n_parameters
     settings = {"substeps": substeps, "step_s": data.step_s}
     if only_when:
         settings["only_when"] = list(only_when)
+    if method == "bayes":
+        settings["gp_inputs"] = list(gp_nodes)
     diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes) + list(md.simulator.notes) + window_notes}
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None
@@ -239,7 +248,8 @@ def calibrate(
         joined = continuation(train_slice, test_slice)
         offset = test_slice.start - joined.start if joined is not None else 0
         if method == "bayes":
-            test_problem = md.problem(joined or test_slice, target_scales=problem.target_scales, warmup_s=0.0)
+            test_problem = md.problem(joined or test_slice, target_scales=problem.target_scales, warmup_s=0.0,
+                                      gp_inputs=gp_nodes)
             predictive = calibrator.predict(test_problem, n_draws=200,
                                             steps_from_training_start=(joined or test_slice).start - train_slice.start)
             median = {k: v[offset:] for k, v in predictive.median.items()}

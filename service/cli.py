@@ -202,6 +202,9 @@ def calibrate_command(
     seed: SeedOption = 0,
     plots: Annotated[Path | None, typer.Option(help="Folder for measured-vs-model plots.")] = None,
     only_when: OnlyWhenOption = None,
+    gp_input: Annotated[list[str] | None, typer.Option(
+        help="An input of the discrepancy GP (--method bayes): 'time' (the default) or a boundary input "
+             "(node local name, IRI or CSV column); repeat for several.")] = None,
     as_json: JsonOption = False,
     store: StoreOption = Path("graphtwin-data"),
     memory: MemoryOption = False,
@@ -212,7 +215,7 @@ def calibrate_command(
         model_name = _load(graph_store, model, name)
         outcome = calibrate(graph_store, model_name, data, train=parse_window(train),
                             test=parse_window(test) if test else None, method=method, seed=seed,
-                            progress=not as_json, only_when=only_when or ())
+                            progress=not as_json, only_when=only_when or (), gp_inputs=gp_input or ("time",))
     except USER_ERRORS as exc:
         raise fail(exc) from None
     record = outcome.record

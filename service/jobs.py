@@ -689,14 +689,15 @@ def _result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:
 
 
 def calibrate_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
-    """``{"model", "measurements", "train", "test", "method", "seed", "only_when"}`` (windows as ``START/END``):
-    :func:`service.calibration_run.calibrate` on the uploaded CSV ``context.measurements(id)``."""
+    """``{"model", "measurements", "train", "test", "method", "seed", "only_when", "gp_inputs"}`` (windows as
+    ``START/END``): :func:`service.calibration_run.calibrate` on the uploaded CSV ``context.measurements(id)``."""
     model = params["model"]
     data = context.measurements(params["measurements"])
     context.report(f"calibrating ({params.get('method', 'point')})")
     outcome = calibrate(store, model, data, train=parse_window(params.get("train") or "/"),
                         test=_window(params.get("test")), method=params.get("method", "point"),
-                        seed=int(params.get("seed", 0)), only_when=params.get("only_when") or ())
+                        seed=int(params.get("seed", 0)), only_when=params.get("only_when") or (),
+                        gp_inputs=params.get("gp_inputs") or ("time",))
     context.report("calibrated; writing the run")
     return JobResult(outcome.record.to_dict(), _result_links(store, model, outcome.record.run_id))
 

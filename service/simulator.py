@@ -49,7 +49,7 @@ import numpy as np
 from .assembled_model import AssembledModel, Connection
 
 __all__ = ["Simulator", "SimulationResult", "simulate", "component_order", "loop_substeps", "MAX_LOOP_STEP_S",
-           "target_series"]
+           "target_series", "held_over_gaps"]
 
 #: Longest internal step of a model with a closed control loop, s: at 2 minutes the case study's
 #: heating loop is free of the sampling limit cycle over its whole prior (tests/components).
@@ -114,6 +114,18 @@ def _strongly_connected(nodes: list[str], edges: Mapping[str, set[str]]) -> dict
                     if member == node:
                         break
     return comp
+
+
+def held_over_gaps(values: np.ndarray) -> np.ndarray:
+    """``values`` with each NaN replaced by the last finite value before it (the first finite value
+    before that one); at least one value must be finite."""
+    finite = np.isfinite(values)
+    index = np.where(finite, np.arange(values.size), 0)
+    np.maximum.accumulate(index, out=index)
+    held = values[index]
+    first = int(np.argmax(finite))
+    held[:first] = values[first]
+    return held
 
 
 def component_order(model: AssembledModel) -> tuple[list[str], set[Connection], list[str]]:
@@ -277,11 +289,7 @@ class Simulator:
                     raise ValueError(f"boundary input {iri} has no finite value in the window")
                 continue
             if bad.any():
-                index = np.where(~bad, np.arange(filled.size), 0)
-                np.maximum.accumulate(index, out=index)
-                first = np.flatnonzero(~bad)[0]
-                filled = filled[index]
-                filled[:first] = filled[first]
+                filled = held_over_gaps(filled)
             if substeps > 1:
                 filled = np.interp(np.arange(n_internal) / substeps, np.arange(n_steps), filled)
             series[iri] = np.broadcast_to(filled[:, None], (filled.size, n_ens))

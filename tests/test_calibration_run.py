@@ -201,6 +201,42 @@ def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_
     assert outcome.calibrator.chain_.shape[0] == 20  # the trace shows every step, burn-in included
 
 
+def test_the_discrepancy_runs_over_the_boundary_inputs_the_user_chooses(synthetic):
+    """``gp_inputs``: time and the supply air flow (named by its CSV column) are the GP's inputs, one
+    length scale each per target, in the training and the test window; recorded with the run."""
+    store, path, _ = synthetic
+    meter = EX + "supply_air_flow_meter"
+    outcome = calibrate(store, "case", path, train=("2026-01-12", "2026-01-12T23:59"),
+                        test=("2026-01-13", "2026-01-13T05:59"), method="bayes", seed=1, substeps=1,
+                        bayes_settings={"max_steps": 10, "check_interval": 10, "n_temperatures": 2},
+                        gp_inputs=["time", "supply_air_flow"])
+    assert outcome.record.settings["gp_inputs"] == ["time", meter]
+    calibrator = outcome.calibrator
+    scales = [n for n in calibrator.hyper_names_ if ":log_length_scale:" in n]
+    assert len(scales) == 2 * 5 and sum(n.endswith(":supply_air_flow_meter") for n in scales) == 5
+    train = outcome.train
+    problem = outcome.model_data.problem(train, gp_inputs=("time", meter))
+    np.testing.assert_array_equal(problem.gp_inputs[:, 1], outcome.model_data.data.series[meter][train])
+    np.testing.assert_allclose(np.diff(problem.gp_inputs[:, 0]), 600.0 / 3600.0)
+    assert outcome.intervals["test"][EX + "coil_outlet_air_temperature_sensor"][0.9][0].shape == (36,)
+
+
+@pytest.mark.parametrize("method, names, problem", [
+    ("bayes", ["coil_outlet_air_temperature_sensor"], "no boundary input of the model"),
+    ("bayes", ["time", "wind_speed"], "'wind_speed' are no boundary input"),
+    ("point", ["supply_air_flow"], "a point calibration has no discrepancy"),
+])
+def test_gp_inputs_that_are_no_boundary_input_or_go_to_a_point_fit_are_refused(synthetic, method, names, problem):
+    store, path, _ = synthetic
+    graphs_before = set(store.backend.graphs())
+    with pytest.raises(ValueError, match=problem) as caught:
+        calibrate(store, "case", path, train=TRAIN, method=method, gp_inputs=names)
+    if method == "bayes":
+        assert ("use time, fan_inlet_air_temperature_sensor, setpoint_schedule, supply_air_flow_meter, "
+                "supply_water_temperature_sensor, a node IRI or its CSV column") in str(caught.value)
+    assert set(store.backend.graphs()) == graphs_before
+
+
 def test_a_point_run_is_plotted_as_measured_against_predicted_only(point_run, tmp_path):
     (path,) = plot_calibration(point_run, tmp_path)
     assert path.name == f"{point_run.record.run_id}-fit.png"

@@ -231,3 +231,5 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
     assert "Estimates (point" in result.output and "Metrics, test window" in result.output
     regimes = result.output[result.output.index("Test RMSE per operating regime"):]
     assert "supply air flow meter" in regimes and " %" in regimes and "°C" in regimes  # rules, shares, units
+    refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--gp-input", "supply_air_flow"])
+    assert refused.exit_code == 2 and "a point calibration has no discrepancy" in refused.output
