@@ -102,9 +102,11 @@ class PatternTriple:
     object: str
     rule: Rule = Rule.EXACT
     optional: bool = False  # True for an optional traverse (rule TRAVERSE); OPTIONAL rule implies it
-    #: a traverse from the subject that, where nothing lies along the predicate, takes the nearest
-    #: match against it (a coil's fan: downstream in a draw-through unit, upstream in a blow-through one)
+    #: a traverse that, where the triple as written gives the end it searches from no partner, takes
+    #: the triple reversed (a coil's fan: upstream in a blow-through unit, else downstream)
     or_reverse: bool = False
+    #: classes a traverse does not pass, beside the searched-for end's (a mixing box, where streams join)
+    stop_at: tuple[str, ...] = ()
 
     @property
     def is_optional(self) -> bool:
@@ -194,7 +196,7 @@ _TOP_KEYS = {
     "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values",
 }
 _NODE_KEYS = ("classes", "iri", "literal", "any")
-_TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_reverse"}
+_TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_reverse", "stop_at"}
 _SPLICE_KEYS = {"node", "input", "output", "host_models"}
 
 
@@ -318,7 +320,7 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     triples = []
     for i, spec in enumerate(_array(path, "triples", data.get("triples", []), "an array of tables ([[triples]])")):
         where = f"triples[{i}]"
-        spec = _table(path, where, spec, "a table with 'subject', 'predicate', 'object', optional 'rule', 'optional' and 'or_reverse'")
+        spec = _table(path, where, spec, "a table with 'subject', 'predicate', 'object', optional 'rule', 'optional', 'or_reverse' and 'stop_at'")
         _only_keys(path, where, spec, _TRIPLE_KEYS)
         rule_text = spec.get("rule", "exact")
         try:
@@ -339,7 +341,11 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
                 raise _fail(path, f"{where}.{key}", "must be true or false")
         if or_reverse and rule is not Rule.TRAVERSE:
             raise _fail(path, where + ".or_reverse", "only a traverse can fall back to the reverse direction")
-        triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL, or_reverse))
+        stop_at = tuple(_curie(path, f"{where}.stop_at[{j}]", c) for j, c in enumerate(
+            _array(path, f"{where}.stop_at", spec.get("stop_at", []), "an array of class CURIEs")))
+        if stop_at and rule is not Rule.TRAVERSE:
+            raise _fail(path, where + ".stop_at", "only a traverse has places to stop at")
+        triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL, or_reverse, stop_at))
 
     modeled = tuple(known(n, f"modeled_nodes[{i}]") for i, n in enumerate(_array(
         path, "modeled_nodes", data["modeled_nodes"], "a non-empty array of node ids", empty_ok=False)))

@@ -10,8 +10,9 @@ twice, so loops (return air mixed back into the supply) terminate and give the r
 sensor on a loop finds the equipment right before it, not everything on the loop. A node is not its
 own partner: a loop that comes back to the start without meeting another instance gives no pair
 (a fan whose only upstream equipment is itself has no inlet to wire, and is reported). A traverse
-with ``or_reverse`` is not symmetric (a subject's partners against the predicate count only where it
-has none along it), so it is searched from its subject: the join binds the subject first.
+with ``or_reverse`` is not symmetric (the reversed triple counts only where the written one gives the
+searched-from end no partner), so it is searched from that end (:attr:`Traversal.start`, the end the
+signature models): the join binds it first.
 
 A :class:`MatchSession` reads each traversed predicate's edge list, each class's instances and
 subclasses ONCE, runs each distinct part query once (signatures share sensor and device parts) and
@@ -257,18 +258,19 @@ class MatchSession:
                 searches[start] = frozenset(seen)
         return searches
 
-    def partners(self, traversal: Traversal, subjects: Iterable[str]) -> dict[str, frozenset[str]]:
-        """Each of ``subjects`` → its nearest partners along the traversal's predicate; with
-        ``or_reverse``, the instances of its object classes among them, and for a subject that has
-        none, those against the predicate."""
-        subjects = set(subjects)
-        along = self.nearest(traversal, subjects, True)
+    def partners(self, traversal: Traversal, starts: Iterable[str]) -> dict[str, frozenset[str]]:
+        """Each of ``starts`` (nodes of the traversal's :attr:`~Traversal.start` end) → its nearest
+        partners as the triple is written; with ``or_reverse``, the instances of its far classes among
+        them, and for a start that has none, those with the triple reversed."""
+        starts = set(starts)
+        written = not traversal.from_object  # from the subject: along the predicate
+        found = self.nearest(traversal, starts, written)
         if not traversal.or_reverse:
-            return along
-        objects = self.instance_terms(traversal.object_classes)
-        found = {s: along[s] & objects for s in subjects}
-        against = self.nearest(traversal, [s for s in subjects if not found[s]], False)
-        return {s: found[s] or against[s] & objects for s in subjects}
+            return found
+        far = self.instance_terms(traversal.far_classes)
+        found = {s: found[s] & far for s in starts}
+        reversed_ = self.nearest(traversal, [s for s in starts if not found[s]], not written)
+        return {s: found[s] or reversed_[s] & far for s in starts}
 
 
 def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: list[QueryPart],
@@ -281,27 +283,27 @@ def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: lis
         bound = set(columns)
         check = next((t for t in checks if t.subject in bound and t.object in bound), None)
         if check is not None:
-            subject, obj = columns.index(check.subject), columns.index(check.object)
-            nearest = session.partners(check, (r[subject] for r in rows))
-            rows = [r for r in rows if r[obj] in nearest[r[subject]]]
+            start, far = columns.index(check.start), columns.index(check.far)
+            nearest = session.partners(check, (r[start] for r in rows))
+            rows = [r for r in rows if r[far] in nearest[r[start]]]
             checks.remove(check)
             continue
         part = next((p for p in pending if bound & set(p.nodes)), None)
         via = far = None
         if part is None:
-            via = next((t for t in checks if t.subject in bound and t.object not in bound
-                        or t.object in bound and t.subject not in bound and not t.or_reverse), None)
+            via = next((t for t in checks if t.start in bound and t.far not in bound
+                        or t.far in bound and t.start not in bound and not t.or_reverse), None)
             if via is not None:
-                far = via.object if via.subject in bound else via.subject
+                far = via.far if via.start in bound else via.start
                 part = next(p for p in pending if far in p.nodes)
         part = part or pending[0]
         pending.remove(part)
         if via is not None:
             checks.remove(via)
-            if via.subject in bound:
-                start = columns.index(via.subject)
+            if via.start in bound:
+                start = columns.index(via.start)
                 nearest = session.partners(via, (r[start] for r in rows))
-            else:
+            else:  # a plain traverse searched from its object: against the predicate
                 start = columns.index(via.object)
                 nearest = session.nearest(via, (r[start] for r in rows), False)
         shared = sorted(bound & set(part.nodes))

@@ -15,7 +15,8 @@ every other resource is minted under it, no blank nodes, so two writes of one li
     <sig/node/v> a gt:PatternNode, gt:LiteralPatternNode ; gt:nodeId "v" .                  # literal
     <sig/node/u> a gt:PatternNode, gt:AnyTermPatternNode ; gt:nodeId "u" .                  # any
     <sig/triple/0> a gt:PatternTriple ; gt:patternSubject <sig/node/a> ; gt:patternPredicate fso:suppliesFluidTo ;
-          gt:patternObject <sig/node/b> ; gt:rule gt:Exact | gt:Traverse | gt:Optional ; [gt:mayBeAbsent true] ; [gt:orReverse true] .
+          gt:patternObject <sig/node/b> ; gt:rule gt:Exact | gt:Traverse | gt:Optional ; [gt:mayBeAbsent true] ; [gt:orReverse true] ;
+          [gt:stopsAt gt:MixingBox] .
     <sig/input/P> a gt:PortMapping ; gt:portName "P" ; gt:sourceNode <sig/node/s> ; gt:quantity "temperature" .
     <sig/output/P> a gt:PortMapping ; gt:portName "P" ; gt:atNode <sig/node/n> ; gt:quantity "power" .
     <sig/parameter/N> a gt:ParameterMapping ; gt:parameterName "N" ; gt:valueNode <sig/node/v> ;
@@ -104,6 +105,7 @@ def signature_triples(signature: Signature) -> list[ox.Triple]:
             triples.append(ox.Triple(iri, GT.mayBeAbsent, ox.Literal(True)))
         if pattern.or_reverse:
             triples.append(ox.Triple(iri, GT.orReverse, ox.Literal(True)))
+        triples += [ox.Triple(iri, GT.stopsAt, ox.NamedNode(c)) for c in pattern.stop_at]
 
     for mapping in signature.inputs:
         iri = ox.NamedNode(f"{signature.iri}/input/{mapping.port}")

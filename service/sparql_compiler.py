@@ -13,7 +13,7 @@
   not expressible on property paths: written as ``FILTER NOT EXISTS`` or ``MINUS`` over two paths it
   is either explosive (> 600 s at 100k triples) or wrong on recirculation loops (every candidate on
   a loop lies "behind" another). A traverse with ``or_reverse`` becomes ``?s (P+|^P+) ?o``: the
-  nearest match along ``P`` from ``?s``, and only where there is none, the nearest against it.
+  nearest pair as written, and only where the searched-from end has none, the nearest reversed.
 
 :attr:`CompiledQuery.text` is that whole query (``graphtwin signature explain`` prints it): run on
 any SPARQL endpoint it returns every *reachable* combination, a superset of the matches. The matcher
@@ -46,17 +46,30 @@ __all__ = ["CompiledQuery", "QueryPart", "Traversal", "compile_signature"]
 class Traversal:
     """A traverse triple the matcher joins on nearest pairs: ``subject`` reaches ``object`` along
     ``predicate`` without passing an instance of ``blocking_classes``; ``block``: the optional block
-    (index in :attr:`CompiledQuery.blocks`) that is unbound when it fails, None when it is required."""
+    (index in :attr:`CompiledQuery.blocks`) that is unbound when it fails, None when it is required.
+
+    With ``or_reverse`` the pairs are searched from :attr:`start` (the object when ``from_object``):
+    its nearest instances of ``far_classes`` as the triple is written, and where it has none, with
+    the triple reversed."""
 
     subject: str
     predicate: str
     object: str
     blocking_classes: tuple[str, ...]
     block: int | None = None
-    #: where the subject reaches no instance of ``object_classes`` along the predicate, take the
-    #: nearest against it
     or_reverse: bool = False
-    object_classes: tuple[str, ...] = ()
+    far_classes: tuple[str, ...] = ()
+    from_object: bool = False
+
+    @property
+    def start(self) -> str:
+        """The end the pairs are searched from."""
+        return self.object if self.from_object else self.subject
+
+    @property
+    def far(self) -> str:
+        """The end searched for."""
+        return self.subject if self.from_object else self.object
 
 
 @dataclass(frozen=True)
@@ -137,7 +150,7 @@ class _Writer:
         subject, obj = self.term(triple.subject), self.term(triple.object)
         if triple.rule is Rule.TRAVERSE and triple.or_reverse:
             return [
-                f"# traverse: {triple.subject} {predicate}+ {triple.object}, or where there is none "
+                f"# traverse: {triple.subject} {predicate}+ {triple.object}, or where that gives none "
                 f"{triple.object} {predicate}+ {triple.subject} (nearest: joined by the matcher)",
                 f"{subject} ({predicate}+|^{predicate}+) {obj} .",
             ]
@@ -335,11 +348,16 @@ OPAQUE_CLASSES = tuple(f"{S4BLDG}{name}" for name in ("BuildingSpace", "Boiler",
 def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -> Traversal:
     """The searched-for end is the one the signature does not model (a fan looks for its nearest
     upstream sensor, a coil for its nearest downstream fan, even past another coil); when both or
-    neither end is modelled, both ends' classes block; so do :data:`OPAQUE_CLASSES`."""
+    neither end is modelled, both ends' classes block (``or_reverse``: it is searched from the
+    subject, and the object's classes block); so do the triple's ``stop_at`` classes and
+    :data:`OPAQUE_CLASSES`."""
     ends = [triple.subject, triple.object]
     searched = [n for n in ends if n not in signature.modeled_nodes] or ends
-    if len(searched) == 2:
+    if triple.or_reverse:
+        searched = searched[-1:]
+    elif len(searched) == 2:
         searched = ends
-    classes = tuple(c for n in searched for c in signature.nodes[n].classes) + OPAQUE_CLASSES
+    classes = tuple(c for n in searched for c in signature.nodes[n].classes) + triple.stop_at + OPAQUE_CLASSES
     return Traversal(triple.subject, triple.predicate, triple.object, tuple(dict.fromkeys(classes)), block,
-                     triple.or_reverse, signature.nodes[triple.object].classes if triple.or_reverse else ())
+                     triple.or_reverse, signature.nodes[searched[-1]].classes if triple.or_reverse else (),
+                     triple.or_reverse and searched[-1] == triple.subject)

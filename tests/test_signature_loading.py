@@ -131,11 +131,14 @@ def test_check_model_names_takes_the_class_an_fmu_signature_builds(tmp_path):
         check_model_names(signature, Lag)
 
 
-@pytest.mark.parametrize("rule, flag, problem", [
-    ("exact", "true", "only a traverse can fall back to the reverse direction"),
-    ("traverse", '"yes"', "must be true or false"),
+@pytest.mark.parametrize("rule, line, key, problem", [
+    ("exact", "or_reverse = true", "or_reverse", "only a traverse can fall back to the reverse direction"),
+    ("traverse", 'or_reverse = "yes"', "or_reverse", "must be true or false"),
+    ("exact", 'stop_at = ["gt:MixingBox"]', "stop_at", "only a traverse has places to stop at"),
+    ("traverse", 'stop_at = "gt:MixingBox"', "stop_at", "expected an array of class CURIEs, got a string"),
+    ("traverse", 'stop_at = ["nope:MixingBox"]', "stop_at[0]", "nope"),
 ])
-def test_or_reverse_is_a_boolean_of_traverses(tmp_path, rule, flag, problem):
+def test_or_reverse_and_stop_at_belong_to_traverses(tmp_path, rule, line, key, problem):
     text = (TOP + NODES + 'coil = { classes = ["s4bldg:Coil"] }\n[[triples]]\nsubject = "coil"\n'
-            f'predicate = "fso:suppliesFluidTo"\nobject = "fan"\nrule = "{rule}"\nor_reverse = {flag}\n')
-    _refused(tmp_path, text, "triples[0].or_reverse", problem)
+            f'predicate = "fso:suppliesFluidTo"\nobject = "fan"\nrule = "{rule}"\n{line}\n')
+    _refused(tmp_path, text, f"triples[0].{key}", problem)

@@ -273,8 +273,9 @@ def test_a_traverse_does_not_pass_through_a_boiler():
     assert _pairs(match_signature(store, _sensor_upstream())) == [("coil", "ret")]
 
 
-def _coil_fan(optional: bool = False):
-    triple = {"subject": "coil", "predicate": X + "feeds", "object": "fan", "rule": "traverse", "or_reverse": True}
+def _coil_fan(optional: bool = False, stop_at: tuple[str, ...] = (X + "MixingBox",)):
+    triple = {"subject": "fan", "predicate": X + "feeds", "object": "coil", "rule": "traverse", "or_reverse": True,
+              "stop_at": list(stop_at)}
     if optional:
         triple["optional"] = True
     return signature_from_dict({
@@ -284,37 +285,43 @@ def _coil_fan(optional: bool = False):
     })
 
 
-def test_or_reverse_takes_the_fan_downstream_and_upstream_only_where_there_is_none():
+UNITS = """
+    x:rfan_a a x:Fan ; x:feeds x:mix_a . x:mix_a a x:MixingBox ; x:feeds x:coil_a .
+    x:coil_a a x:Coil ; x:feeds x:sensor_a . x:sensor_a a x:Sensor ; x:feeds x:sfan_a . x:sfan_a a x:Fan .
+    x:mix_b a x:MixingBox ; x:feeds x:fan_b . x:fan_b a x:Fan ; x:feeds x:coil_b . x:coil_b a x:Coil ; x:feeds x:duct_b .
+    x:duct_b x:feeds x:box_fan_1, x:box_fan_2 . x:box_fan_1 a x:Fan . x:box_fan_2 a x:Fan .
+    x:mix_c a x:MixingBox ; x:feeds x:coil_c . x:coil_c a x:Coil ; x:feeds x:sensor_c . x:sensor_c a x:Sensor ."""
+
+
+def test_or_reverse_takes_the_fan_upstream_and_downstream_only_where_there_is_none():
     # unit a draws through (return fan → mixing box → coil → supply fan): the supply fan, not the
-    # return fan behind the mixing box; unit b blows through (fan → coil → room): the fan upstream,
-    # though the sensor downstream reaches nothing; unit c has no fan at all: no match
-    store = _store("""
-        x:rfan_a a x:Fan ; x:feeds x:mix_a . x:mix_a a x:MixingBox ; x:feeds x:coil_a .
-        x:coil_a a x:Coil ; x:feeds x:sensor_a . x:sensor_a a x:Sensor ; x:feeds x:sfan_a . x:sfan_a a x:Fan .
-        x:mix_b a x:MixingBox ; x:feeds x:fan_b . x:fan_b a x:Fan ; x:feeds x:coil_b .
-        x:coil_b a x:Coil ; x:feeds x:sensor_b . x:sensor_b a x:Sensor ; x:feeds x:room_b . x:room_b a x:Room .
-        x:mix_c a x:MixingBox ; x:feeds x:coil_c . x:coil_c a x:Coil ; x:feeds x:sensor_c . x:sensor_c a x:Sensor .""")
+    # return fan behind the mixing box; unit b blows through (fan → coil → two terminal-unit fans):
+    # the fan upstream, not the terminal fans after it; unit c has no fan at all: no match
+    store = _store(UNITS)
     signature = _coil_fan()
     assert _pairs(match_signature(store, signature), "fan", "coil") == [("fan_b", "coil_b"), ("sfan_a", "coil_a")]
     # optional: the fanless coil stays, unbound
     assert _pairs(match_signature(store, _coil_fan(optional=True)), "fan", "coil") == [
         (None, "coil_c"), ("fan_b", "coil_b"), ("sfan_a", "coil_a")]
-    assert "(x:feeds+|^x:feeds+)" in compile_signature(signature).text.replace(f"<{X}feeds>", "x:feeds")
+    # without the stop at mixing boxes the return fan, upstream, would win in unit a
+    assert ("rfan_a", "coil_a") in _pairs(match_signature(store, _coil_fan(stop_at=())), "fan", "coil")
+    text = compile_signature(signature).text.replace(f"<{X}feeds>", "x:feeds")
+    assert "?fan (x:feeds+|^x:feeds+) ?coil ." in text
 
 
-def test_or_reverse_is_searched_from_the_subject_when_the_pattern_binds_the_object_first():
-    # the signature models the fan, so the fans are bound first; a blow-through coil lies downstream
-    # of its fan, so a search from the fan against the predicate would miss it: the coil is found
-    # from its side
-    store = _store("""
-        x:rfan a x:Fan ; x:feeds x:coil_a ; x:label "return" . x:coil_a a x:Coil ; x:feeds x:sfan .
-        x:sfan a x:Fan ; x:label "supply" .
-        x:fan_b a x:Fan ; x:feeds x:coil_b ; x:label "blow-through" . x:coil_b a x:Coil .""")
+def test_or_reverse_is_searched_from_the_modelled_end_when_the_pattern_binds_the_other_first():
+    # a meter of each fan is bound first (the anchor), with its fan; the coil, reached only by the
+    # traverse, is searched from its side: a search from the fans would pair the return fan with the
+    # coil downstream of it, and the supply fan of unit a with nothing
+    store = _store(UNITS + """
+        x:m_rfan x:measures x:rfan_a . x:m_sfan x:measures x:sfan_a . x:m_fan_b x:measures x:fan_b .
+        x:m_rfan a x:Sensor . x:m_sfan a x:Sensor . x:m_fan_b a x:Sensor .""")
     signature = signature_from_dict({
-        "id": "LabelledFan", "modeled_nodes": ["fan"], "model": "service.measuring_device:MeasuringDevice",
-        "nodes": {"fan": {"classes": [X + "Fan"]}, "label": {"literal": True}, "coil": {"classes": [X + "Coil"]}},
-        "triples": [{"subject": "fan", "predicate": X + "label", "object": "label"},
-                    {"subject": "coil", "predicate": X + "feeds", "object": "fan", "rule": "traverse", "or_reverse": True}],
+        "id": "MeteredFanCoil", "modeled_nodes": ["meter", "coil"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"meter": {"classes": [X + "Sensor"]}, "fan": {"classes": [X + "Fan"]}, "coil": {"classes": [X + "Coil"]}},
+        "triples": [{"subject": "meter", "predicate": X + "measures", "object": "fan"},
+                    {"subject": "fan", "predicate": X + "feeds", "object": "coil", "rule": "traverse", "or_reverse": True,
+                     "stop_at": [X + "MixingBox"]}],
     })
-    assert sorted((m["coil"].rsplit("#")[-1], m["label"]) for m in match_signature(store, signature)) == [
-        ("coil_a", "supply"), ("coil_b", "blow-through")]
+    assert sorted((m["meter"].rsplit("#")[-1], m["coil"].rsplit("#")[-1]) for m in match_signature(store, signature)) == [
+        ("m_fan_b", "coil_b"), ("m_sfan", "coil_a")]

@@ -40,9 +40,11 @@ def test_the_fan_signature_as_triples():
     assert _objects(triples, fan + "/triple/2", GT.rule) == {GT.Optional.value}
     assert _objects(triples, fan + "/triple/2", GT.mayBeAbsent) == {"true"}
     assert _objects(triples, fan + "/triple/0", GT.orReverse) == set()
-    coil = SIG + "HeatingCoil"  # its fan: downstream, else upstream
-    fan_triple = next(f"{coil}/triple/{i}" for i, t in enumerate(LIBRARY["HeatingCoil"].triples) if t.object == "fan")
-    assert _objects(signature_triples(LIBRARY["HeatingCoil"]), fan_triple, GT.orReverse) == {"true"}
+    coil = SIG + "HeatingCoil"  # its fan: upstream, else downstream, not past a mixing box
+    fan_triple = next(f"{coil}/triple/{i}" for i, t in enumerate(LIBRARY["HeatingCoil"].triples) if t.subject == "fan")
+    coil_triples = signature_triples(LIBRARY["HeatingCoil"])
+    assert _objects(coil_triples, fan_triple, GT.orReverse) == {"true"}
+    assert _objects(coil_triples, fan_triple, GT.stopsAt) == {GT.MixingBox.value}
     assert _objects(triples, fan + "/input/air_volume_flow", GT.sourceNode) == {fan + "/node/flow_source"}
     assert _objects(triples, fan + "/input/air_volume_flow", GT.quantity) == {"volume_flow"}
     assert _objects(triples, fan + "/output/electric_power", GT.atNode) == {fan + "/node/fan"}

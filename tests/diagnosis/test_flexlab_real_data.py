@@ -107,10 +107,10 @@ def test_the_top_effect_is_the_heating_valve_passing_water_while_shut(reports, f
     is not asserted; a valve stuck fully open behind a logged command of 0 looks like a leak to a
     linear valve). The stuck valve (nested: stuck at s with weight w is a leak λ = w·s) is fitted
     with its host as trained: it finds a partial opening just past the coil's dead band and ranks
-    lower. The effects that take the air flow of a fan upstream of the coil (a constant heat gain,
-    casing heat exchange) do not apply to this draw-through unit. Fan motor heat, a property of the
-    fan and not a fault that
-    appears from one day to the next, is not fitted as one. ΔBIC stays above the −10 the ranking
+    lower. A constant heat gain at a coil (its air flow from the fan downstream in this draw-through
+    unit) ranks close behind: with the valve shut all day, a leak differs from any heat source only
+    in how it follows the air flow and the coil inlet temperature. Fan motor heat, a property of the
+    fan and not a fault that appears from one day to the next, is not fitted as one. ΔBIC stays above the −10 the ranking
     calls significant: 15-minute means leave a day only ~15 effective observations."""
     effects = reports[fault]["report"].effects
     best = effects[0]
