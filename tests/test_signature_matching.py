@@ -121,6 +121,12 @@ def test_campus_units_match_their_nearest_devices_round_the_return_loop():
     boxes = {(m["outdoor_sensor"][len(unit):], m["return_sensor"][len(unit):]) for m in matches["MixingBox"]
              if m["box"].startswith(unit)}
     assert boxes == {("outdoor_air_sensor", "return_air_sensor")}
+    # the supply flow meter sits after the mixing box: the return fan behind it is not its source
+    meters = {m["meter"][len(unit):]: m["upstream"] for m in matches["FlowMeter"] if m["meter"].startswith(unit)}
+    assert meters == {"supply_flow_meter": None, "return_flow_meter": None}
+    # the coils draw their air through to the supply fan, not from the return fan behind the mixing box
+    assert {m["fan"][len(unit):] for sid in ("CoolingCoil", "HeatingCoil", "HotWaterLoop", "ConstantHeatGain")
+            for m in matches[sid] if m["fan"].startswith(unit)} == {"supply_fan"}
     # a shared session gives what a fresh one does
     assert match_signature(store, library["HotWaterLoop"], default_graph=store.matching_dataset("campus")) == \
         matches["HotWaterLoop"]
