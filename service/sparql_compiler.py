@@ -347,7 +347,7 @@ OPAQUE_CLASSES = tuple(f"{S4BLDG}{name}" for name in ("BuildingSpace", "Boiler",
 
 def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -> Traversal:
     """The searched-for end is the one the signature does not model (a fan looks for its nearest
-    upstream sensor, a coil for its nearest downstream fan, even past another coil); when both or
+    upstream sensor, a coil for its nearest fan, even past another coil); when both or
     neither end is modelled, both ends' classes block (``or_reverse``: it is searched from the
     subject, and the object's classes block); so do the triple's ``stop_at`` classes and
     :data:`OPAQUE_CLASSES`."""
