@@ -643,12 +643,23 @@ def report_command(
     if data is not None and not data.is_file():
         raise fail(f"{data}: no such file")
     graph_store = open_store(store, False)
+    locate, missing = data_file_locator(data), []
+
+    def locate_noting(source: str) -> Path:
+        try:
+            return locate(source)
+        except FileNotFoundError as exc:
+            missing.append(str(exc))
+            raise
+
     try:
-        page = report_html(graph_store, run, locate_data=data_file_locator(data))
+        page = report_html(graph_store, run, locate_data=locate_noting)
     except UnknownRunError as exc:
         raise fail(exc) from None
     output.write_text(page, encoding="utf-8")
     console.print(f"wrote {output}")
+    for problem in dict.fromkeys(missing):
+        console.print(f"[yellow]warning:[/] {problem}: the page has no measured-vs-model plots", markup=True)
 
 
 @app.command("demo")

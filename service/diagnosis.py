@@ -316,6 +316,14 @@ def _bound_note(value: float, spec) -> str:
     return ""
 
 
+def _estimate_text(name: str, value: float, standard_error: float, spec) -> str:
+    """``name = value ± se`` (with :func:`_bound_note`), or, where the standard error spans the
+    prior range or is not finite, that the data do not identify it."""
+    if not np.isfinite(standard_error) or standard_error > spec.upper - spec.lower:
+        return f"{name} = {value:.3g}, not identified (the data leave it anywhere in [{spec.lower:g}, {spec.upper:g}])"
+    return f"{name} = {value:.3g} ± {standard_error:.2g}" + _bound_note(value, spec)
+
+
 def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     md = ModelData(job.model, job.data, job.substeps, job.compared)
@@ -374,10 +382,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     rho = float(np.corrcoef(residual[mask], change[mask])[0, 1]) if np.std(change[mask]) > 0 else 0.0
     evidence.residual_correlation = (best, rho)
     removed = 1.0 - evidence.rmse_after[best] ** 2 / max(evidence.rmse_before[best] ** 2, 1e-300)
-    estimates = "; ".join(
-        f"{refs[j].name} = {theta[j]:.3g} ± {standard_errors[j]:.2g}" + _bound_note(theta[j], refs[j].spec)
-        for j in effect_columns
-    )
+    estimates = "; ".join(_estimate_text(refs[j].name, theta[j], standard_errors[j], refs[j].spec) for j in effect_columns)
     evidence.explanation = (
         f"residual on {local_name(best)} correlates {rho:.2f} with what {job.signature.id} at {local_name(job.node)} adds; "
         f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "

@@ -424,7 +424,14 @@ class ProcessJobExecutor:
                 return self._pool.submit(function, *args)
 
     def shutdown(self) -> None:
+        """Stop the pool and its workers: a job still running there is abandoned, not left to run
+        on in an orphaned process after the service exits."""
+        workers = list((self._pool._processes or {}).values())  # the pool keeps no public handle on them
         self._pool.shutdown(wait=False, cancel_futures=True)
+        for worker in workers:
+            worker.terminate()
+        for worker in workers:
+            worker.join(timeout=10)
 
 
 class DaskJobExecutor:

@@ -103,3 +103,15 @@ def test_an_estimate_at_a_bound_of_its_prior_is_flagged_in_the_explanation():
     assert _bound_note(4.99999999961, offset) == " (at its upper bound 5)"
     assert _bound_note(-5.0, offset) == " (at its lower bound -5)"
     assert _bound_note(4.9, offset) == ""
+
+
+def test_an_estimate_the_data_leave_anywhere_in_its_prior_is_called_not_identified():
+    from service.component import Parameter
+    from service.diagnosis import _estimate_text
+
+    leak = Parameter("leakage_fraction", "1", 0.0, 0.0, 0.3, "leakage", null=0.0)
+    assert _estimate_text("leakage_fraction", 0.21, 1.3e8, leak) == \
+        "leakage_fraction = 0.21, not identified (the data leave it anywhere in [0, 0.3])"
+    assert _estimate_text("leakage_fraction", 0.21, float("inf"), leak).endswith("[0, 0.3])")
+    assert _estimate_text("leakage_fraction", 0.21, 0.02, leak) == "leakage_fraction = 0.21 ± 0.02"
+    assert _estimate_text("leakage_fraction", 0.3, 0.02, leak) == "leakage_fraction = 0.3 ± 0.02 (at its upper bound 0.3)"

@@ -74,6 +74,24 @@ def test_after_a_pool_worker_dies_the_next_job_runs_in_a_new_pool(case_store, tm
         runner.shutdown(wait=True)
 
 
+def _sleep(seconds: float) -> float:
+    time.sleep(seconds)
+    return seconds
+
+
+def test_shutting_the_pool_down_stops_a_worker_still_running_a_job():
+    """A service stopped while a job runs leaves no orphaned worker computing on."""
+    executor = ProcessJobExecutor(1)
+    future = executor.submit(_sleep, 120.0)
+    deadline = time.monotonic() + 60
+    while not future.running() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = list(executor._pool._processes.values())
+    assert future.running() and [w.is_alive() for w in workers] == [True]
+    executor.shutdown()
+    assert [w.is_alive() for w in workers] == [False]
+
+
 distributed = pytest.importorskip("distributed", reason="the Dask executor needs distributed (the test extra has it)")
 
 SHORT_TRAIN = "2026-01-12T06:00/2026-01-12T09:00"  # 3 h of the synthetic day: a calibration of a few seconds

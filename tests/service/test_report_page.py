@@ -326,8 +326,6 @@ def test_the_http_route_serves_the_page_and_refuses_unknown_runs_and_missing_tok
     assert report_client.get(f"/runs/{case.report.run_id}/report").status_code == 401
 
 
-@pytest.mark.skipif("report" not in {command.name for command in cli.registered_commands},
-                    reason="`graphtwin report` is not in service/cli.py yet")
 def test_graphtwin_report_writes_the_page_from_an_on_disk_store(case, tmp_path):
     folder = tmp_path / "store"
     disk = GraphStore.embedded(folder)
@@ -339,6 +337,12 @@ def test_graphtwin_report_writes_the_page_from_an_on_disk_store(case, tmp_path):
     assert result.exit_code == 0, result.output
     images = PageParser(output.read_text(encoding="utf-8")).images
     assert sum(i["class"] == "series" for i in images) == len(case.report.sensors)
+    # without --data, and the run's file not in the current folder: the page is written, and the
+    # terminal says what it lacks
+    without = CliRunner().invoke(cli, ["report", case.report.run_id, "-o", str(output), "--store", str(folder)],
+                                 env={"COLUMNS": "300"})
+    assert without.exit_code == 0 and f"{case.data.name}: no such file" in without.output, without.output
+    assert "give its path with --data" in without.output and "no measured-vs-model plots" in without.output
     unknown = CliRunner().invoke(cli, ["report", "case-point-00000000", "-o", str(tmp_path / "x.html"),
                                        "--store", str(folder)])
     assert unknown.exit_code == 2 and "no calibration run 'case-point-00000000'" in unknown.output
