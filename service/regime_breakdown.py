@@ -22,7 +22,7 @@ import numpy as np
 
 from .calibration_data import ModelData
 from .operating_regimes import OperatingRegimes, per_regime_metrics
-from .units import unit_label
+from .units import convert, unit_label
 
 __all__ = ["RegimeBreakdown", "regime_breakdown", "fit_boundary_regimes"]
 
@@ -30,14 +30,17 @@ __all__ = ["RegimeBreakdown", "regime_breakdown", "fit_boundary_regimes"]
 def fit_boundary_regimes(md: ModelData, window: slice, *, seed: int = 0,
                          **options) -> tuple[OperatingRegimes, np.ndarray]:
     """:class:`OperatingRegimes` fitted on ``md``'s boundary inputs over ``window`` (named by the
-    device's local name, in the data's units; ``options`` go to the estimator), and those inputs
-    over the whole data, ``ndarray[n_data_steps, n_inputs]``, to label any steps with."""
+    device's local name, each in its CSV column's unit, so a rule reads as the data do and as
+    ``--only-when`` takes it: a fan speed logged in % is "≤ 11 %", not "≤ 0.11"; ``options`` go to
+    the estimator), and those inputs over the whole data, ``ndarray[n_data_steps, n_inputs]``, to
+    label any steps with."""
     data = md.data
     nodes = [md.node_of[c] for c in md.model.boundary_inputs]
-    features = np.column_stack([data.series[n] for n in nodes])
+    logged = [data.source_units.get(n, data.units[n]) for n in nodes]
+    features = np.column_stack([convert(data.series[n], data.units[n], unit) for n, unit in zip(nodes, logged)])
     names = [n.replace("#", "/").rsplit("/", 1)[-1].replace("_", " ") for n in nodes]
     regimes = OperatingRegimes(random_state=seed, **options).fit(
-        features[window], names, feature_units=[unit_label(data.units[n]) for n in nodes], step_s=data.step_s)
+        features[window], names, feature_units=[unit_label(unit) for unit in logged], step_s=data.step_s)
     return regimes, features
 
 

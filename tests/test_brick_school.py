@@ -195,3 +195,10 @@ def test_on_the_units_own_operation_a_hidden_recirculation_effect_is_found(store
     best = report.effects[0]
     assert (best.effect, best.node, best.significant) == ("ReturnFlowOffFanSpeed", AHU7 + "ahu_7_mixing_section", True), \
         [(e.effect, e.test_improvement) for e in report.effects[:3]]
+
+
+def test_regime_rules_read_in_the_columns_units(winter_comparison):
+    """The fan speed command is logged in %, the temperatures in °F: the rules say "≤ 11%" and °F,
+    as --only-when takes a condition (not the simulator's fraction 0.11 and °C)."""
+    worst = next(r for r in winter_comparison.regimes if r["worst"])
+    assert "sf spd cmd ≤ 11%" in worst["rule"] and "°F" in worst["rule"] and "°C" not in worst["rule"], worst
