@@ -481,11 +481,10 @@ def _describe_missing(triple: PatternTriple, anchor: str, signature: Signature, 
     spec = signature.nodes[other]
     what = " or ".join(_short(c) for c in spec.classes) or (spec.iri or "value")
     if triple.rule is Rule.TRAVERSE:
-        side = "upstream of" if triple.object == anchor else "downstream of"
-        if triple.or_reverse:
-            side = side.replace(" of", " or " + ("downstream" if triple.object == anchor else "upstream") + " of")
+        sides = ("upstream", "downstream") if triple.object == anchor else ("downstream", "upstream")
+        side = " or ".join(sides if triple.or_reverse else sides[:1])
         stops = "".join(f"{_short(c)} instances, " for c in triple.stop_at)
-        return (f"no {what} {side} {node} along {triple.predicate} (the search stops at {stops}building spaces, "
+        return (f"no {what} {side} of {node} along {triple.predicate} (the search stops at {stops}building spaces, "
                 f"boilers, chillers and cooling towers; signature {signature.source_file})")
     if triple.subject == anchor:
         return f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} (signature {signature.source_file})"

@@ -148,16 +148,14 @@ class _Writer:
     def triple(self, triple: PatternTriple) -> list[str]:
         predicate = _short(_iri(triple.predicate, self.where))
         subject, obj = self.term(triple.subject), self.term(triple.object)
-        if triple.rule is Rule.TRAVERSE and triple.or_reverse:
-            return [
-                f"# traverse: {triple.subject} {predicate}+ {triple.object}, or where that gives none "
-                f"{triple.object} {predicate}+ {triple.subject} (nearest: joined by the matcher)",
-                f"{subject} ({predicate}+|^{predicate}+) {obj} .",
-            ]
         if triple.rule is Rule.TRAVERSE:
+            path, fallback = f"{predicate}+", ""
+            if triple.or_reverse:
+                path = f"({predicate}+|^{predicate}+)"
+                fallback = f", or where that gives none {triple.object} {predicate}+ {triple.subject}"
             return [
-                f"# traverse: {triple.subject} {predicate}+ {triple.object} (nearest: joined by the matcher)",
-                f"{subject} {predicate}+ {obj} .",
+                f"# traverse: {triple.subject} {predicate}+ {triple.object}{fallback} (nearest: joined by the matcher)",
+                f"{subject} {path} {obj} .",
             ]
         return [f"{subject} {predicate} {obj} ."]
 

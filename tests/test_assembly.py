@@ -219,3 +219,17 @@ def test_coils_take_their_air_flow_from_the_fan_downstream_or_else_upstream():
     # the effects that need the air flow apply to a draw-through coil too
     with_gain = assemble(store, "draw", extra_effects=[EffectRequest("ConstantHeatGain", FLEXLAB + "heating_coil")])
     assert len(with_gain.components) == len(draw.components) + 1
+
+
+def test_a_coil_without_a_fan_either_way_is_reported_with_both_directions_and_the_stops():
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    fanless = text.replace("fso:suppliesFluidTo ex:supply_fan .\nex:heating_coil_valve", ".\nex:heating_coil_valve")
+    store = GraphStore.embedded(None)
+    store.load_model("fanless", fanless.encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "fanless")
+    assert any(p.startswith(f"{FLEXLAB}heating_coil is not modelled by HeatingCoil: no Fan upstream or downstream of "
+                            f"{FLEXLAB}heating_coil along https://w3id.org/fso#suppliesFluidTo (the search stops at "
+                            "MixingBox instances, building spaces") for p in info.value.problems), info.value.problems
