@@ -19,13 +19,22 @@ from .assembled_model import AssembledModel
 from .calibration_problem import CalibrationProblem
 from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .namespaces import local_name
-from .simulator import Simulator, held_over_gaps
+from .simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
 
-__all__ = ["GAP_RECOVERY_S", "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+__all__ = ["GAP_RECOVERY_S", "WARMUP_S", "WARMUP_PERIOD_S", "warmup_period_steps", "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
 
 #: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
-#: the model's states come out of the gap off (as at a window's start, ``ModelData.problem``'s warm-up).
+#: the model's states come out of the gap off (as at a window's start: ``ModelData.problem``'s settling).
 GAP_RECOVERY_S = 3600.0
+
+#: Warm-up simulated before every window [s]: the measured day before it (before the data's first
+#: step, its first day repeated), over which controllers' integrals and thermal masses come from a
+#: cold start to the state the operation leaves: a low-gain heating loop (K_p 0.012 /K, T_i 1800 s)
+#: takes ~5 h from an empty integral, and after a night setback winds down for as long.
+WARMUP_S = 86400.0
+#: Period repeated before the data's first step in a warm-up, s (the first value held in data
+#: shorter than this).
+WARMUP_PERIOD_S = 86400.0
 
 #: Simulator unit of each quantity a signature output may carry (``signatures/README.md``).
 QUANTITY_UNITS = {
@@ -74,6 +83,12 @@ def check_mapped_parameters(model: AssembledModel) -> None:
         raise ValueError("; ".join(problems) + ": fix the value (or its unit) in the model graph")
 
 
+def warmup_period_steps(n_steps: int, step_s: float) -> int:
+    """Steps of :data:`WARMUP_PERIOD_S` when data of ``n_steps`` cover it, else 1 (hold the first value)."""
+    period = int(round(WARMUP_PERIOD_S / step_s))
+    return period if n_steps >= period else 1
+
+
 def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5, strict: bool = False) -> MeasuredData:
     """Read the CSV at ``path`` for ``model`` (:func:`service.measurements.read_measurements`)."""
     return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps, strict=strict)
@@ -89,6 +104,8 @@ class ModelData:
     #: ``ndarray[n_steps]`` of bool: the steps where targets are compared (an operating filter,
     #: :mod:`service.operating_filter`); None: every step.
     compared: np.ndarray | None = None
+    #: Warm-up simulated before every window, s.
+    warmup_s: float = WARMUP_S
 
     def __post_init__(self) -> None:
         check_mapped_parameters(self.model)
@@ -101,9 +118,23 @@ class ModelData:
         self.simulator = Simulator(self.model, self.data.step_s, self.substeps)
         self.units = {self.node_of[c]: self.data.units[self.node_of[c]] for c in self.model.targets}
 
+    @property
+    def warmup_steps(self) -> int:
+        return int(round(self.warmup_s / self.data.step_s))
+
     def boundary(self, window: slice) -> dict[str, np.ndarray]:
-        """Component IRI → measured series in ``window`` (targets included: they seed delayed inputs)."""
-        return {c: self.data.series[node][window] for c, node in self.node_of.items()}
+        """Component IRI → measured series over ``window`` preceded by its warm-up
+        (:func:`~service.simulator.warmup_index`; targets included: they seed delayed inputs)."""
+        index = warmup_index(window, self.warmup_steps, warmup_period_steps(self.data.n_steps, self.data.step_s))
+        return {c: self.data.series[node][index] for c, node in self.node_of.items()}
+
+    def run(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None, *,
+            record: Sequence[tuple[str, str]] | None = None) -> SimulationResult:
+        """Simulate ``window`` for θ ``ndarray[n_ensemble, n_estimated]`` after :attr:`warmup_s` of
+        warm-up: the states at the window's start are those the measured operation before it leaves
+        (a controller's integral, a coil's water), not a cold start."""
+        return self.simulator.run(self.boundary(window), np.atleast_2d(theta), fixed=fixed, record=record,
+                                  warmup_steps=self.warmup_steps)
 
     def observed(self, window: slice) -> dict[str, np.ndarray]:
         """Target node → observed series in ``window``: NaN where not measured; NaN where a
@@ -112,11 +143,12 @@ class ModelData:
         :data:`GAP_RECOVERY_S` after such a gap (the model's states — thermal masses, a controller's
         integral — come out of it off, and take that long to follow the inputs again); and NaN
         outside the operating filter (``compared``)."""
-        inputs_missing = np.zeros(window.stop - window.start, dtype=bool)
-        for component in self.model.boundary_inputs:
-            inputs_missing |= ~np.isfinite(self.data.series[self.node_of[component]][window])
         recovery = int(round(GAP_RECOVERY_S / self.data.step_s))
-        after_gap = np.convolve(inputs_missing, np.ones(recovery + 1, dtype=bool))[: inputs_missing.size] > 0
+        span = warmup_index(window, recovery)  # a gap just before the window reaches into it
+        inputs_missing = np.zeros(span.size, dtype=bool)
+        for component in self.model.boundary_inputs:
+            inputs_missing |= ~np.isfinite(self.data.series[self.node_of[component]][span])
+        after_gap = (np.convolve(inputs_missing, np.ones(recovery + 1, dtype=bool))[: span.size] > 0)[recovery:]
         compared = (np.ones(self.data.n_steps, dtype=bool) if self.compared is None else self.compared)[window]
         keep = compared & ~after_gap
         return {self.node_of[c]: np.where(keep, self.data.series[self.node_of[c]][window], np.nan)
@@ -124,13 +156,12 @@ class ModelData:
 
     def simulate_targets(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
         """Target node → ``ndarray[n_ensemble, n_steps]`` for θ ``ndarray[n_ensemble, n_estimated]``."""
-        record = [(c, "measured_value") for c in self.model.targets]
-        result = self.simulator.run(self.boundary(window), theta, fixed=fixed, record=record)
+        result = self.run(window, theta, fixed, record=[(c, "measured_value") for c in self.model.targets])
         return {self.node_of[c]: result.target(c) for c in self.model.targets}
 
-    def simulate_all(self, window: slice, theta: np.ndarray):
+    def simulate_all(self, window: slice, theta: np.ndarray) -> SimulationResult:
         """Every output of every component (for plots and the residual-dependence search)."""
-        return self.simulator.run(self.boundary(window), np.atleast_2d(theta))
+        return self.run(window, theta)
 
     def non_finite_source(self, window: slice, theta: np.ndarray) -> str | None:
         """Where the simulation of ``window`` at θ ``ndarray[n_estimated]`` first gives NaN or an
@@ -189,7 +220,7 @@ class ModelData:
     def problem(
         self, window: slice | Sequence[slice], *, default: np.ndarray | None = None,
         fixed: Mapping[str, float] | None = None, target_scales: Mapping[str, float] | None = None,
-        gp_inputs: Sequence[str] = ("time",), warmup_s: float = 3600.0,
+        gp_inputs: Sequence[str] = ("time",), settling_s: float = 3600.0,
     ) -> CalibrationProblem:
         """The calibration problem of ``window`` (or of several windows, concatenated; each is
         simulated on its own): θ = the model's estimated parameters.
@@ -201,18 +232,19 @@ class ModelData:
         :param gp_inputs: the discrepancy GP's inputs (:meth:`gp_input_nodes`): ``"time"`` (hours
             since the data's first step) and boundary input nodes (their measured series, in the
             simulator's unit; a gap holds the last value); empty: none (the calibrator's time index).
-        :param warmup_s: the first ``warmup_s`` seconds of each window are simulated but not
-            compared: the model starts in steady state with the first inputs, the building did not.
+        :param settling_s: the first ``settling_s`` seconds of each window are simulated but not
+            compared: the warm-up settles the model's states, it cannot give them the building's (before
+            the data's first step it holds the first inputs; the building did not).
         """
         windows = [window] if isinstance(window, slice) else list(window)
         lower, upper = self.bounds()
         start = self.default_theta() if default is None else np.clip(np.asarray(default, float), lower, upper)
-        warmup = int(round(warmup_s / self.data.step_s))
+        settling = int(round(settling_s / self.data.step_s))
         observed: dict[str, list[np.ndarray]] = {}
         for part in windows:
             for node, values in self.observed(part).items():
                 values = values.copy()
-                values[:warmup] = np.nan
+                values[:settling] = np.nan
                 observed.setdefault(node, []).append(values)
         columns = [np.concatenate([self._gp_input_series(name, w) for w in windows]) for name in gp_inputs]
 

@@ -82,19 +82,19 @@ def continuation(train: slice, test: slice) -> slice | None:
     return slice(train.start, test.stop) if test.start >= train.start else None
 
 
-def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray, warmup_s: float = 3600.0) -> dict[str, np.ndarray]:
+def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray, settling_s: float = 3600.0) -> dict[str, np.ndarray]:
     """Target node → prediction on ``test`` for one θ: the continuation of the training run when the
-    test follows the training start, else a run of its own whose first ``warmup_s`` are NaN (the
-    model starts in steady state, the building did not)."""
+    test follows the training start, else a run of its own (warmed up over the data before it) whose first ``settling_s`` are NaN
+    (the warm-up settles the model's states, it cannot give them the building's)."""
     joined = continuation(train, test)
     if joined is not None:
         offset = test.start - joined.start
         return {k: v[0][offset:] for k, v in md.simulate_targets(joined, theta[None, :]).items()}
-    warmup = int(round(warmup_s / md.data.step_s))
+    settling = int(round(settling_s / md.data.step_s))
     out = {}
     for node, values in md.simulate_targets(test, theta[None, :]).items():
         values = values[0].copy()
-        values[:warmup] = np.nan
+        values[:settling] = np.nan
         out[node] = values
     return out
 
@@ -248,7 +248,7 @@ def calibrate(
         joined = continuation(train_slice, test_slice)
         offset = test_slice.start - joined.start if joined is not None else 0
         if method == "bayes":
-            test_problem = md.problem(joined or test_slice, target_scales=problem.target_scales, warmup_s=0.0,
+            test_problem = md.problem(joined or test_slice, target_scales=problem.target_scales, settling_s=0.0,
                                       gp_inputs=gp_nodes)
             predictive = calibrator.predict(test_problem, n_draws=200,
                                             steps_from_training_start=(joined or test_slice).start - train_slice.start)

@@ -249,7 +249,7 @@ def _print_regimes(record) -> None:
         table.add_column(column, overflow="fold")
     for row in record.regimes:
         table.add_row(row["rule"], f"{100 * row['share']:.0f} %",
-                      *(f"{row['rmse'][n]:.3g} {unit_label(units.get(n, ''))}" for n in sensors))
+                      *(_with_unit(row["rmse"][n], units.get(n, "")) for n in sensors))
     console.print(table)
 
 
@@ -341,7 +341,7 @@ def simulate_command(
             raise ValueError(f"{params}: no estimated parameter named {', '.join(unknown)}")
         theta = [float(values.get(r.key, values.get(r.name, r.spec.default))) for r in refs]
         md = ModelData(assembled, measured, loop_substeps(assembled, measured.step_s))
-        result = md.simulator.run(md.boundary(slice(0, measured.n_steps)), [theta])
+        result = md.simulate_all(slice(0, measured.n_steps), np.array(theta))
     except (*USER_ERRORS, json.JSONDecodeError) as exc:
         raise fail(exc) from None
     simulated = target_series(assembled, result)

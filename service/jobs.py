@@ -47,6 +47,7 @@ import os
 import re
 import tempfile
 import threading
+import time
 import uuid
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
@@ -430,8 +431,11 @@ class ProcessJobExecutor:
         self._pool.shutdown(wait=False, cancel_futures=True)
         for worker in workers:
             worker.terminate()
+        deadline = time.monotonic() + 10.0
         for worker in workers:
-            worker.join(timeout=10)
+            # join returns early when the pool's own thread reaps the worker first; its exit code follows
+            while worker.exitcode is None and time.monotonic() < deadline:
+                worker.join(timeout=0.05)
 
 
 class DaskJobExecutor:

@@ -239,12 +239,12 @@ def dominant_parameters_by_regime(
     top: int = 3,
     n_trajectories: int = 10,
     seed: int | None = 0,
-    warmup_s: float = 3600.0,
+    settling_s: float = 3600.0,
 ) -> list[list[dict]]:
     """Per regime, the ``top`` parameters that move the model's misfit most there (Morris μ*).
 
     The measure is :func:`calibration_morris_by_regime` on the calibration problem of ``window``
-    (all targets, the first ``warmup_s`` not compared); one ensemble run of
+    (all targets, the first ``settling_s`` not compared); one ensemble run of
     ``n_trajectories · (n_parameters + 1)`` members.
 
     :param labels: ``ndarray[window length]`` regime per step of the window (−1: left out), e.g.
@@ -256,7 +256,7 @@ def dominant_parameters_by_regime(
         ``mu_star_conf`` and ``sigma`` are in weighted-residual units (residual / target scale),
         ``share`` is μ* over the regime's total μ*.
     """
-    problem = model_data.problem(window, warmup_s=warmup_s)
+    problem = model_data.problem(window, settling_s=settling_s)
     sensitivity = calibration_morris_by_regime(problem, labels, n_trajectories=n_trajectories, seed=seed)
     refs = {ref.key: ref for ref in model_data.model.estimated_parameters}
     regimes = range(n_regimes) if n_regimes is not None else sensitivity.regimes

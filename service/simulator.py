@@ -35,7 +35,8 @@ stepping every component, at a fraction of the Python work per step (tests/test_
 **Boundary inputs** (measuring devices with no connected input) receive their measured series
 through their ``measured_value`` input; NaN gaps in a boundary series are held at the last value
 (the calibration leaves those steps out). Dynamic components start from ``initial_state`` with
-their first inputs.
+their first inputs (a PI controller's integral at 0); ``warmup_steps`` lets them settle first, over
+the steps before a window (:func:`warmup_index`), before the steps the result reports.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ import numpy as np
 from .assembled_model import AssembledModel, Connection
 
 __all__ = ["Simulator", "SimulationResult", "simulate", "component_order", "loop_substeps", "MAX_LOOP_STEP_S",
-           "target_series", "held_over_gaps"]
+           "target_series", "held_over_gaps", "warmup_index"]
 
 #: Longest internal step of a model with a closed control loop, s: at 2 minutes the case study's
 #: heating loop is free of the sampling limit cycle over its whole prior (tests/components).
@@ -114,6 +115,18 @@ def _strongly_connected(nodes: list[str], edges: Mapping[str, set[str]]) -> dict
                     if member == node:
                         break
     return comp
+
+
+def warmup_index(window: slice, warmup_steps: int, period_steps: int = 1) -> np.ndarray:
+    """Indices of a series that give ``window`` preceded by ``warmup_steps`` steps of warm-up: the
+    steps before the window, and before the series' first step its first ``period_steps`` repeated
+    (the first day: the plant ran the same day before the log began, as EnergyPlus repeats its first
+    day to warm up; 1: the first value held). Index ``k`` from ``window.start − warmup_steps`` to
+    ``window.stop − 1``, a negative ``k`` replaced by ``k mod period_steps``."""
+    index = np.arange(window.start - warmup_steps, window.stop)
+    before = index < 0
+    index[before] %= period_steps
+    return index
 
 
 def held_over_gaps(values: np.ndarray) -> np.ndarray:
@@ -251,6 +264,7 @@ class Simulator:
         fixed: Mapping[str, float] | None = None,
         *,
         record: Iterable[tuple[str, str]] | None = None,
+        warmup_steps: int = 0,
     ) -> SimulationResult:
         """Simulate every ensemble member over the boundary series.
 
@@ -261,8 +275,11 @@ class Simulator:
             ``model.estimated_parameters``.
         :param fixed: parameter key → value overriding θ or a mapped value.
         :param record: the (component, port) outputs to keep; all when None.
+        :param warmup_steps: the first ``warmup_steps`` data steps of ``boundary`` are a warm-up
+            (:func:`warmup_index`): simulated, left out of the result (``n_steps − warmup_steps``
+            steps).
         :raises ValueError: a boundary input without a series, series of different lengths, θ of
-            the wrong shape.
+            the wrong shape, a warm-up as long as the series.
         """
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
         if theta.shape[1] != self.n_parameters:
@@ -274,6 +291,9 @@ class Simulator:
         if len(lengths) != 1:
             raise ValueError(f"boundary series have different lengths: {sorted(lengths)}")
         n_steps = lengths.pop()
+        if not 0 <= warmup_steps < n_steps:
+            raise ValueError(f"a warm-up of {warmup_steps} steps leaves nothing of {n_steps} steps to simulate")
+        n_kept = n_steps - warmup_steps
         n_ens = theta.shape[0]
         params = self._parameters(theta, fixed or {})
         substeps = self.substeps
@@ -326,7 +346,7 @@ class Simulator:
         for iri in stepped:
             record_ports = sorted(set(kept[iri]) | {port for source, port in needed_late if source == iri})
             for port in record_ports:
-                buffers[(iri, port)] = np.empty((n_steps, n_ens))
+                buffers[(iri, port)] = np.empty((n_kept, n_ens))
             plan.append((iri, self.instances[iri], params[iri],
                          [(name, source) for name, source, late in links[iri] if not late],
                          [(name, source) for name, source, late in links[iri] if late],
@@ -358,9 +378,9 @@ class Simulator:
                 outputs = instance.step(p, inputs, states[iri], dt)
                 for port, value in outputs.items():
                     current[(iri, port)] = value
-                if record and offset == 0:
+                if record and offset == 0 and k >= warmup_steps:
                     for port in keep:
-                        buffers[(iri, port)][k] = outputs[port]
+                        buffers[(iri, port)][k - warmup_steps] = outputs[port]
 
         # a delayed input off a feedback port and without a measured seed starts from its source's
         # output of a first pass over step 0 (module docstring)
@@ -377,9 +397,9 @@ class Simulator:
                 previous[key] = current[key]
 
         # memoryless components that only feed each other: at the data steps, in one call each
-        at_data_steps = {key: values[::substeps] for key, values in early.items()} | buffers
+        at_data_steps = {key: values[::substeps][warmup_steps:] for key, values in early.items()} | buffers
         for iri in self.behind:
-            at_data_steps.update(evaluate_at_once(iri, at_data_steps, None, (n_steps, n_ens)))
+            at_data_steps.update(evaluate_at_once(iri, at_data_steps, None, (n_kept, n_ens)))
         outputs = {(iri, port): at_data_steps[(iri, port)] for iri in self.order for port in kept[iri]}
         return SimulationResult({key: values.T if key in buffers else np.array(values.T)
                                  for key, values in outputs.items()}, self.step_s)

@@ -23,7 +23,7 @@ the cost, the number of simulate calls, the estimates with standard errors, and 
 cross-validation on held-out periods (:func:`contiguous_folds`): the training window is cut into
 ``n_folds`` contiguous blocks; each block in turn is held out, both strategies are fitted (Morris
 and plan included) on the remaining blocks, and the held-out block is simulated on its own (its
-first ``warmup_s`` not scored, the model starts in steady state) and scored by the weighted RMSE
+first ``settling_s`` not scored: the warm-up settles the model's states, not to the building's) and scored by the weighted RMSE
 ``sqrt(mean_{k,t} ((y_k(t) − ŷ_k(t)) / s_k)²)`` with the training window's target scales ``s_k``.
 The regimes come from the boundary inputs only (:class:`~service.operating_regimes.OperatingRegimes`,
 no target enters them), so labelling the held-out block does not leak its measurements.
@@ -251,14 +251,14 @@ def cross_validate(
     n_folds: int = 3,
     target_scales: dict[str, float] | None = None,
     seed: int = 0,
-    warmup_s: float = 3600.0,
+    settling_s: float = 3600.0,
     n_starts: int = 2,
     n_candidates: int = 32,
     max_nfev: int = 40,
 ) -> list[FoldScore]:
     """Blocked cross-validation of one strategy on ``window`` (:func:`contiguous_folds`): fit on the
     other blocks (each simulated on its own), simulate the held-out block on its own and score it
-    after its first ``warmup_s``.
+    after its first ``settling_s``.
 
     :param labels: ``ndarray[n_data_steps]`` regime of every data step (the successive strategy's
         Morris and plan are redone on each fold's fit windows).
@@ -270,14 +270,14 @@ def cross_validate(
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
     settings = {"n_starts": n_starts, "n_candidates": n_candidates, "max_nfev": max_nfev}
-    scales = dict(target_scales or model_data.problem(window, warmup_s=warmup_s).target_scales)
-    warmup = int(round(warmup_s / model_data.data.step_s))
+    scales = dict(target_scales or model_data.problem(window, settling_s=settling_s).target_scales)
+    settling = int(round(settling_s / model_data.data.step_s))
     scores = []
-    for fit_windows, held_out in contiguous_folds(window, n_folds, min_steps=warmup + 2):
-        fit_problem = model_data.problem(fit_windows, target_scales=scales, warmup_s=warmup_s)
+    for fit_windows, held_out in contiguous_folds(window, n_folds, min_steps=settling + 2):
+        fit_problem = model_data.problem(fit_windows, target_scales=scales, settling_s=settling_s)
         fit_labels = np.concatenate([labels[w] for w in fit_windows])
         theta = _fit(strategy, fit_problem, fit_labels, settings, seed).theta_
-        held_problem = model_data.problem(held_out, target_scales=scales, warmup_s=warmup_s)
+        held_problem = model_data.problem(held_out, target_scales=scales, settling_s=settling_s)
         outputs = held_problem.run(theta[None, :])
         residuals = held_problem.weighted_residuals(outputs)[0]
         scores.append(FoldScore(
@@ -403,7 +403,7 @@ def compare_strategies(
     rules: Sequence[str] = (),
     n_folds: int = 3,
     seed: int = 0,
-    warmup_s: float = 3600.0,
+    settling_s: float = 3600.0,
     n_starts: int = 2,
     n_candidates: int = 32,
     max_nfev: int = 40,
@@ -425,8 +425,8 @@ def compare_strategies(
     n_regimes = int(labels.max()) + 1 if (labels >= 0).any() else 0
     settings = {"n_starts": n_starts, "n_candidates": n_candidates, "max_nfev": max_nfev}
     if n_folds:  # refuse impossible folds before any fit
-        contiguous_folds(train, n_folds, min_steps=int(round(warmup_s / model_data.data.step_s)) + 2)
-    problem = model_data.problem(train, warmup_s=warmup_s)
+        contiguous_folds(train, n_folds, min_steps=int(round(settling_s / model_data.data.step_s)) + 2)
+    problem = model_data.problem(train, settling_s=settling_s)
 
     strategies, fitted = {}, {}
     for name in STRATEGIES:
@@ -436,7 +436,7 @@ def compare_strategies(
         metrics = {"train": _regime_metrics(labels[train], dict(problem.observed),
                                             {k: v[0] for k, v in problem.run(theta[None, :]).items()}, n_regimes)}
         if test is not None:
-            predicted = predict_test(model_data, train, test, theta, warmup_s)
+            predicted = predict_test(model_data, train, test, theta, settling_s)
             observed = {k: np.where(np.isfinite(predicted[k]), v, np.nan) for k, v in model_data.observed(test).items()}
             metrics["test"] = _regime_metrics(labels[test], observed, predicted, n_regimes)
         estimates = {
@@ -445,7 +445,7 @@ def compare_strategies(
             for j, key in enumerate(problem.parameter_names)
         }
         folds = cross_validate(model_data, train, labels, strategy=name, n_folds=n_folds,
-                               target_scales=problem.target_scales, seed=seed, warmup_s=warmup_s,
+                               target_scales=problem.target_scales, seed=seed, settling_s=settling_s,
                                **settings) if n_folds else []
         strategies[name] = StrategyResult(name, theta, estimates, estimator.cost_, estimator.n_simulate_calls_,
                                           metrics, cv=folds, stages=getattr(estimator, "stages_", []))

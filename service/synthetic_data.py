@@ -21,18 +21,18 @@ from pathlib import Path
 import numpy as np
 
 from .assembly import EffectRequest, assemble
-from .calibration_data import _device_unit, read_model_data
+from .calibration_data import WARMUP_S, _device_unit, read_model_data, warmup_period_steps
 from .measurements import write_csv
 from .signature import Signature
-from .simulator import Simulator, loop_substeps
+from .simulator import Simulator, loop_substeps, warmup_index
 from .store import GraphStore
 from .units import convert
 from .synthetic_operation import case_study_operation
 
 __all__ = ["SyntheticTruth", "generate_synthetic_data", "NOISE_STD", "applicable_nodes"]
 
-#: The truth runs this long before the data starts, so its start-up transient is not in the data.
-WARMUP_S = 86400.0
+#: The synthetic operation starts this long before the data (a day of history the data does not show).
+HISTORY_S = 86400.0
 #: First time stamp of the synthetic data.
 START = "2026-01-12T00:00:00"
 #: Measurement noise standard deviation per simulator unit (relative for W and flows).
@@ -142,9 +142,9 @@ def generate_synthetic_data(
     rng = np.random.default_rng(seed)
     theta = _truth_theta(model, model_name, effect, rng, truth or {})
     if operation is None:
-        warmup = int(round(WARMUP_S / step_s))
-        synthetic = case_study_operation(n_days=n_days + WARMUP_S / 86400.0, step_s=step_s, seed=seed,
-                                         start=str(np.datetime64(START) - np.timedelta64(int(WARMUP_S), "s")))
+        history = int(round(HISTORY_S / step_s))
+        synthetic = case_study_operation(n_days=n_days + HISTORY_S / 86400.0, step_s=step_s, seed=seed,
+                                         start=str(np.datetime64(START) - np.timedelta64(int(HISTORY_S), "s")))
         timestamps, boundary = synthetic.timestamps, {}
         for component in model.boundary_inputs:
             link = model.measurement(component)
@@ -153,21 +153,26 @@ def generate_synthetic_data(
             boundary[component] = synthetic.series[link.series_id]
     else:
         measured = read_model_data(model, operation)
-        warmup, timestamps, step_s = 0, measured.timestamps, measured.step_s
+        history, timestamps, step_s = 0, measured.timestamps, measured.step_s
         boundary = {c: measured.series[model.measurement(c).node] for c in model.boundary_inputs}
-    result = Simulator(model, step_s, substeps or loop_substeps(model, step_s)).run(boundary, theta[None, :])
-    boundary = {c: v[warmup:] for c, v in boundary.items()}
+    # warmed up as ModelData warms a window up: the first day repeated, then the history
+    n_total = next(iter(boundary.values())).size
+    warmup = history + int(round(WARMUP_S / step_s))
+    index = warmup_index(slice(history, n_total), warmup, warmup_period_steps(n_total, step_s))
+    result = Simulator(model, step_s, substeps or loop_substeps(model, step_s)).run(
+        {c: v[index] for c, v in boundary.items()}, theta[None, :], warmup_steps=warmup)
+    boundary = {c: v[history:] for c, v in boundary.items()}
     columns = {}
     for component in model.boundary_inputs + model.targets:
         link = model.measurement(component)
         unit = _device_unit(model, component)
         values = boundary.get(component)
         if values is None:
-            clean = result.target(component)[0][warmup:]
+            clean = result.target(component)[0]
             sigma = NOISE_STD.get(unit, _RELATIVE_NOISE * float(np.nanmean(np.abs(clean))))
             values = clean + rng.normal(0.0, sigma, clean.size)
         columns[link.series_id] = convert(values, unit, link.unit, where=link.node)
-    write_csv(output, timestamps[warmup:], columns)
+    write_csv(output, timestamps[history:], columns)
     return SyntheticTruth(
         theta={ref.key: float(v) for ref, v in zip(model.estimated_parameters, theta)},
         effect=hidden_effect, node=node, path=Path(output),

@@ -233,3 +233,19 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
     assert "supply air flow meter" in regimes and " %" in regimes and "°C" in regimes  # rules, shares, units
     refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--gp-input", "supply_air_flow"])
     assert refused.exit_code == 2 and "a point calibration has no discrepancy" in refused.output
+
+
+def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():
+    from types import SimpleNamespace
+
+    from service import cli
+
+    sensor = EX + "coil_outlet_air_temperature_sensor"
+    record = SimpleNamespace(regime_rule_accuracy=1.0, metrics={"test": {sensor: SimpleNamespace(unit="degC")}}, regimes=[
+        {"rule": "setpoint > 18.5 °C", "share": 1.0, "rmse": {sensor: 0.31}},
+        {"rule": "setpoint ≤ 14 °C", "share": 0.0, "rmse": {sensor: float("nan")}}])
+    with cli.console.capture() as captured:
+        cli._print_regimes(record)
+    rows = {line.split("│")[1].strip(): line for line in captured.get().splitlines() if line.count("│") > 2}
+    assert "0.31 °C" in rows["setpoint > 18.5 °C"]
+    assert "nan" not in rows["setpoint ≤ 14 °C"] and "–" in rows["setpoint ≤ 14 °C"]

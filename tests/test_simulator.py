@@ -8,7 +8,7 @@ import pytest
 from service.assembled_model import AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef
 from service.component import ComponentModel, Parameter, Port
 from service.signature import signature_from_dict
-from service.simulator import Simulator, component_order, simulate, target_series
+from service.simulator import Simulator, component_order, simulate, target_series, warmup_index
 
 
 class Gain(ComponentModel):
@@ -147,6 +147,31 @@ def test_a_delayed_sensor_starts_from_its_first_reading():
     assert target_series(model, seeded) == {"urn:sensor": pytest.approx([5.5, 2.75, 1.375])}
     unseeded = sim.run({"urn:source": u}, theta)
     assert unseeded.outputs[("urn:sum", "y")][0] == pytest.approx([1.0, 0.5, 0.25])
+
+
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_a_warm_up_is_simulated_and_left_out_of_the_result(substeps):
+    """Every output (stepped, and memoryless ones evaluated at once before and after the stepping)
+    of a run with ``warmup_steps = k`` is the full run's from step k on."""
+    model = _sensor_loop_model()
+    u = np.array([1.0, 3.0, 0.0, 2.0, 0.5, 4.0])
+    boundary = {"urn:source": u, "urn:sensor": np.full(6, 10.0)}
+    sim = Simulator(model, 60.0, substeps)
+    theta = np.array([[0.5], [0.9]])
+    full = sim.run(boundary, theta)
+    warmed = sim.run(boundary, theta, warmup_steps=4)
+    assert set(warmed.outputs) == set(full.outputs)
+    for key, values in full.outputs.items():
+        assert warmed.outputs[key].shape == (2, 2)
+        assert warmed.outputs[key] == pytest.approx(values[:, 4:]), key
+    with pytest.raises(ValueError, match="warm-up of 6 steps leaves nothing of 6"):
+        sim.run(boundary, theta, warmup_steps=6)
+
+
+def test_warm_up_index_takes_the_steps_before_and_repeats_the_first_period_before_the_data():
+    assert warmup_index(slice(5, 8), 3).tolist() == [2, 3, 4, 5, 6, 7]
+    assert warmup_index(slice(1, 3), 5, period_steps=4).tolist() == [0, 1, 2, 3, 0, 1, 2]
+    assert warmup_index(slice(0, 2), 3).tolist() == [0, 0, 0, 0, 1]
 
 
 def test_fixed_values_override_theta_columns():

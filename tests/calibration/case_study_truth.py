@@ -33,7 +33,7 @@ class CaseStudyTruth:
     the training problem and the continuation problem (training start to test end)."""
 
     def __init__(self, folder, hidden_effect: str | None = None, seed: int = 3):
-        store = GraphStore.embedded(None)
+        self.store = store = GraphStore.embedded(None)
         store.load_model("case", CASE_STUDY)
         path = folder / f"case-{hidden_effect}-{seed}.csv"
         self.truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
@@ -59,7 +59,7 @@ class CaseStudyTruth:
         fit = BayesianCalibrator(**BAYES).fit(self.problem)
         joined = continuation(self.train, self.test)
         offset = self.test.start - joined.start
-        predictive = fit.predict(self.md.problem(joined, target_scales=self.problem.target_scales, warmup_s=0.0))
+        predictive = fit.predict(self.md.problem(joined, target_scales=self.problem.target_scales, settling_s=0.0))
         observed = self.md.observed(self.test)
         metrics = {
             node: target_metrics(

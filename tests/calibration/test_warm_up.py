@@ -1,0 +1,56 @@
+"""Every simulated window starts warmed up: a controller's integral and the thermal masses in the
+state the operation before the window leaves (the data's first day repeated before its first step),
+not empty. Seed 0's truth is a slow heating loop (K_p ≈ 0.012 /K, T_i ≈ 1,850 s) still winding down
+from the day setpoint at midnight, where the data starts: a cold start missed its first six hours
+by 2.6 K and bent the point fit's time constants to match that transient."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from case_study import EX
+from case_study_truth import CaseStudyTruth
+
+from service.calibration_run import calibrate
+
+SIX_HOURS = slice(0, 36)
+AIR, WATER = EX + "coil_outlet_air_temperature_sensor", EX + "coil_outlet_water_temperature_sensor"
+
+
+@pytest.fixture(scope="module")
+def seed0(tmp_path_factory):
+    return CaseStudyTruth(tmp_path_factory.mktemp("warm"), seed=0)
+
+
+def _rmse(observed, simulated, span=slice(None)):
+    return float(np.sqrt(np.nanmean((observed[span] - simulated[span]) ** 2)))
+
+
+def test_the_truth_s_parameters_match_the_data_from_its_first_step(seed0):
+    observed = seed0.md.observed(seed0.train)
+    warmed = seed0.md.simulate_targets(seed0.train, seed0.true_theta[None, :])
+    cold = dataclasses.replace(seed0.md, warmup_s=0.0).simulate_targets(seed0.train, seed0.true_theta[None, :])
+    for node in (AIR, WATER):
+        assert _rmse(observed[node], warmed[node][0], SIX_HOURS) < 0.5, node
+        assert _rmse(observed[node], cold[node][0], SIX_HOURS) > 2.0, node  # what the warm-up removes
+
+
+def test_a_window_after_the_data_s_start_warms_up_on_the_data_before_it(seed0):
+    """The test day simulated on its own (warmed up over the training day) is the continuation of
+    the run from the data's start, to a small fraction of the noise."""
+    md, theta = seed0.md, seed0.true_theta[None, :]
+    alone = md.simulate_targets(seed0.test, theta)
+    joined = slice(seed0.train.start, seed0.test.stop)
+    continued = {node: values[:, seed0.test.start - joined.start:] for node, values in md.simulate_targets(joined, theta).items()}
+    for node in (AIR, WATER, EX + "valve_position_sensor"):
+        assert np.max(np.abs(alone[node] - continued[node])) < 0.02, node
+
+
+def test_point_calibration_on_a_start_in_mid_transient_predicts_the_next_day_within_the_noise(seed0):
+    outcome = calibrate(seed0.store, "case", seed0.truth.path, train=("2026-01-12", "2026-01-12T23:59"),
+                        test=("2026-01-13", None), seed=0)
+    test = outcome.record.metrics["test"]
+    assert test[AIR].rmse < 0.2  # noise 0.1 K; 0.42 K from a cold start
+    assert test[EX + "valve_position_sensor"].rmse < 0.02  # noise 0.005; 0.08 from a cold start
