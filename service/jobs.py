@@ -23,8 +23,8 @@ elsewhere never touches it: the job's thread ships a :class:`ShippedJob` (the gr
 upload ``params["measurements"]``), :func:`run_shipped_job` runs the work against a scratch
 in-memory store holding them and sends back the result and the graphs it wrote (N-Quads), and the
 job's thread commits those as below. Progress messages of shipped work arrive with its result; a
-cancel drops the remote task at once (a running Dask task or pool process finishes in the
-background and its results are discarded).
+cancel drops the remote task at once: a running pool process is terminated, a running Dask task
+finishes in the background and its results are discarded.
 
 **Results.** A job reads the store as it is and writes through :class:`DeferredWrites`: every graph
 it writes is kept in memory and committed in ONE update when the job ends, before its status says
@@ -32,9 +32,9 @@ it writes is kept in memory and committed in ONE update when the job ends, befor
 job reports success; a failed or cancelled job writes nothing. (A job never reads a graph it wrote
 itself; such a read would see the graph as it was before the job.)
 
-**Cancel.** A queued job is cancelled at once. A running one is flagged: its work stops at its
-next progress message (:meth:`JobContext.report` raises :class:`JobCancelled`), or runs to its end,
-and its results are then discarded. A cancel that arrives while the results are being committed
+**Cancel.** A queued job is cancelled at once. A running one is flagged: work on the job's thread
+stops at its next progress message (:meth:`JobContext.report` raises :class:`JobCancelled`), or
+runs to its end, and its results are then discarded; shipped work is dropped as above. A cancel that arrives while the results are being committed
 waits for the commit and is then refused: the job has ended.
 """
 
@@ -401,41 +401,71 @@ def ship_job(store: GraphStore, job_id: str, params: dict,
 
 
 class ProcessJobExecutor:
-    """Shipped work in a local pool of ``max_workers`` processes (started with ``spawn``: the server's
-    threads and its open store are not copied into them). A pool whose worker died (killed, out of
-    memory) cannot take work: the job that ran there fails, and the next one gets a new pool."""
+    """Shipped work in ``max_workers`` local processes (started with ``spawn``: the server's threads
+    and its open store are not copied into them), each in a single-process pool of its own, so one
+    job's process can be stopped without touching the others': a cancelled running job
+    (:meth:`cancel`) has its process terminated and its slot gets a new one. A pool whose worker
+    died (killed, out of memory) cannot take work: the job that ran there fails, and the next one in
+    that slot gets a new pool. A job goes to the slot with the least work (the runner runs at most
+    as many jobs at once as there are slots)."""
 
     def __init__(self, max_workers: int = 1):
         self.name = f"a local process pool ({max_workers} process{'es' if max_workers > 1 else ''})"
-        self._max_workers = max_workers
-        self._pool = self._new_pool()
+        self._slots = [self._new_pool() for _ in range(max_workers)]
+        self._submitted: list[list[Future]] = [[] for _ in range(max_workers)]
         self._lock = threading.Lock()
 
-    def _new_pool(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(max_workers=self._max_workers, mp_context=get_context("spawn"))
+    @staticmethod
+    def _new_pool() -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn"))
 
-    def submit(self, function, *args):
+    def submit(self, function, *args) -> Future:
         with self._lock:
+            for futures in self._submitted:
+                futures[:] = [f for f in futures if not f.done()]
+            slot = min(range(len(self._slots)), key=lambda i: len(self._submitted[i]))
             try:
-                return self._pool.submit(function, *args)
+                future = self._slots[slot].submit(function, *args)
             except BrokenProcessPool:
-                log.warning("the job process pool broke (a worker died): starting a new one")
-                self._pool.shutdown(wait=False, cancel_futures=True)
-                self._pool = self._new_pool()
-                return self._pool.submit(function, *args)
+                log.warning("a job process pool broke (its worker died): starting a new one")
+                self._replace(slot)
+                future = self._slots[slot].submit(function, *args)
+            self._submitted[slot].append(future)
+            return future
+
+    def cancel(self, future: Future) -> None:
+        """Drop ``future``'s work: cancelled if it has not started, else its process is terminated
+        (work queued behind it in the same slot fails with it) and the slot gets a new one."""
+        if future.cancel() or future.done():
+            return
+        with self._lock:
+            slot = next((i for i, futures in enumerate(self._submitted) if future in futures), None)
+            if slot is not None and not future.done():
+                self._replace(slot)
+
+    def _replace(self, slot: int) -> None:
+        _stop_pool(self._slots[slot])
+        self._slots[slot], self._submitted[slot] = self._new_pool(), []
 
     def shutdown(self) -> None:
-        """Stop the pool and its workers: a job still running there is abandoned, not left to run
-        on in an orphaned process after the service exits."""
-        workers = list((self._pool._processes or {}).values())  # the pool keeps no public handle on them
-        self._pool.shutdown(wait=False, cancel_futures=True)
-        for worker in workers:
-            worker.terminate()
-        deadline = time.monotonic() + 10.0
-        for worker in workers:
-            # join returns early when the pool's own thread reaps the worker first; its exit code follows
-            while worker.exitcode is None and time.monotonic() < deadline:
-                worker.join(timeout=0.05)
+        """Stop every slot's pool and worker: a job still running there is abandoned, not left to
+        run on in an orphaned process after the service exits."""
+        with self._lock:
+            for pool in self._slots:
+                _stop_pool(pool)
+
+
+def _stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 10.0) -> None:
+    """Shut ``pool`` down and terminate its workers, waiting up to ``timeout_s`` for them to exit."""
+    workers = list((pool._processes or {}).values())  # the pool keeps no public handle on them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for worker in workers:
+        worker.terminate()
+    deadline = time.monotonic() + timeout_s
+    for worker in workers:
+        # join returns early when the pool's own thread reaps the worker first; its exit code follows
+        while worker.exitcode is None and time.monotonic() < deadline:
+            worker.join(timeout=0.05)
 
 
 class DaskJobExecutor:
@@ -459,6 +489,10 @@ class DaskJobExecutor:
 
     def submit(self, function, work: JobKind, job: ShippedJob):
         return self.client.submit(function, work, job, pure=False, key=f"graphtwin-job-{job.job_id}")
+
+    def cancel(self, future) -> None:
+        """Drop ``future``'s task (a running one finishes on its worker; its result is discarded)."""
+        future.cancel()
 
     def shutdown(self) -> None:
         if self._own_client:
@@ -618,7 +652,7 @@ class JobRunner:
                 break
             except TimeoutError:
                 if self.get(job_id).cancel_requested:
-                    future.cancel()
+                    self.executor.cancel(future)
                     raise JobCancelled() from None
         with self._lock:
             self._jobs[job_id].progress.extend(messages)

@@ -18,7 +18,9 @@ class PIController(ComponentModel):
     The integral I [K·s] advances by e·Δt each step **unless** the output is saturated and the error
     would drive it further into saturation (conditional integration): after a long saturation the
     controller leaves the limit as soon as the error changes sign, without unwinding a huge integral.
-    Sampled at the simulation step. Starts with I such that u equals its proportional part (I = 0).
+    Sampled at the simulation step. Starts with I such that u equals its proportional part (I = 0);
+    a simulated window starts after a day's warm-up (:data:`service.calibration_data.WARMUP_S`): a
+    low-gain loop takes hours to build the integral a running unit has.
     The gains are the *effective* gains of the loop sampled at the simulation step (minutes, where a
     BMS samples every second): K_p 0.005–0.05 /K (0.5–5 % valve per K) and T_i 600–3600 s keep the
     discrete loop of a hot-water coil stable across the prior box at a 5-minute step (checked over

@@ -6,7 +6,8 @@ moved from its default 25 % of the way towards a seeded random bound (a truth th
 find, not the defaults it starts from), and the hidden effect's parameters take the values its
 signature gives under ``[extra.synthetic_truth]`` (strong enough to matter, physically plausible).
 The simulation runs on :func:`service.synthetic_operation.case_study_operation` boundary inputs, or
-on the boundary inputs of a measurement file (real operation, a known truth: semi-synthetic data);
+on the boundary inputs of a measurement file (real operation, a known truth: semi-synthetic data),
+warmed up as :class:`~service.calibration_data.ModelData` warms a window up (a day before the data);
 Gaussian measurement noise is added to every target: 0.1 K on temperatures, 0.005 on positions,
 1 % of the mean on powers and flows (the accuracy of good building-automation sensors). Columns
 are written in each device's declared unit and named by its ``gt:timeSeriesId``.

@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 from service.api import create_app
 from service.assembly import assemble
 from service.jobs import (
-    DaskJobExecutor, JobRecords, JobRunner, ProcessJobExecutor, ShippedJob, add_effect_job, assemble_job,
+    DaskJobExecutor, JobRecords, JobResult, JobRunner, ProcessJobExecutor, ShippedJob, add_effect_job, assemble_job,
     calibrate_job, run_shipped_job, ship_job,
 )
 from service.settings import Settings
@@ -63,10 +63,10 @@ def test_after_a_pool_worker_dies_the_next_job_runs_in_a_new_pool(case_store, tm
     runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), {"assemble": assemble_job}, executor=executor)
     try:
         assert _wait(runner, runner.submit("assemble", {"model": "case"}).id).status == "succeeded"
-        for pid in list(executor._pool._processes):
+        for pid in list(executor._slots[0]._processes):
             os.kill(pid, signal.SIGKILL)
         deadline = time.monotonic() + 30
-        while not executor._pool._broken and time.monotonic() < deadline:
+        while not executor._slots[0]._broken and time.monotonic() < deadline:
             time.sleep(0.05)
         done = [_wait(runner, runner.submit("assemble", {"model": "case"}).id) for _ in range(2)]
         assert [job.status for job in done] == ["succeeded", "succeeded"], [job.error for job in done]
@@ -86,10 +86,46 @@ def test_shutting_the_pool_down_stops_a_worker_still_running_a_job():
     deadline = time.monotonic() + 60
     while not future.running() and time.monotonic() < deadline:
         time.sleep(0.05)
-    workers = list(executor._pool._processes.values())
+    workers = list(executor._slots[0]._processes.values())
     assert future.running() and [w.is_alive() for w in workers] == [True]
     executor.shutdown()
     assert [w.is_alive() for w in workers] == [False]
+
+
+def _sleep_job(store, params, context):
+    time.sleep(params["seconds"])
+    return JobResult({"slept": params["seconds"]})
+
+
+def _workers(executor: ProcessJobExecutor) -> list:
+    return [w for pool in executor._slots for w in (pool._processes or {}).values()]
+
+
+def test_cancelling_a_running_pool_job_stops_its_process_and_leaves_the_other_job_running(tmp_path):
+    """A cancelled job's process is terminated (it does not compute on for nothing); the job running
+    beside it in the other process finishes, and the next job runs in the new process."""
+    executor = ProcessJobExecutor(2)
+    runner = JobRunner(GraphStore.embedded(None), JobRecords(tmp_path / "jobs"), {"sleep": _sleep_job},
+                       max_workers=2, executor=executor)
+    try:
+        doomed = runner.submit("sleep", {"seconds": 120}).id
+        other = runner.submit("sleep", {"seconds": 4}).id
+        deadline = time.monotonic() + 60
+        while len([w for w in _workers(executor) if w.is_alive()]) < 2 or any(
+                runner.get(j).status != "running" for j in (doomed, other)):
+            assert time.monotonic() < deadline, "the two jobs never ran side by side"
+            time.sleep(0.05)
+        time.sleep(1.0)  # both are in their sleep
+        before = {w.pid: w for w in _workers(executor)}
+        runner.cancel(doomed)
+        assert _wait(runner, doomed).status == "cancelled"
+        stopped = [w for w in before.values() if w.exitcode is not None]
+        assert len(stopped) == 1 and stopped[0].exitcode < 0, [(w.pid, w.exitcode) for w in before.values()]
+        finished = _wait(runner, other)
+        assert finished.status == "succeeded" and finished.result == {"slept": 4}
+        assert _wait(runner, runner.submit("sleep", {"seconds": 0}).id).status == "succeeded"
+    finally:
+        runner.shutdown(wait=True)
 
 
 distributed = pytest.importorskip("distributed", reason="the Dask executor needs distributed (the test extra has it)")
