@@ -22,7 +22,7 @@ TRAIN = ("2026-01-12", "2026-01-12T23:59")
 TEST = ("2026-01-13", None)
 #: Settings of the Bayesian runs: ``graphtwin calibrate --method bayes`` (4 temperatures, 60 walkers,
 #: IAT checked every 100 steps, the default moves), capped at 6,000 steps (they converge in about
-#: 2,000: 3–4 minutes each on one core).
+#: 2,600 with the warm-up: about 8 minutes each on one core).
 BAYES = dict(n_temperatures=4, max_steps=6000, check_interval=100, random_state=0, progress=False)
 STRUCTURALLY_UNIDENTIFIABLE = ("supply_fan#c1", "supply_fan#c2", "supply_fan#c3", "supply_fan#c4",
                                "heating_coil_air_side#loop_flow_coefficient")
