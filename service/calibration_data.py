@@ -21,17 +21,12 @@ from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .namespaces import local_name
 from .simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
 
-__all__ = ["GAP_RECOVERY_S", "WARMUP_S", "WARMUP_PERIOD_S", "warmup_period_steps", "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+__all__ = ["GAP_RECOVERY_S", "WARMUP_PERIOD_S", "model_warmup_s", "warmup_period_steps", "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
 
 #: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
 #: the model's states come out of the gap off (as at a window's start: ``ModelData.problem``'s settling).
 GAP_RECOVERY_S = 3600.0
 
-#: Warm-up simulated before every window [s]: the measured day before it (before the data's first
-#: step, its first day repeated), over which controllers' integrals and thermal masses come from a
-#: cold start to the state the operation leaves: a low-gain heating loop (K_p 0.012 /K, T_i 1800 s)
-#: takes ~5 h from an empty integral, and after a night setback winds down for as long.
-WARMUP_S = 86400.0
 #: Period repeated before the data's first step in a warm-up, s (the first value held in data
 #: shorter than this).
 WARMUP_PERIOD_S = 86400.0
@@ -83,6 +78,15 @@ def check_mapped_parameters(model: AssembledModel) -> None:
         raise ValueError("; ".join(problems) + ": fix the value (or its unit) in the model graph")
 
 
+def model_warmup_s(model: AssembledModel) -> float:
+    """Warm-up simulated before every window of ``model`` [s]: its slowest component's settling time
+    (:meth:`~service.component.ComponentModel.settling_time_s`: a day with a PI loop, none for static
+    components). Over the measured time before the window (before the data's first step, its first
+    day repeated) controllers' integrals and thermal masses come from their cold start to the state
+    the operation leaves."""
+    return max((c.model_class.settling_time_s() for c in model.components.values()), default=0.0)
+
+
 def warmup_period_steps(n_steps: int, step_s: float) -> int:
     """Steps of :data:`WARMUP_PERIOD_S` when data of ``n_steps`` cover it, else 1 (hold the first value)."""
     period = int(round(WARMUP_PERIOD_S / step_s))
@@ -104,11 +108,13 @@ class ModelData:
     #: ``ndarray[n_steps]`` of bool: the steps where targets are compared (an operating filter,
     #: :mod:`service.operating_filter`); None: every step.
     compared: np.ndarray | None = None
-    #: Warm-up simulated before every window, s.
-    warmup_s: float = WARMUP_S
+    #: Warm-up simulated before every window, s; None: :func:`model_warmup_s`.
+    warmup_s: float | None = None
 
     def __post_init__(self) -> None:
         check_mapped_parameters(self.model)
+        if self.warmup_s is None:
+            self.warmup_s = model_warmup_s(self.model)
         nodes = {self.model.measurement(c).node: c for c in self.model.boundary_inputs + self.model.targets}
         missing = sorted(n for n in nodes if n not in self.data.series)
         if missing:

@@ -28,7 +28,7 @@ import numpy as np
 __all__ = [
     "Port", "Parameter", "ComponentModel", "SplicedEffect", "Params", "Signals", "State",
     "first_order_lag_factor", "AIR_SPECIFIC_HEAT_J_PER_KG_K", "WATER_SPECIFIC_HEAT_J_PER_KG_K",
-    "AIR_DENSITY_KG_PER_M3", "WATER_DENSITY_KG_PER_M3",
+    "AIR_DENSITY_KG_PER_M3", "WATER_DENSITY_KG_PER_M3", "DEFAULT_SETTLING_S",
 ]
 
 Params = dict[str, np.ndarray]
@@ -81,6 +81,11 @@ class Parameter:
             )
 
 
+#: Settling time of a component with states that does not state its own [s]: a day, the period of
+#: building operation (an FMU's dynamics are unknown; a PI loop's are slow, see PIController).
+DEFAULT_SETTLING_S = 86400.0
+
+
 class ComponentModel:
     """Base class of component models: declare ports, parameters and states; implement :meth:`step`.
 
@@ -95,12 +100,23 @@ class ComponentModel:
     #: One :meth:`step` advances a whole ensemble with numpy at about the cost of one member (False
     #: when each member is stepped on its own, an FMU instance per member).
     vectorised: ClassVar[bool] = True
+    #: How long the states take to forget their start [s], at the slowest the priors allow: the
+    #: warm-up a simulated window needs (:func:`service.calibration_data.model_warmup_s`). None: a
+    #: day for a model with states (:data:`DEFAULT_SETTLING_S`), nothing for a memoryless one.
+    settling_s: ClassVar[float | None] = None
 
     @classmethod
     def memoryless(cls) -> bool:
         """Outputs at t_k depend on the inputs at t_k alone: no declared state and no
         :meth:`initial_state` of its own (the simulator then evaluates it over all steps at once)."""
         return not cls.states and cls.initial_state is ComponentModel.initial_state
+
+    @classmethod
+    def settling_time_s(cls) -> float:
+        """:attr:`settling_s`, or its default."""
+        if cls.settling_s is not None:
+            return cls.settling_s
+        return 0.0 if cls.memoryless() else DEFAULT_SETTLING_S
 
     @classmethod
     def input_names(cls) -> tuple[str, ...]:

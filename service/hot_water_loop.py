@@ -105,6 +105,8 @@ class HotWaterLoop(ComponentModel):
         Parameter("water_side_time_constant", "s", 60.0, 5.0, 600.0, "water side, τ_w"),
     )
     states = ("inlet_water_temperature", "heat_rate", "outlet_air_temperature", "outlet_water_temperature")
+    #: Five times the four lags in series at their slowest (their time constants' upper bounds).
+    settling_s = 5.0 * sum(p.upper for p in parameters if p.unit == "s")
 
     def _water_flow(self, params, position):
         flow_m3_per_h = loop_water_flow_m3_per_h(

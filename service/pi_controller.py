@@ -19,8 +19,8 @@ class PIController(ComponentModel):
     would drive it further into saturation (conditional integration): after a long saturation the
     controller leaves the limit as soon as the error changes sign, without unwinding a huge integral.
     Sampled at the simulation step. Starts with I such that u equals its proportional part (I = 0);
-    a simulated window starts after a day's warm-up (:data:`service.calibration_data.WARMUP_S`): a
-    low-gain loop takes hours to build the integral a running unit has.
+    a simulated window starts after a day's warm-up (:attr:`settling_s`): a low-gain loop takes
+    hours to build the integral a running unit has.
     The gains are the *effective* gains of the loop sampled at the simulation step (minutes, where a
     BMS samples every second): K_p 0.005–0.05 /K (0.5–5 % valve per K) and T_i 600–3600 s keep the
     discrete loop of a hot-water coil stable across the prior box at a 5-minute step (checked over
@@ -38,6 +38,9 @@ class PIController(ComponentModel):
         Parameter("integral_time", "s", 1200.0, 600.0, 3600.0, "integral time, T_i"),
     )
     states = ("integral",)
+    #: A day: a low-gain loop (K_p 0.012 /K, T_i 1,850 s) takes ~5 h to build its integral from zero
+    #: and as long to wind down after a night setback; at the priors' slow corner longer still.
+    settling_s = 86400.0
     #: a in the error e = a · (w − y): +1 reverse acting, −1 direct acting
     action = 1.0
 

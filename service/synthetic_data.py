@@ -7,7 +7,7 @@ find, not the defaults it starts from), and the hidden effect's parameters take 
 signature gives under ``[extra.synthetic_truth]`` (strong enough to matter, physically plausible).
 The simulation runs on :func:`service.synthetic_operation.case_study_operation` boundary inputs, or
 on the boundary inputs of a measurement file (real operation, a known truth: semi-synthetic data),
-warmed up as :class:`~service.calibration_data.ModelData` warms a window up (a day before the data);
+warmed up as :class:`~service.calibration_data.ModelData` warms a window up;
 Gaussian measurement noise is added to every target: 0.1 K on temperatures, 0.005 on positions,
 1 % of the mean on powers and flows (the accuracy of good building-automation sensors). Columns
 are written in each device's declared unit and named by its ``gt:timeSeriesId``.
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .assembly import EffectRequest, assemble
-from .calibration_data import WARMUP_S, _device_unit, read_model_data, warmup_period_steps
+from .calibration_data import _device_unit, model_warmup_s, read_model_data, warmup_period_steps
 from .measurements import write_csv
 from .signature import Signature
 from .simulator import Simulator, loop_substeps, warmup_index
@@ -158,7 +158,7 @@ def generate_synthetic_data(
         boundary = {c: measured.series[model.measurement(c).node] for c in model.boundary_inputs}
     # warmed up as ModelData warms a window up: the first day repeated, then the history
     n_total = next(iter(boundary.values())).size
-    warmup = history + int(round(WARMUP_S / step_s))
+    warmup = history + int(round(model_warmup_s(model) / step_s))
     index = warmup_index(slice(history, n_total), warmup, warmup_period_steps(n_total, step_s))
     result = Simulator(model, step_s, substeps or loop_substeps(model, step_s)).run(
         {c: v[index] for c, v in boundary.items()}, theta[None, :], warmup_steps=warmup)

@@ -18,6 +18,7 @@ class FirstOrderLag(SplicedEffect):
     outputs = (Port("value_out", "degC", "lagged value"),)
     parameters = (Parameter("time_constant", "s", 0.0, 0.0, 1800.0, "first-order time constant, τ", null=0.0),)
     states = ("lagged",)
+    settling_s = 5.0 * parameters[0].upper  # five time constants at the slowest
 
     def initial_state(self, params, inputs, dt_s):
         return {"lagged": inputs["value_in"].copy()}

@@ -54,3 +54,24 @@ def test_point_calibration_on_a_start_in_mid_transient_predicts_the_next_day_wit
     test = outcome.record.metrics["test"]
     assert test[AIR].rmse < 0.2  # noise 0.1 K; 0.42 K from a cold start
     assert test[EX + "valve_position_sensor"].rmse < 0.02  # noise 0.005; 0.08 from a cold start
+
+
+def test_the_warm_up_is_as_long_as_the_model_s_slowest_state_needs():
+    """A day with a PI loop; none for static components (the FLEXLAB unit's coils, mixing box and
+    fan); five of its slowest time constants for a sensor lag added to them."""
+    from service.assembly import EffectRequest, assemble
+    from service.calibration_data import model_warmup_s
+    from service.hot_water_loop import HotWaterLoop
+    from service.resources import examples_dir
+    from service.store import GraphStore
+
+    store = GraphStore.embedded(None)
+    store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
+    store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+    assert model_warmup_s(assemble(store, "case")) == 86400.0
+    assert HotWaterLoop.settling_time_s() == 5 * (900 + 900 + 300 + 600)
+    flexlab = assemble(store, "flexlab")
+    assert model_warmup_s(flexlab) == 0.0
+    sensor = next(flexlab.measurement(c).node for c in flexlab.targets)
+    lagged = assemble(store, "flexlab", extra_effects=[EffectRequest("SensorLag", sensor)])
+    assert model_warmup_s(lagged) == 5 * 1800.0
