@@ -206,7 +206,7 @@ def calibrate(
                          "a point calibration has no discrepancy")
     problem = md.problem(train_slice, gp_inputs=gp_nodes)
     n_par = problem.n_parameters
-    settings = {"substeps": substeps, "step_s": data.step_s}
+    settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s}
     if only_when:
         settings["only_when"] = list(only_when)
     if method == "bayes":

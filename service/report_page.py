@@ -273,7 +273,8 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
                          "its series cannot be recomputed")
     model = assemble(store, run.model)
     data = read_model_data(model, data_path)
-    md = ModelData(model, data, int(run.settings["substeps"]), operating_mask(data, run.settings.get("only_when", [])))
+    md = ModelData(model, data, int(run.settings["substeps"]), operating_mask(data, run.settings.get("only_when", [])),
+                   warmup_s=run.settings.get("warmup_s", 0.0))  # a run stored before warm-ups was simulated cold
     missing = [ref.key for ref in model.estimated_parameters if ref.key not in run.estimates]
     if missing:
         raise ValueError(f"run {run.run_id} stores no estimate of {', '.join(missing)}")
@@ -631,6 +632,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         ("model", f"{run.model} (version {run.version})"), ("method", run.method), ("data", run.data_source),
         *[(f"{name} window", f"{start} – {end}") for name, (start, end) in windows],
         *([("compared only where", " and ".join(run.settings["only_when"]))] if run.settings.get("only_when") else []),
+        *([("warm-up before each window", f"{run.settings['warmup_s'] / 3600:g} h")] if "warmup_s" in run.settings else []),
         ("finished", run.ended), ("run graph", store.run_graph(run.run_id).value),
         ("diagnosis", diagnosis.iri if diagnosis else "none"),
     ])
