@@ -21,7 +21,8 @@ from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .namespaces import local_name
 from .simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
 
-__all__ = ["GAP_RECOVERY_S", "WARMUP_PERIOD_S", "model_warmup_s", "warmup_period_steps", "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+__all__ = ["GAP_RECOVERY_S", "WARMUP_PERIOD_S", "model_warmup_s", "warmup_period_steps", "QUANTITY_UNITS", "ModelData",
+           "series_specs", "read_model_data", "check_mapped_parameters"]
 
 #: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
 #: the model's states come out of the gap off (as at a window's start: ``ModelData.problem``'s settling).
@@ -239,8 +240,8 @@ class ModelData:
             since the data's first step) and boundary input nodes (their measured series, in the
             simulator's unit; a gap holds the last value); empty: none (the calibrator's time index).
         :param settling_s: the first ``settling_s`` seconds of each window are simulated but not
-            compared: the warm-up settles the model's states, it cannot give them the building's (before
-            the data's first step it holds the first inputs; the building did not).
+            compared: the warm-up settles the model's states, it cannot give them the building's
+            (before the data's first step it repeats the first day; the building's day before differed).
         """
         windows = [window] if isinstance(window, slice) else list(window)
         lower, upper = self.bounds()

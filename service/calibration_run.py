@@ -84,8 +84,9 @@ def continuation(train: slice, test: slice) -> slice | None:
 
 def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray, settling_s: float = 3600.0) -> dict[str, np.ndarray]:
     """Target node → prediction on ``test`` for one θ: the continuation of the training run when the
-    test follows the training start, else a run of its own (warmed up over the data before it) whose first ``settling_s`` are NaN
-    (the warm-up settles the model's states, it cannot give them the building's)."""
+    test follows the training start, else a run of its own (warmed up over the data before it) whose
+    first ``settling_s`` are NaN (the warm-up settles the model's states, it cannot give them the
+    building's)."""
     joined = continuation(train, test)
     if joined is not None:
         offset = test.start - joined.start

@@ -34,8 +34,9 @@ itself; such a read would see the graph as it was before the job.)
 
 **Cancel.** A queued job is cancelled at once. A running one is flagged: work on the job's thread
 stops at its next progress message (:meth:`JobContext.report` raises :class:`JobCancelled`), or
-runs to its end, and its results are then discarded; shipped work is dropped as above. A cancel that arrives while the results are being committed
-waits for the commit and is then refused: the job has ended.
+runs to its end, and its results are then discarded; shipped work is dropped as above. A cancel
+that arrives while the results are being committed waits for the commit and is then refused: the
+job has ended.
 """
 
 from __future__ import annotations

@@ -23,8 +23,9 @@ the cost, the number of simulate calls, the estimates with standard errors, and 
 cross-validation on held-out periods (:func:`contiguous_folds`): the training window is cut into
 ``n_folds`` contiguous blocks; each block in turn is held out, both strategies are fitted (Morris
 and plan included) on the remaining blocks, and the held-out block is simulated on its own (its
-first ``settling_s`` not scored: the warm-up settles the model's states, not to the building's) and scored by the weighted RMSE
-``sqrt(mean_{k,t} ((y_k(t) − ŷ_k(t)) / s_k)²)`` with the training window's target scales ``s_k``.
+first ``settling_s`` not scored: the warm-up settles the model's states, not to the building's) and
+scored by the weighted RMSE ``sqrt(mean_{k,t} ((y_k(t) − ŷ_k(t)) / s_k)²)`` with the training
+window's target scales ``s_k``.
 The regimes come from the boundary inputs only (:class:`~service.operating_regimes.OperatingRegimes`,
 no target enters them), so labelling the held-out block does not leak its measurements.
 """
