@@ -67,10 +67,11 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from . import __version__
 from .api_schemas import (
-    AddEffectRequest, AssembleRequest, CalibrateRequest, DiagnoseRequest, ErrorBody, Health, JobList, JobPublic,
-    MeasurementsInfo, MeasurementsList, ModelInfo, ModelList, ModelUploaded, NamedQueryList,
+    AddEffectRequest, AssembleRequest, BrickReportPublic, CalibrateRequest, DiagnoseRequest, ErrorBody, Health,
+    JobList, JobPublic, MeasurementsInfo, MeasurementsList, ModelInfo, ModelList, ModelUploaded, NamedQueryList,
 )
 from .assembly import AssemblyError, IncompleteModelError, assemble
+from .brick_report import brick_report, official_brick_classes
 from .calibration_data import read_model_data
 from .jobs import (
     JobRecord, JobRecords, JobRunner, JobStateError, add_effect_job, assemble_job, calibrate_job, diagnose_job,
@@ -132,6 +133,8 @@ class Service:
     runner: JobRunner
     uploads: MeasurementUploads
     query_pool: ThreadPoolExecutor
+    #: the official Brick ontology's classes (``GRAPHTWIN_BRICK_ONTOLOGY``), read at start-up
+    brick_classes: frozenset[str] | None = None
 
 
 def _service(request: Request) -> Service:
@@ -180,6 +183,13 @@ async def _read_body(request: Request, limit: int) -> bytes:
             raise ApiError(413, f"the upload exceeds the limit of {limit} bytes")
         chunks.append(chunk)
     return b"".join(chunks)
+
+
+def _require_fit_models(store: GraphStore, body: CalibrateRequest | DiagnoseRequest) -> None:
+    """404 unless the model to fit, and the model its fit starts from (if any), are in the store."""
+    _require_model(store, body.model)
+    if body.start_from is not None:
+        _require_model(store, body.start_from)
 
 
 def _require_model(store: GraphStore, name: str) -> str:
@@ -521,6 +531,18 @@ def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | N
     return {"name": name, "graph": store.model_graph(name).value, "triples": triples, "replaced": replaced}
 
 
+@router.get("/models/{name}/brick-report", response_model=BrickReportPublic, tags=["models"],
+            dependencies=[ReadAccess], responses=_errors(401, 403, 404))
+def get_brick_report(name: str, service: ServiceDep) -> dict:
+    """What the Brick alignment could not use in model ``name`` (as ``graphtwin brick-report``):
+    unaligned classes with what would be needed, unread relations, the assumptions made and the
+    triples that would remove them, points without a column or unit. ``official_ontology`` says
+    whether the service knows the official Brick classes (``GRAPHTWIN_BRICK_ONTOLOGY``)."""
+    _require_model(service.store, name)
+    report = brick_report(service.store, name, service.brick_classes)
+    return report.to_dict() | {"official_ontology": service.brick_classes is not None}
+
+
 @router.put("/models/{name}", response_model=ModelUploaded, tags=["models"], dependencies=[WriteAccess],
             openapi_extra=_RDF_BODY, responses=_errors(400, 401, 403, 413, 415, 422))
 async def put_model(name: str, request: Request, response: Response, service: ServiceDep) -> dict:
@@ -746,7 +768,7 @@ def submit_assemble(body: AssembleRequest, response: Response, service: ServiceD
              dependencies=[WriteAccess], responses=_JOB_ERRORS)
 def submit_calibrate(body: CalibrateRequest, response: Response, service: ServiceDep) -> dict:
     """Calibrate a model against a measurement upload; estimates and metrics go to a run graph."""
-    _require_model(service.store, body.model)
+    _require_fit_models(service.store, body)
     _require_measurements(service, body.measurements)
     return _submit(service, "calibrate", body.model_dump(), response)
 
@@ -755,7 +777,7 @@ def submit_calibrate(body: CalibrateRequest, response: Response, service: Servic
              dependencies=[WriteAccess], responses=_JOB_ERRORS)
 def submit_diagnose(body: DiagnoseRequest, response: Response, service: ServiceDep) -> dict:
     """Calibrate on train, compare on test, locate the failures and rank the missing effects."""
-    _require_model(service.store, body.model)
+    _require_fit_models(service.store, body)
     _require_measurements(service, body.measurements)
     return _submit(service, "diagnose", body.model_dump(), response)
 
@@ -834,6 +856,7 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     Job records a stopped process left queued or running are marked ``interrupted`` here.
     """
     settings = settings or Settings()
+    brick_classes = official_brick_classes(settings.brick_ontology) if settings.brick_ontology is not None else None
     store = store if store is not None else _open_store(settings)
     records = JobRecords(settings.jobs_dir)
     interrupted = records.mark_interrupted()
@@ -857,7 +880,7 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
         description="Semantic HVAC models in, calibrated simulation models and missing-physics diagnoses out. "
                     "Writes need `Authorization: Bearer <token>`.",
     )
-    app.state.graphtwin = Service(settings, store, runner, uploads, query_pool)
+    app.state.graphtwin = Service(settings, store, runner, uploads, query_pool, brick_classes)
     app.add_exception_handler(ApiError, _api_error_response)
     app.add_exception_handler(RequestValidationError, _validation_error_response)
     app.add_exception_handler(SparqlEndpointError, _store_unavailable_response)

@@ -10,6 +10,7 @@ from typing import Literal
 
 from pydantic import BaseModel, Field, field_validator
 
+from .calibration_data import DEFAULT_GP_INPUTS
 from .calibration_run import parse_window
 from .operating_filter import parse_condition
 from .store import GraphStore
@@ -52,6 +53,39 @@ class ModelInfo(ModelSummary):
     inferred_triples: int = Field(description="what the alignment rules derived (the model's inferred graph)")
     assembled: bool = Field(description="an assembly graph exists (an assemble or calibrate job ran)")
     measurements: list[str] = Field(description="ids of the measurement uploads validated against this model")
+
+
+class UnalignedClassPublic(BaseModel):
+    class_iri: str
+    count: int = Field(description="nodes of the model typed with the class")
+    unaligned: int = Field(description="of them, those no alignment rule used")
+    needed: str = Field(description="what would be needed for graphtwin to use them")
+
+
+class UnreadRelationPublic(BaseModel):
+    predicate: str
+    count: int = Field(description="triples of the model with the predicate")
+    needed: str
+
+
+class AssumptionPublic(BaseModel):
+    about: str = Field(description="the node the assumption is about")
+    assumption: str = Field(description="what the alignment assumed")
+    resolved_by: str = Field(description="the triple(s) that would remove the ambiguity")
+    rule: str = Field(description="the alignment rule that assumed it")
+
+
+class BrickReportPublic(BaseModel):
+    model_name: str
+    official_ontology: bool = Field(description=(
+        "the service knows the official Brick classes (GRAPHTWIN_BRICK_ONTOLOGY): an unaligned class outside "
+        "graphtwin's subset is then told apart as official Brick or not Brick at all"))
+    unaligned_classes: list[UnalignedClassPublic]
+    unread_relations: list[UnreadRelationPublic]
+    assumptions: list[AssumptionPublic]
+    points_without_column: list[str]
+    points_without_unit: list[str]
+    temperature_points_off_path: list[str]
 
 
 class ModelUploaded(ModelSummary):
@@ -117,29 +151,40 @@ class AssembleRequest(_ModelRequest):
     pass
 
 
-class CalibrateRequest(_ModelRequest):
+class _FitRequest(_ModelRequest):
+    """What calibrate and diagnose jobs share: the data, the seed, the operating filter, the start."""
+
     measurements: str = Field(description="id of a measurement upload")
+    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
+    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
+    start_from: str | None = Field(default=None, description=(
+        "a model in the store whose latest calibrated parameters start the fit (the version before an added "
+        "effect, say); the others start at their defaults"))
+
+    _conditions = field_validator("only_when")(_check_conditions)
+
+    @field_validator("start_from")
+    @classmethod
+    def _start_model_name(cls, value: str | None) -> str | None:
+        return GraphStore.check_name(value) if value is not None else None
+
+
+class CalibrateRequest(_FitRequest):
     train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
     test: str | None = Field(default=None, description="test window START/END")
     method: Literal["point", "bayes"] = "point"
-    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
-    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
-    gp_inputs: list[str] = Field(default=["time"], min_length=1, description=(
-        "inputs of the discrepancy GP (method bayes): 'time' and boundary inputs by node IRI, local name or CSV column"))
+    gp_inputs: list[str] = Field(default=list(DEFAULT_GP_INPUTS), min_length=1, description=(
+        "inputs of the discrepancy GP (method bayes): 'time' and boundary inputs by node IRI, local name or "
+        "CSV column"))
 
     _windows = field_validator("train", "test")(_check_window)
-    _conditions = field_validator("only_when")(_check_conditions)
 
 
-class DiagnoseRequest(_ModelRequest):
-    measurements: str = Field(description="id of a measurement upload")
+class DiagnoseRequest(_FitRequest):
     train: str = Field(description="training window START/END")
     test: str = Field(description="test window START/END")
-    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
-    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
 
     _windows = field_validator("train", "test")(_check_window)
-    _conditions = field_validator("only_when")(_check_conditions)
 
 
 class AddEffectRequest(_ModelRequest):

@@ -43,7 +43,8 @@ from .signature_matcher import MatchSession, match_signature, missing_class_repo
 from .store import GraphStore
 from .units import convert
 
-__all__ = ["AssemblyError", "IncompleteModelError", "assemble", "EffectRequest", "component_iri", "recorded_effects"]
+__all__ = ["AssemblyError", "IncompleteModelError", "assemble", "EffectRequest", "component_iri", "without_model",
+           "recorded_effects"]
 
 
 class AssemblyError(ValueError):
@@ -72,6 +73,12 @@ def component_iri(model_name: str, signature: Signature, node_name: str) -> str:
     other nodes the same signature represents share it (``…/unit1/supply_fan``,
     ``…/unit2/supply_fan``), so no instance replaces another."""
     return f"{GTR}model/{model_name}/component/{signature.id}/{node_name}"
+
+
+def without_model(key: str) -> str:
+    """A component IRI or parameter key without its model: ``…/model/NAME/component/Fan/supply_fan#c1``
+    → ``Fan/supply_fan#c1``, the same for every name (or version) the building model is loaded under."""
+    return key.rsplit("/component/", 1)[-1]
 
 
 def assemble(

@@ -12,7 +12,9 @@ Read from a loaded model (:meth:`service.store.GraphStore.load_model`): its own 
   ``brick:hasPoint`` and inverses) was aligned. Per class:
   the count of such nodes out of all, and what would be needed (an official class of
   ``ontologies/brick-subset.ttl`` with a similar name when the class is not in it; a signature or
-  rule for it when it is).
+  rule for it when it is). Given the official ontology file (``official_brick_classes``), a class
+  outside the subset is told apart: an official class graphtwin does not model, or no official class
+  at all (misspelt, with the official names close to it).
 * **Unread relations**: a Brick (``brick:``, ``ref:``) predicate the model uses that no alignment
   rule reads, with its triple count.
 * **Assumptions**: every ``gt:AlignmentAssumption`` the rules recorded (what was assumed, the
@@ -24,17 +26,18 @@ Read from a loaded model (:meth:`service.store.GraphStore.load_model`): its own 
 from __future__ import annotations
 
 import difflib
-import re
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 from rich.console import Console
 from rich.table import Table
 
 from .alignment import rule_terms
-from .store import ONTOLOGY_GRAPH, GraphStore
+from .namespaces import local_name
+from .store import ONTOLOGY_GRAPH, GraphStore, parse_rdf, rdf_format
 
 __all__ = ["BRICK", "REC", "REF", "UnalignedClass", "UnreadRelation", "Assumption", "BrickReport",
-           "brick_report", "print_brick_report"]
+           "brick_report", "official_brick_classes", "print_brick_report"]
 
 BRICK = "https://brickschema.org/schema/Brick#"
 REC = "https://w3id.org/rec#"
@@ -167,21 +170,57 @@ def _short(iri: str) -> str:
     return iri
 
 
-def _class_hint(class_iri: str, known: set[str]) -> str:
-    if class_iri not in known:
-        local = re.sub(r"^.*[#/]", "", class_iri)
-        names = {re.sub(r"^.*[#/]", "", k): k for k in known}
-        close = difflib.get_close_matches(local, list(names), n=3, cutoff=0.75)
-        hint = f" (if misspelt: {', '.join(_short(names[c]) for c in close)}?)" if close else ""
-        return ("not in graphtwin's Brick subset (ontologies/brick-subset.ttl: the official Brick 1.4 classes the "
-                f"rules read), so no rule reads it: a point or equipment graphtwin does not model, or a class that is "
-                f"not official Brick{hint}")
-    return ("no alignment rule maps it to a SAREF/FSO device, property or flow node, so no signature can use it "
-            "(a rule in queries/alignment/ and, for equipment, a component signature in signatures/)")
+def _close_names(local: str, classes) -> list[str]:
+    names = {local_name(k): k for k in classes}
+    return [_short(names[c]) for c in difflib.get_close_matches(local, list(names), n=3, cutoff=0.75)]
 
 
-def brick_report(store: GraphStore, model_name: str) -> BrickReport:
-    """The report for model ``model_name`` loaded in ``store``.
+def _class_hint(class_iri: str, known: set[str], official: frozenset[str] | None) -> str:
+    if class_iri in known:
+        return ("no alignment rule maps it to a SAREF/FSO device, property or flow node, so no signature can use it "
+                "(a rule in queries/alignment/ and, for equipment, a component signature in signatures/)")
+    local = local_name(class_iri)
+    subset = "graphtwin's Brick subset (ontologies/brick-subset.ttl: the official Brick 1.4 classes the rules read)"
+    if official is None:
+        close = _close_names(local, known)
+        hint = f" (if misspelt: {', '.join(close)}?)" if close else ""
+        return (f"not in {subset}, so no rule reads it: a point or equipment graphtwin does not model, or a class "
+                f"that is not official Brick{hint}")
+    if class_iri in official:
+        return ("official Brick, not in graphtwin's subset (ontologies/brick-subset.ttl): not modelled; a rule in "
+                "queries/alignment/ (for equipment also a signature) would be needed")
+    close = _close_names(local, official)
+    return ("not official Brick (nor in graphtwin's subset): misspelt"
+            + (f"? Closest official classes: {', '.join(close)}" if close else ", or from another vocabulary"))
+
+
+def official_brick_classes(path: Path) -> frozenset[str]:
+    """The Brick and RealEstateCore classes (``owl:Class`` / ``rdfs:Class``) an official ontology file
+    declares (``Brick.ttl``; the RDF syntaxes models load in, by the file's suffix: :func:`rdf_format`).
+
+    :raises ValueError: naming the file, when it cannot be read, has no RDF suffix, or declares no such
+        class; :class:`~service.store.ModelLoadError` (a ValueError) naming its line and column when it
+        cannot be parsed.
+    """
+    path = Path(path)
+    try:
+        fmt, data = rdf_format(path.suffix), path.read_bytes()
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    kinds = {"http://www.w3.org/2002/07/owl#Class", "http://www.w3.org/2000/01/rdf-schema#Class"}
+    classes = frozenset(
+        t.subject.value for t in parse_rdf(data, fmt, str(path))
+        if t.predicate.value == "http://www.w3.org/1999/02/22-rdf-syntax-ns#type" and t.object.value in kinds
+        and t.subject.value.startswith((BRICK, REC)))
+    if not classes:
+        raise ValueError(f"{path}: declares no Brick or RealEstateCore class: not the official Brick ontology")
+    return classes
+
+
+def brick_report(store: GraphStore, model_name: str, official: frozenset[str] | None = None) -> BrickReport:
+    """The report for model ``model_name`` loaded in ``store``; ``official``: the class IRIs of the
+    official Brick ontology (:func:`official_brick_classes`), to tell official classes graphtwin does
+    not model from misspelt ones.
 
     :raises KeyError: no model of that name in the store.
     """
@@ -193,7 +232,7 @@ def brick_report(store: GraphStore, model_name: str) -> BrickReport:
     known = {row["class"].value for row in store.query(_SUBSET_CLASSES, substitutions={"ontology": ONTOLOGY_GRAPH})}
     classes = tuple(
         UnalignedClass(row["class"].value, int(row["count"].value), int(row["unaligned_count"].value),
-                       _class_hint(row["class"].value, known))
+                       _class_hint(row["class"].value, known, official))
         for row in store.query(_CLASSES, substitutions=graphs)
     )
     read = _rule_terms()
@@ -226,7 +265,7 @@ def print_brick_report(report: BrickReport, console: Console | None = None) -> N
     if report.unaligned_classes:
         table = Table(title="Brick classes not aligned (their nodes reach no signature)")
         for column in ("class", "nodes not aligned / all", "what would be needed"):
-            table.add_column(column)
+            table.add_column(column, overflow="fold")
         for c in report.unaligned_classes:
             table.add_row(_short(c.class_iri), f"{c.unaligned} / {c.count}", c.needed)
         console.print(table)

@@ -21,8 +21,11 @@ from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .namespaces import local_name
 from .simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
 
-__all__ = ["GAP_RECOVERY_S", "WARMUP_PERIOD_S", "model_warmup_s", "warmup_period_steps", "QUANTITY_UNITS", "ModelData",
-           "series_specs", "read_model_data", "check_mapped_parameters"]
+__all__ = ["DEFAULT_GP_INPUTS", "GAP_RECOVERY_S", "WARMUP_PERIOD_S", "model_warmup_s", "warmup_period_steps",
+           "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+
+#: The discrepancy GP's inputs unless the user names others: time alone (hours since the data's start).
+DEFAULT_GP_INPUTS: tuple[str, ...] = ("time",)
 
 #: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
 #: the model's states come out of the gap off (as at a window's start: ``ModelData.problem``'s settling).
@@ -227,7 +230,7 @@ class ModelData:
     def problem(
         self, window: slice | Sequence[slice], *, default: np.ndarray | None = None,
         fixed: Mapping[str, float] | None = None, target_scales: Mapping[str, float] | None = None,
-        gp_inputs: Sequence[str] = ("time",), settling_s: float = 3600.0,
+        gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS, settling_s: float = 3600.0,
     ) -> CalibrationProblem:
         """The calibration problem of ``window`` (or of several windows, concatenated; each is
         simulated on its own): θ = the model's estimated parameters.

@@ -8,6 +8,13 @@ predictive intervals on the test window. The test window is simulated as the con
 training window (one run from the training start), so it carries no start-up transient. With a test
 window the run also records the error per operating regime (:mod:`service.regime_breakdown`).
 
+``start_from`` names another model in the store (the version before an effect was added, say): the
+latest calibrated values of the parameters the two share replace the component defaults as the
+plausible start screened with the Latin-hypercube candidates (:func:`calibrated_start`), so
+re-calibrating after ``add-effect`` starts where the base model's fit ended (the diagnosis's refit
+starts there too), with the effect's parameters at their defaults, instead of searching the whole
+prior again.
+
 Everything a run produced goes into its named graph in ONE transaction after the fit: a reader
 sees the whole run or none of it; a failed run writes nothing.
 """
@@ -27,9 +34,9 @@ import numpy as np
 import pyoxigraph as ox
 
 from .assembled_model import AssembledModel
-from .assembly import assemble
+from .assembly import assemble, without_model
 from .assembly_triples import assembly_iri, assembly_triples
-from .calibration_data import ModelData, read_model_data
+from .calibration_data import DEFAULT_GP_INPUTS, ModelData, read_model_data
 from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
 from .measurements import parse_timestamp
@@ -40,8 +47,8 @@ from .regime_breakdown import RegimeBreakdown, regime_breakdown
 from .simulator import loop_substeps
 from .store import GraphStore
 
-__all__ = ["Window", "parse_window", "CalibrationOutcome", "calibrate", "model_version", "fit_point",
-           "continuation", "predict_test", "store_run"]
+__all__ = ["Window", "parse_window", "CalibrationOutcome", "calibrate", "calibrated_start", "model_version",
+           "fit_point", "continuation", "predict_test", "store_run"]
 
 Window = tuple[str | None, str | None]
 
@@ -151,6 +158,44 @@ def _estimates(model: AssembledModel, theta, q16, q84, theta_map, se, verdicts) 
     return estimates
 
 
+def calibrated_start(store: GraphStore, start_from: str, model_name: str,
+                     model: AssembledModel) -> tuple[np.ndarray, list[str], str]:
+    """θ to start ``model``'s calibration from, the IRIs of the runs its values come from, and a
+    sentence saying what it holds. For each estimated parameter: the latest calibrated value (the MAP,
+    ``calibrated-parameters.rq``) of the same parameter of the same component in model ``start_from``
+    (keys matched without the model name, :func:`without_model`), clipped to this model's bounds; the
+    component default where ``start_from`` has none (the parameters of an effect just added).
+
+    :raises ValueError: ``start_from`` is not in the store, has no calibration run, or shares no
+        estimated parameter with ``model``.
+    """
+    if not store.has_model(start_from):
+        raise ValueError(f"start from {start_from!r}: no such model in the store; it holds "
+                         f"{', '.join(store.models()) or 'none'}")
+    latest = {without_model(f"{row['component'].value}#{row['name'].value}"):
+              (float((row.get("map") or row["median"]).value), row["run"].value)
+              for row in store.run_named_query("calibrated-parameters", model=start_from)}
+    if not latest:
+        raise ValueError(f"start from {start_from!r}: the model has no calibration run in the store; "
+                         "calibrate it first")
+    theta = np.array([ref.spec.default for ref in model.estimated_parameters])
+    at_default, runs = [], set()
+    for j, ref in enumerate(model.estimated_parameters):
+        key = without_model(ref.key)
+        if key in latest:
+            value, run = latest[key]
+            theta[j] = min(max(value, ref.spec.lower), ref.spec.upper)
+            runs.add(run)
+        else:
+            at_default.append(key)
+    if not runs:
+        raise ValueError(f"start from {start_from!r}: its calibrated parameters ({', '.join(sorted(latest))}) include "
+                         f"none that model {model_name} estimates")
+    note = (f"started from the latest calibration of {start_from}: {len(theta) - len(at_default)} of {len(theta)} "
+            "parameters" + (f"; at their defaults: {', '.join(at_default)}" if at_default else ""))
+    return theta, sorted(runs), note
+
+
 def calibrate(
     store: GraphStore,
     model_name: str,
@@ -166,7 +211,8 @@ def calibrate(
     on_progress: Callable[[dict], None] | None = None,
     only_when: Sequence[str] = (),
     min_test_steps: int = 1,
-    gp_inputs: Sequence[str] = ("time",),
+    gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS,
+    start_from: str | None = None,
 ) -> CalibrationOutcome:
     """Calibrate ``model_name`` against the CSV at ``data_path`` and store the run. A test window
     that overlaps the training window is noted in the run's warnings (its metrics are then partly on
@@ -177,9 +223,11 @@ def calibrate(
     :param min_test_steps: a test window with fewer steps of data is refused.
     :param gp_inputs: the inputs of the discrepancy GP (``method="bayes"``): ``"time"`` and boundary
         inputs by node IRI, local name or CSV column (:meth:`ModelData.gp_input_nodes`).
+    :param start_from: a model in the store whose latest calibrated values start this fit
+        (:func:`calibrated_start`); None: the component defaults.
 
     :raises ValueError: a bad window, a target without measurements, NaN-only series, an unknown
-        method; nothing is written to the store then.
+        method, a ``start_from`` with nothing to start from; nothing is written to the store then.
     """
     if method not in ("point", "bayes"):
         raise ValueError(f"unknown method {method!r}: use point or bayes")
@@ -202,17 +250,24 @@ def calibrate(
             window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
                                 "partly on data the calibration fitted")
     gp_nodes = md.gp_input_nodes(gp_inputs)
-    if method == "point" and gp_nodes != ("time",):
+    if method == "point" and gp_nodes != DEFAULT_GP_INPUTS:
         raise ValueError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
                          "a point calibration has no discrepancy")
-    problem = md.problem(train_slice, gp_inputs=gp_nodes)
+    start = start_runs = start_note = None
+    if start_from is not None:
+        start, start_runs, start_note = calibrated_start(store, start_from, model_name, model)
+    problem = md.problem(train_slice, gp_inputs=gp_nodes, default=start)
     n_par = problem.n_parameters
     settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s}
+    if start_from is not None:
+        settings["start_from"] = {"model": start_from, "runs": start_runs}
     if only_when:
         settings["only_when"] = list(only_when)
     if method == "bayes":
         settings["gp_inputs"] = list(gp_nodes)
     diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes) + list(md.simulator.notes) + window_notes}
+    if start_note:
+        diagnostics["start"] = start_note
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None
     if method == "point":

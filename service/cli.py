@@ -25,6 +25,7 @@ from rich.text import Text
 from .assembly import AssemblyError, EffectRequest, assemble
 from .assembly_summary import assembly_to_dict, print_assembly
 from .assembly_triples import assembly_triples
+from .calibration_data import DEFAULT_GP_INPUTS
 from .calibration_run import calibrate, parse_window
 from .diagnosis import DiagnosisReport, diagnose
 from .error_history import error_history
@@ -60,6 +61,9 @@ ModelFileArgument = Annotated[Path, typer.Argument(help="Building model file.")]
 MeasurementsArgument = Annotated[Path, typer.Argument(help="Measurement CSV (README: data contract).")]
 TrainWindowOption = Annotated[str, typer.Option(help="Training window START/END (ISO; either side may be empty).")]
 TestWindowOption = Annotated[str | None, typer.Option(help="Test window START/END.")]
+StartFromOption = Annotated[str | None, typer.Option(help=(
+    "A model in the store whose latest calibrated parameters start the fit (the version before `add-effect`, "
+    "or the model itself: a warm start on new data); the others, an added effect's, start at their defaults."))]
 USER_ERRORS = (ModelLoadError, AssemblyError, SignatureError, MeasurementError, FileNotFoundError, ValueError, KeyError)
 
 
@@ -141,17 +145,21 @@ def assemble_command(
 def brick_report_command(
     model: Annotated[Path, typer.Argument(help="Building model file (Brick 1.3/1.4).")],
     name: NameOption = None,
+    brick_ontology: Annotated[Path | None, typer.Option(help=(
+        "The official Brick ontology file (Brick.ttl): tells an official class graphtwin does not model "
+        "from a misspelt one."))] = None,
     as_json: JsonOption = False,
     store: StoreOption = Path("graphtwin-data"),
     memory: MemoryOption = False,
 ) -> None:
     """What the Brick alignment could not use in MODEL: unaligned classes, unread relations, the
     assumptions it made and the triples that would remove them, points without a column or unit."""
-    from .brick_report import brick_report, print_brick_report
+    from .brick_report import brick_report, official_brick_classes, print_brick_report
 
     graph_store = open_store(store, memory)
     try:
-        report = brick_report(graph_store, _load(graph_store, model, name))
+        official = official_brick_classes(brick_ontology) if brick_ontology is not None else None
+        report = brick_report(graph_store, _load(graph_store, model, name), official)
     except USER_ERRORS as exc:
         raise fail(exc) from None
     if as_json:
@@ -205,6 +213,7 @@ def calibrate_command(
     gp_input: Annotated[list[str] | None, typer.Option(
         help="An input of the discrepancy GP (--method bayes): 'time' (the default) or a boundary input "
              "(node local name, IRI or CSV column); repeat for several.")] = None,
+    start_from: StartFromOption = None,
     as_json: JsonOption = False,
     store: StoreOption = Path("graphtwin-data"),
     memory: MemoryOption = False,
@@ -215,7 +224,8 @@ def calibrate_command(
         model_name = _load(graph_store, model, name)
         outcome = calibrate(graph_store, model_name, data, train=parse_window(train),
                             test=parse_window(test) if test else None, method=method, seed=seed,
-                            progress=not as_json, only_when=only_when or (), gp_inputs=gp_input or ("time",))
+                            progress=not as_json, only_when=only_when or (), gp_inputs=gp_input or DEFAULT_GP_INPUTS,
+                            start_from=start_from)
     except USER_ERRORS as exc:
         raise fail(exc) from None
     record = outcome.record
@@ -232,6 +242,8 @@ def calibrate_command(
         table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", e.unit,
                       "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(r"\1.\2", "; ".join(e.reasons)))
     console.print(table)
+    if "start" in record.diagnostics:
+        console.print(record.diagnostics["start"], markup=False, highlight=False)
     for window, metrics in record.metrics.items():
         _print_metrics(f"Metrics, {window} window", metrics)
     _print_regimes(record)
@@ -379,12 +391,12 @@ def _save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
 
 
 def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects,
-                  only_when) -> None:
+                  only_when, start_from) -> None:
     graph_store = open_store(store, memory)
     try:
         model_name = _load(graph_store, model, name)
         report = diagnose(graph_store, model_name, data, train=parse_window(train), test=parse_window(test),
-                          seed=seed, rank_effects=rank_effects, only_when=only_when or (),
+                          seed=seed, rank_effects=rank_effects, only_when=only_when or (), start_from=start_from,
                           on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
     except USER_ERRORS as exc:
         raise fail(exc) from None
@@ -411,11 +423,12 @@ def _diagnosis_command(rank_effects: bool, doc: str):
         as_json: JsonOption = False,
         plots: PlotsOption = Path("graphtwin-plots"),
         only_when: OnlyWhenOption = None,
+        start_from: StartFromOption = None,
         store: StoreOption = Path("graphtwin-data"),
         memory: MemoryOption = False,
     ) -> None:
         _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects=rank_effects,
-                      only_when=only_when)
+                      only_when=only_when, start_from=start_from)
 
     command.__doc__ = doc
     return command
@@ -694,13 +707,13 @@ def demo_command(
         console.print("No effect is significant: nothing to add.")
         return
     best = report.significant[0]
-    console.rule(f"[bold]3. Add {best.effect} at {local_name(best.node)} and recalibrate")
+    console.rule(f"[bold]3. Add {best.effect} at {local_name(best.node)} and recalibrate from the base fit")
     new_model = output / "model_with_effect.ttl"
     record_effect_in_file(model_path, new_model, applied_effect_triples(library[best.effect], best.node))
     version = f"{base_name}+{best.effect}"
     graph_store.load_model(version, new_model)
     before = report.sensors
-    after_run = calibrate(graph_store, version, data, train=train, test=test, seed=seed)
+    after_run = calibrate(graph_store, version, data, train=train, test=test, seed=seed, start_from=base_name)
     table = Table(title="Test-window RMSE: before and after")
     for column in ("sensor", "before", "after", "change"):
         table.add_column(column)

@@ -407,16 +407,18 @@ def diagnose(
     on_progress: Callable[[str], None] | None = None,
     rank_effects: bool = True,
     only_when: Sequence[str] = (),
+    start_from: str | None = None,
 ) -> DiagnosisReport:
     """Calibrate on ``train``, compare on ``test``, locate the failures and rank the missing effects
     (``rank_effects=False``: compare and locate only, ``graphtwin compare``; the failing sensors'
     residual dependence is then always reported). ``only_when``: operating conditions, the targets
-    compared only where all hold (:mod:`service.operating_filter`)."""
+    compared only where all hold (:mod:`service.operating_filter`). ``start_from``: a model in the
+    store whose latest calibration starts the base fit (:func:`service.calibration_run.calibrated_start`)."""
     say = on_progress or (lambda message: None)
     library = library or load_signature_library(signatures_dir())
     say("calibrating the base model")
     base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps,
-                     only_when=only_when, min_test_steps=MIN_TEST_STEPS)
+                     only_when=only_when, min_test_steps=MIN_TEST_STEPS, start_from=start_from)
     md, model = base.model_data, base.model
     substeps = md.substeps
     data = md.data

@@ -66,6 +66,7 @@ import pyoxigraph as ox
 from .assembly import EffectRequest, assemble, recorded_effects
 from .assembly_summary import assembly_to_dict
 from .assembly_triples import assembly_iri, assembly_triples
+from .calibration_data import DEFAULT_GP_INPUTS
 from .calibration_run import calibrate, model_version, parse_window
 from .effect_recording import applied_effect_triples
 from .namespaces import GT
@@ -735,30 +736,33 @@ def _result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:
 
 
 def calibrate_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
-    """``{"model", "measurements", "train", "test", "method", "seed", "only_when", "gp_inputs"}`` (windows as
-    ``START/END``): :func:`service.calibration_run.calibrate` on the uploaded CSV ``context.measurements(id)``."""
+    """``{"model", "measurements", "train", "test", "method", "seed", "only_when", "gp_inputs", "start_from"}``
+    (windows as ``START/END``): :func:`service.calibration_run.calibrate` on the uploaded CSV
+    ``context.measurements(id)``."""
     model = params["model"]
     data = context.measurements(params["measurements"])
     context.report(f"calibrating ({params.get('method', 'point')})")
     outcome = calibrate(store, model, data, train=parse_window(params.get("train") or "/"),
                         test=_window(params.get("test")), method=params.get("method", "point"),
                         seed=int(params.get("seed", 0)), only_when=params.get("only_when") or (),
-                        gp_inputs=params.get("gp_inputs") or ("time",))
+                        gp_inputs=params.get("gp_inputs") or DEFAULT_GP_INPUTS,
+                        start_from=params.get("start_from"))
     context.report("calibrated; writing the run")
     return JobResult(outcome.record.to_dict(), _result_links(store, model, outcome.record.run_id))
 
 
 def diagnose_job(store: GraphStore, params: dict, context: JobContext) -> JobResult:
-    """``{"model", "measurements", "train", "test", "seed", "only_when"}``: :func:`service.diagnosis.diagnose`,
-    its phases reported as progress (a cancel stops it at the next phase). One worker process: the
-    job already runs beside the server's other work (or in a pool process, or on a Dask worker)."""
+    """``{"model", "measurements", "train", "test", "seed", "only_when", "start_from"}``:
+    :func:`service.diagnosis.diagnose`, its phases reported as progress (a cancel stops it at the next
+    phase). One worker process: the job already runs beside the server's other work (or in a pool
+    process, or on a Dask worker)."""
     from .diagnosis import diagnose  # the effect catalog machinery loads only when a diagnosis runs
 
     model = params["model"]
     data = context.measurements(params["measurements"])
     report = diagnose(store, model, data, train=parse_window(params["train"]), test=parse_window(params["test"]),
                       seed=int(params.get("seed", 0)), on_progress=context.report, workers=1,
-                      only_when=params.get("only_when") or ())
+                      only_when=params.get("only_when") or (), start_from=params.get("start_from"))
     links = _result_links(store, model, report.run_id)
     links["diagnosis_graph"] = store.run_graph(f"{report.run_id}-diagnosis").value
     return JobResult(report.to_dict(), links)

@@ -611,6 +611,12 @@ figure{margin:10px 0;overflow-x:auto}img{max-width:100%}.bad{color:#b3261e;font-
 grid-template-columns:max-content auto;gap:2px 14px}dt{color:#5a6472}dd{margin:0}"""
 
 
+def _start_text(start_from: dict) -> str:
+    """A run's ``start_from`` setting (:func:`service.calibration_run.calibrated_start`) in words."""
+    runs = ", ".join(run.rsplit("/", 1)[-1] for run in start_from["runs"])
+    return f"the latest calibration of {start_from['model']} (run {runs})"
+
+
 def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], Path] | None = None) -> str:
     """The report page of run ``run_id`` (a calibration run, or a diagnosis graph ``<run>-diagnosis``).
 
@@ -633,6 +639,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         *[(f"{name} window", f"{start} – {end}") for name, (start, end) in windows],
         *([("compared only where", " and ".join(run.settings["only_when"]))] if run.settings.get("only_when") else []),
         *([("warm-up before each window", f"{run.settings['warmup_s'] / 3600:g} h")] if "warmup_s" in run.settings else []),
+        *([("started from", _start_text(run.settings["start_from"]))] if "start_from" in run.settings else []),
         ("finished", run.ended), ("run graph", store.run_graph(run.run_id).value),
         ("diagnosis", diagnosis.iri if diagnosis else "none"),
     ])

@@ -18,6 +18,9 @@
                                 (the workers of that Dask scheduler); see :mod:`service.jobs`
 ``GRAPHTWIN_JOB_WORKERS``       jobs running at once: 1 or 2 with threads or processes (they share
                                 this machine's CPU), up to 64 with a Dask cluster
+``GRAPHTWIN_BRICK_ONTOLOGY``    the official Brick ontology file (``Brick.ttl``): the Brick report
+                                (``GET /models/{name}/brick-report``) then tells an official class
+                                graphtwin does not model from a misspelt one
 ==============================  ==================================================================
 
 Secrets are :class:`~pydantic.SecretStr`: ``repr``, logs and tracebacks show ``**********``.
@@ -67,6 +70,7 @@ class Settings(BaseSettings):
     max_result_rows: int = Field(default=100_000, gt=0)
     executor: str = "processes"
     job_workers: int = Field(default=1, ge=1, le=64)
+    brick_ontology: Path | None = None
 
     @field_validator("token", "endpoint_token")
     @classmethod

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .assembly import EffectRequest, assemble
+from .assembly import EffectRequest, assemble, without_model
 from .calibration_data import _device_unit, model_warmup_s, read_model_data, warmup_period_steps
 from .measurements import write_csv
 from .signature import Signature
@@ -67,22 +67,16 @@ def applicable_nodes(store: GraphStore, model_name: str, signature: Signature) -
     return usable
 
 
-def _component_part(key: str) -> str:
-    """A parameter key without its model: ``…/model/NAME/component/Fan/supply_fan#c1`` →
-    ``Fan/supply_fan#c1`` (a run of the model loaded under another name gives the same)."""
-    return key.rsplit("/component/", 1)[-1]
-
-
 def _truth_theta(model, model_name: str, effect: Signature | None, rng: np.random.Generator,
                  given: Mapping[str, float]) -> np.ndarray:
     values = []
     truth = (effect.extra.get("synthetic_truth", {}) if effect is not None else {})
-    given = {_component_part(key): value for key, value in given.items()}
-    unknown = sorted(given.keys() - {_component_part(ref.key) for ref in model.estimated_parameters})
+    given = {without_model(key): value for key, value in given.items()}
+    unknown = sorted(given.keys() - {without_model(ref.key) for ref in model.estimated_parameters})
     if unknown:
         raise ValueError(f"the truth names parameters model {model_name} does not estimate: {', '.join(unknown)}")
     for ref in model.estimated_parameters:
-        spec, part = ref.spec, _component_part(ref.key)
+        spec, part = ref.spec, without_model(ref.key)
         if part in given:
             values.append(float(given[part]))
             rng.random()  # the same draws for the others whatever is given

@@ -5,6 +5,9 @@ import os
 import pytest
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# A width in the environment when the CLI is imported (exported by a shell, or set by pytest-xdist in
+# its workers) is frozen into the CLI's console; tests that check wide tables set COLUMNS per invocation.
+os.environ.pop("COLUMNS", None)
 
 from case_study import CASE_STUDY  # noqa: E402
 

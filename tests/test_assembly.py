@@ -3,11 +3,10 @@
 import dataclasses
 
 import pytest
-from case_study import CASE_STUDY, EX
+from case_study import CASE_STUDY, EX, case_study_with_effect
 
 from service.assembly import AssemblyError, EffectRequest, IncompleteModelError, assemble
 from service.assembly_triples import assembly_triples
-from service.effect_recording import applied_effect_triples
 from service.resources import signatures_dir
 from service.signature import load_signature_library
 from service.store import GraphStore
@@ -48,9 +47,8 @@ def test_assembly_triples_describe_every_component(case_store):
 
 def test_a_recorded_effect_is_spliced_on_reassembly(tmp_path):
     library = load_signature_library(signatures_dir())
-    extra = "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in applied_effect_triples(library["FanMotorHeat"], EX + "supply_fan"))
     store = GraphStore.embedded(None)
-    store.load_model("with_heat", CASE_STUDY.read_bytes() + b"\n" + extra.encode())
+    store.load_model("with_heat", case_study_with_effect(library["FanMotorHeat"], EX + "supply_fan"))
     model = assemble(store, "with_heat")
     effect = [c for c in model.components.values() if c.signature.id == "FanMotorHeat"]
     assert len(effect) == 1

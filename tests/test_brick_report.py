@@ -1,6 +1,13 @@
 """service/brick_report.py: what the alignment did not use is listed, with what would be needed."""
 
-from service.brick_report import brick_report
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from service.brick_report import brick_report, official_brick_classes
+from service.cli import app
 from service.resources import examples_dir
 from service.store import GraphStore
 
@@ -51,3 +58,38 @@ ex:sat a brick:Supply_Air_Temperature_Sensor .
 """)
     by_class = {c.class_iri.removeprefix(BRICK): c for c in brick_report(store, "hum").unaligned_classes}
     assert set(by_class) == {"Humidifier"} and by_class["Humidifier"].unaligned == 1
+
+
+OFFICIAL_BRICK = Path(__file__).resolve().parents[2] / "shared" / "ontologies" / "brick" / "Brick.ttl"
+
+
+@pytest.mark.skipif(not OFFICIAL_BRICK.is_file(), reason=f"the official Brick.ttl is not at {OFFICIAL_BRICK} (../shared)")
+def test_the_official_ontology_tells_an_unmodelled_class_from_a_misspelt_one(tmp_path):
+    """Without it a class outside graphtwin's subset might be either; with it, the chiller is official
+    Brick graphtwin does not model, and the setpoint is no Brick class at all, with the official
+    names close to it."""
+    official = official_brick_classes(OFFICIAL_BRICK)
+    assert BRICK + "Chiller" in official and BRICK + "Supply_Air_Temprature_Setpoint" not in official
+    store = GraphStore.embedded(None)
+    store.load_model("m", MODEL.encode())
+    by_class = {c.class_iri.removeprefix(BRICK): c.needed for c in brick_report(store, "m", official).unaligned_classes}
+    assert by_class["Chiller"].startswith("official Brick, not in graphtwin's subset")
+    misspelt = by_class["Supply_Air_Temprature_Setpoint"]
+    assert misspelt.startswith("not official Brick")
+    assert "Closest official classes: brick:Supply_Air_Temperature_Setpoint," in misspelt  # one graphtwin lacks
+    model = tmp_path / "m.ttl"
+    model.write_text(MODEL)
+    result = CliRunner().invoke(app, ["brick-report", str(model), "--memory", "--json", "--brick-ontology", str(OFFICIAL_BRICK)])
+    assert result.exit_code == 0, result.output
+    assert {c["class_iri"].removeprefix(BRICK): c["needed"] for c in json.loads(result.output)["unaligned_classes"]} == by_class
+
+
+def test_a_file_that_is_not_the_brick_ontology_is_refused_naming_it(tmp_path):
+    broken = tmp_path / "Brick.ttl"
+    broken.write_text("@prefix brick: <https://brickschema.org/schema/Brick#> .\nbrick:Chiller a \n")
+    with pytest.raises(ValueError, match=r"Brick.ttl, line 3, column \d+: "):
+        official_brick_classes(broken)
+    other = tmp_path / "other.ttl"
+    other.write_text("<urn:a> a <http://www.w3.org/2002/07/owl#Class> .\n")
+    with pytest.raises(ValueError, match="other.ttl: declares no Brick or RealEstateCore class"):
+        official_brick_classes(other)

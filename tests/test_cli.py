@@ -233,6 +233,8 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
     assert "supply air flow meter" in regimes and " %" in regimes and "°C" in regimes  # rules, shares, units
     refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--gp-input", "supply_air_flow"])
     assert refused.exit_code == 2 and "a point calibration has no discrepancy" in refused.output
+    no_start = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--start-from", "v0"])
+    assert no_start.exit_code == 2 and "start from 'v0': no such model in the store" in no_start.output
 
 
 def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():

@@ -80,12 +80,13 @@ def test_jacobian_and_start_screening_are_one_simulate_call_each():
     problem, *_ = linear_problem(calls, default=np.array([0.0, 0.0]))
     separate = PointCalibrator(n_starts=2, n_candidates=16, random_state=0, jacobian_with_residuals=False).fit(problem)
     assert calls[0] == 17  # 16 Latin-hypercube candidates + the default, one call
-    assert set(calls[1:]) == {1, 3}  # residuals (1 member) and Jacobians (p + 1 = 3 members)
+    assert set(calls[1:-1]) == {1, 3}  # residuals (1 member) and Jacobians (p + 1 = 3 members)
+    assert calls[-1] == 4  # the jump check: ±2 SE in each identified parameter, one call
     assert separate.n_simulate_calls_ == len(calls) and separate.n_simulated_members_ == sum(calls)
     n_separate = len(calls)
     calls.clear()
     fused = PointCalibrator(n_starts=2, n_candidates=16, random_state=0).fit(problem)
-    assert calls[0] == 17 and set(calls[1:]) == {3}  # every trial point simulated with its Jacobian
+    assert calls[0] == 17 and set(calls[1:-1]) == {3}  # every trial point simulated with its Jacobian
     assert len(calls) < n_separate  # an accepted step is one call, and the final point is not simulated again
     np.testing.assert_array_equal(fused.theta_, separate.theta_)
     np.testing.assert_array_equal(fused.covariance_, separate.covariance_)
@@ -114,3 +115,23 @@ def test_invalid_settings_and_too_little_data_are_refused():
         PointCalibrator(random_state=0).fit(problem)
     with pytest.raises(ValueError, match="need 1 ≤ n_starts ≤ n_candidates"):
         PointCalibrator(n_starts=5, n_candidates=4).fit(problem)
+
+
+def test_a_cost_that_jumps_within_two_standard_errors_is_not_called_identified():
+    """The linear model, plus a step of 0.5·t in the output once the slope exceeds 3.05: the fit
+    lands below the step (slope ≈ 3.0, SE ≈ 0.1) where the Jacobian is that of the linear model, so
+    its standard error alone would call the slope identified; moved by +2 SE the cost jumps."""
+    problem, t, _ = linear_problem()
+    smooth = PointCalibrator(random_state=1).fit(problem)
+    assert all(v.identified for v in smooth.identifiability_.values())
+    linear_simulate = problem.simulate
+
+    def simulate(theta):
+        return {"y": linear_simulate(theta)["y"] + 0.5 * (theta[:, 1:2] > 3.05) * t}
+
+    from dataclasses import replace
+    jumping = PointCalibrator(random_state=1).fit(replace(problem, simulate=simulate))
+    assert jumping.theta_[1] < 3.05 < jumping.theta_[1] + 2 * jumping.standard_errors_[1]
+    slope = jumping.identifiability_["slope"]
+    assert not slope.identified and slope.reasons[0].startswith("the cost jumps at the estimate")
+    assert jumping.identifiability_["intercept"].identified  # ±2 SE in the intercept alone crosses no step

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from case_study import CASE_STUDY, EX
+from case_study import CASE_STUDY, EX, case_study_with_effect
 
 from service.diagnosis import diagnose, noise_level
 from service.resources import signatures_dir
@@ -136,14 +136,10 @@ def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():
 
 
 def test_an_effect_the_model_records_is_not_offered_again():
-    import pyoxigraph as ox
-
     from service.diagnosis import effect_candidates
-    from service.effect_recording import applied_effect_triples
 
     store = GraphStore.embedded(None)
-    triples = applied_effect_triples(LIBRARY["FanMotorHeat"], EX + "supply_fan")
-    store.load_model("case", CASE_STUDY.read_bytes() + b"\n" + ox.serialize(triples, format=ox.RdfFormat.N_TRIPLES))
+    store.load_model("case", case_study_with_effect(LIBRARY["FanMotorHeat"], EX + "supply_fan"))
     candidates, skipped = effect_candidates(store, "case", LIBRARY)
     offered = {(signature.id, node) for signature, node, _model in candidates}
     assert ("FanMotorHeat", EX + "supply_fan") not in offered and ("ValveLeakage", EX + "heating_valve") in offered

@@ -5,6 +5,7 @@ import csv
 import io
 import threading
 import time
+from pathlib import Path
 
 import pyoxigraph as ox
 import pytest
@@ -61,6 +62,32 @@ def test_health_and_the_openapi_document_list_every_resource(client):
         assert {"401", "403"} <= set(paths[path]["get"]["responses"]), path
     assert "409" in paths["/jobs/add-effect"]["post"]["responses"]
     assert "413" in paths["/sparql"]["post"]["responses"]
+
+
+OFFICIAL_BRICK = Path(__file__).resolve().parents[3] / "shared" / "ontologies" / "brick" / "Brick.ttl"
+BRICK_MODEL = b"""@prefix brick: <https://brickschema.org/schema/Brick#> . @prefix : <https://example.org/r#> .
+:ahu a brick:Air_Handling_Unit ; brick:hasPart :fan, :chiller ; brick:hasPoint :sat .
+:fan a brick:Supply_Fan . :chiller a brick:Chiller . :sat a brick:Supply_Air_Temperature_Sensor .
+:sp a brick:Supply_Air_Temprature_Setpoint ; brick:isPointOf :ahu .
+"""
+
+
+def test_the_brick_report_of_a_model_is_served(client, auth, settings, store):
+    assert client.put("/models/brick", content=BRICK_MODEL, headers={**auth, "Content-Type": "text/turtle"}).status_code == 201
+    report = client.get("/models/brick/brick-report").json()
+    assert report["official_ontology"] is False
+    classes = {c["class_iri"].rsplit("#", 1)[1]: c for c in report["unaligned_classes"]}
+    assert set(classes) == {"Chiller", "Supply_Air_Temprature_Setpoint"} and classes["Chiller"]["unaligned"] == 1
+    assert report["points_without_unit"] == ["https://example.org/r#sat"]
+    assert client.get("/models/nope/brick-report").status_code == 404
+    if not OFFICIAL_BRICK.is_file():
+        pytest.skip(f"the official Brick.ttl is not at {OFFICIAL_BRICK} (../shared): the rest needs it")
+    official = settings.model_copy(update={"brick_ontology": OFFICIAL_BRICK})
+    with TestClient(create_app(official, store=store)) as informed:
+        report = informed.get("/models/brick/brick-report").json()
+    classes = {c["class_iri"].rsplit("#", 1)[1]: c["needed"] for c in report["unaligned_classes"]}
+    assert report["official_ontology"] is True and classes["Chiller"].startswith("official Brick, not in graphtwin's subset")
+    assert classes["Supply_Air_Temprature_Setpoint"].startswith("not official Brick")
 
 
 @pytest.mark.parametrize("fmt", [ox.RdfFormat.TURTLE, ox.RdfFormat.N_TRIPLES, ox.RdfFormat.RDF_XML, ox.RdfFormat.JSON_LD])
@@ -338,6 +365,10 @@ def test_job_requests_for_unknown_things_are_refused(client, auth, case_csv):
     condition = client.post("/jobs/calibrate", headers=auth, json={
         "model": "case", "measurements": upload, "only_when": ["fan speed = 1"]})
     assert condition.status_code == 422 and "expected COLUMN OP NUMBER" in condition.json()["detail"]
+    for kind, windows in (("calibrate", {}), ("diagnose", {"train": "/2026-01-12T11:50", "test": "2026-01-12T12:00/"})):
+        start = client.post(f"/jobs/{kind}", headers=auth, json={
+            "model": "case", "measurements": upload, "start_from": "v0", **windows})
+        assert start.status_code == 404 and start.json()["detail"] == "no model 'v0'; known: case", kind
     assert client.get("/jobs").json()["count"] == 0
 
 
@@ -471,6 +502,12 @@ def test_concurrent_queries_during_a_calibration_never_see_half_a_run(client, au
     assert len(parameters) == len(finished["result"]["parameters"]) == n_estimates
     assert {p["run"]["value"].rsplit("/", 1)[-1] for p in parameters} == {finished["result"]["run_id"]}
     assert finished["links"]["run_graph"] == store.run_graph(finished["result"]["run_id"]).value
+    # a second version of the model, its fit started from the first one's
+    assert client.put("/models/case_again", content=CASE_STUDY.read_bytes(), headers=auth).status_code == 201
+    again = wait_job(client, client.post("/jobs/calibrate", headers=auth, json={
+        "model": "case_again", "measurements": upload, "train": "/2026-01-12T15:50", "start_from": "case"}).json()["id"])
+    assert again["status"] == "succeeded", again
+    assert again["result"]["settings"]["start_from"] == {"model": "case", "runs": [p["run"]["value"] for p in parameters[:1]]}
 
 
 def test_the_service_answers_the_same_on_a_remote_sparql_endpoint(endpoint_backend, tmp_path, auth):

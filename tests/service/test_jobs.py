@@ -244,8 +244,9 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
     data.write_text("time,x\n")
     calls, gate = [], threading.Event()
 
-    def fake_diagnose(diag_store, model_name, data_path, *, train, test, seed, on_progress, workers, only_when):
-        calls.append((model_name, data_path, train, test, seed, workers, list(only_when)))
+    def fake_diagnose(diag_store, model_name, data_path, *, train, test, seed, on_progress, workers, only_when,
+                      start_from):
+        calls.append((model_name, data_path, train, test, seed, workers, list(only_when), start_from))
         on_progress("calibrating the base model")
         gate.wait(10)
         diag_store.write_graph(diag_store.run_graph("m-point-0123abcd"), [_triple(ox.NamedNode(EX + "r"), "run")])
@@ -255,12 +256,12 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
     monkeypatch.setitem(sys.modules, "service.diagnosis", types.SimpleNamespace(diagnose=fake_diagnose))
     runner = runners(store, records, {"diagnose": diagnose_job}, locate_measurements={"u1": data}.__getitem__)
     params = {"model": "m", "measurements": "u1", "train": "/2026-01-12T12:00", "test": "2026-01-12T12:10/", "seed": 3,
-              "only_when": ["x > 1"]}
+              "only_when": ["x > 1"], "start_from": "m0"}
     gate.set()
     done = _wait(runner, runner.submit("diagnose", params).id)
     assert done.status == "succeeded" and done.result == {"summary": "nothing significant is missing", "score": 2.0}
-    assert calls == [("m", data, (None, "2026-01-12T12:00"), ("2026-01-12T12:10", None), 3, 1, ["x > 1"])], \
-        "one diagnosis worker, the operating filter passed on"
+    assert calls == [("m", data, (None, "2026-01-12T12:00"), ("2026-01-12T12:10", None), 3, 1, ["x > 1"], "m0")], \
+        "one diagnosis worker, the operating filter and the start passed on"
     assert [p["message"] for p in done.progress][1:3] == ["calibrating the base model", "testing the effect catalog"]
     assert done.links["run_graph"] == store.run_graph("m-point-0123abcd").value
     assert done.links["calibrated_parameters"] == "/queries/calibrated-parameters?model=m"

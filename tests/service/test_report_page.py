@@ -1,6 +1,6 @@
 """The report page of a real run: the case study with a leaking heating valve hidden in one day of
-synthetic data, calibrated on six morning hours and diagnosed on six afternoon hours (catalog cut to two effects
-to keep it quick), then recalibrated with the effect added (a second model version).
+synthetic data, calibrated on its first half and diagnosed on its second (catalog cut to two effects to keep
+it quick), then recalibrated from the base fit with the effect added (a second model version).
 
 The page is parsed and checked against what the diagnosis returned and the store holds: every
 sensor's metrics and figure, the suspects drawn on the topology, the regimes' rules, the ranked
@@ -74,7 +74,7 @@ def diagnosed_case(folder: Path) -> DiagnosedCase:
     model_v2 = folder / "model_v2.ttl"
     record_effect_in_file(CASE_STUDY, model_v2, applied_effect_triples(library[best.effect], best.node))
     store.load_model(f"case+{best.effect}", model_v2)
-    after = calibrate(store, f"case+{best.effect}", data, train=TRAIN, test=TEST, seed=0)
+    after = calibrate(store, f"case+{best.effect}", data, train=TRAIN, test=TEST, seed=0, start_from="case")
     return DiagnosedCase(store, data, report, after.record)
 
 
@@ -274,6 +274,7 @@ def test_a_run_without_diagnosis_says_so(case):
     assert [row[1] for row in rows[1:]] == [r["rule"] for r in case.version.regimes]
     assert rows[0][:3] == ["regime", "rule", "share of the test window"] and len(rows[0]) > 3
     assert "no data locator was given" in page
+    assert f"<dt>started from</dt><dd>the latest calibration of case (run {case.report.run_id})</dd>" in page
     assert not any("suspect" in classes or "failing" in classes for classes in topology_classes(page).values())
 
 
