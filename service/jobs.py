@@ -648,14 +648,14 @@ class JobRunner:
         future = self.executor.submit(run_shipped_job, self.kinds[kind],
                                       ship_job(self.store, job_id, params, self.locate_measurements))
         self._progress(job_id, f"sent to {self.executor.name}")
-        while True:
-            try:
-                outcome, nquads, dropped, messages = future.result(timeout=0.2)
-                break
-            except TimeoutError:
-                if self.get(job_id).cancel_requested:
-                    self.executor.cancel(future)
-                    raise JobCancelled() from None
+        # poll done() rather than result(timeout=...): distributed's result() can lose a result that
+        # arrives as its timeout expires (an UnboundLocalError inside distributed.utils.sync)
+        while not future.done():
+            if self.get(job_id).cancel_requested:
+                self.executor.cancel(future)
+                raise JobCancelled()
+            time.sleep(0.2)
+        outcome, nquads, dropped, messages = future.result()
         with self._lock:
             self._jobs[job_id].progress.extend(messages)
         writes.keep_shipped(nquads, dropped)
