@@ -172,8 +172,7 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
     """
     text = ox.serialize(model, format=ox.RdfFormat.N_TRIPLES)
     lines = text.split(b"\n")[:-1]
-    subclass, equivalent = _CLASS_AXIOM_INFIXES
-    model_axioms = ox.parse(b"\n".join(line for line in lines if subclass in line or equivalent in line),
+    model_axioms = ox.parse(b"\n".join(_lines_with(text, _CLASS_AXIOM_INFIXES)),
                             format=ox.RdfFormat.N_TRIPLES)
     context = _Context.of(list(ontology), [t.triple for t in model_axioms])
     if _has_blank_node(text) or _has_blank_node(context.ontology):
@@ -234,6 +233,19 @@ def _uncontested(model_parts: ModelParts, minted: dict[bytes, int], results: lis
         if line not in known_of[owner]:
             kept.setdefault(line)
     return list(kept)
+
+
+def _lines_with(text: bytes, infixes: tuple[bytes, ...]) -> list[bytes]:
+    """The lines of ``text`` holding one of ``infixes``, found by searching the text (C speed) rather
+    than testing every line: a model states few class axioms (a million-line campus took 0.4 s)."""
+    found = {}
+    for infix in infixes:
+        at = text.find(infix)
+        while at >= 0:
+            start, end = text.rfind(b"\n", 0, at) + 1, text.find(b"\n", at)
+            found[start] = text[start:end if end >= 0 else len(text)]
+            at = text.find(infix, end) if end >= 0 else -1
+    return [found[start] for start in sorted(found)]
 
 
 def _ntriples(lines: list[bytes]) -> bytes:

@@ -96,15 +96,17 @@ def test_a_rule_that_keeps_minting_terms_is_stopped_with_a_clear_error(case_stor
 
 
 def test_a_property_class_the_model_declares_under_saref_temperature_makes_its_observer_a_temperature_sensor():
-    """Rule 50 reads entailed types only: the model's own ``rdfs:subClassOf`` takes part in the
-    entailment as the ontology's does (a device observing such a property becomes a sensor; a
-    controller observing it does not)."""
+    """Rule 50 reads entailed types only: the model's own ``rdfs:subClassOf`` and
+    ``owl:equivalentClass`` take part in the entailment as the ontology's do (a device observing such
+    a property becomes a sensor; a controller observing it does not)."""
     model = parse_rdf(b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
 @prefix rdfs: <http://www.w3.org/2000/01/rdf-schema#> . @prefix ex: <https://example.org/a#> .
+@prefix owl: <http://www.w3.org/2002/07/owl#> .
 ex:SupplyAirTemperature rdfs:subClassOf ex:AirTemperature . ex:AirTemperature rdfs:subClassOf saref:Temperature .
 ex:sensor a s4bldg:Sensor ; saref:observes ex:t . ex:t a ex:SupplyAirTemperature .
+ex:DryBulb owl:equivalentClass ex:AirTemperature . ex:bulb a s4bldg:Sensor ; saref:observes ex:d . ex:d a ex:DryBulb .
 ex:controller a s4bldg:Controller ; saref:observes ex:t .
 ex:other a s4bldg:Sensor ; saref:observes ex:u . ex:u a ex:Humidity .""", ox.RdfFormat.TURTLE, "model")
     ontology = GraphStore.embedded(None).graph_triples(ONTOLOGY_GRAPH)
     typed = {t.subject.value for t in inferred_triples(model, ontology) if t.object == GT.TemperatureSensor}
-    assert typed == {"https://example.org/a#sensor"}
+    assert typed == {"https://example.org/a#sensor", "https://example.org/a#bulb"}
