@@ -40,7 +40,7 @@ from .calibration_data import DEFAULT_GP_INPUTS, ModelData, read_model_data
 from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
 from .measurements import parse_timestamp
-from .metrics import TargetMetrics, target_metrics
+from .metrics import target_metrics
 from .operating_filter import operating_mask
 from .point_calibration import NonFiniteSimulationError, PointCalibrator
 from .regime_breakdown import RegimeBreakdown, regime_breakdown

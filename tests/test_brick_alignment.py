@@ -5,10 +5,10 @@ rules re-run only when what they read changed)."""
 
 import re
 from collections import defaultdict
-from pathlib import Path
 
 import pyoxigraph as ox
 import pytest
+from shared_data import OFFICIAL_BRICK, SCHOOL
 
 import service.alignment
 from service.alignment import alignment_rules, independent_parts, inferred_ntriples, inferred_triples
@@ -18,7 +18,6 @@ from service.sparql_reads import QueryReads
 from service.store import GraphStore, parse_rdf, skolemize
 from tests.bench.brick_campus import CAMPUS_NAMESPACE, campus_turtle
 
-BRICK_TTL = Path(__file__).resolve().parents[2] / "shared" / "ontologies" / "brick" / "Brick.ttl"
 BRICK = "https://brickschema.org/schema/Brick#"
 GT = "https://w3id.org/graphtwin/ontology#"
 EX = "https://example.org/points-only#"
@@ -168,7 +167,7 @@ def _subclasses(triples) -> dict[str, set[str]]:
     return children
 
 
-@pytest.mark.skipif(not BRICK_TTL.is_file(), reason=f"official Brick.ttl not found at {BRICK_TTL}")
+@pytest.mark.skipif(not OFFICIAL_BRICK.is_file(), reason=f"official Brick.ttl not found at {OFFICIAL_BRICK}")
 def test_the_brick_subset_holds_every_official_subclass_of_the_classes_the_rules_map():
     subset_text = (ontologies_dir() / "brick-subset.ttl").read_text(encoding="utf-8")
     roots = {m for line in subset_text.splitlines() if line.startswith("# ---- ") and "every official subclass" in line
@@ -177,7 +176,7 @@ def test_the_brick_subset_holds_every_official_subclass_of_the_classes_the_rules
     roots = {expand[r.split(":")[0]] + r.split(":")[1] for r in roots}
     subset = parse_rdf(subset_text.encode(), ox.RdfFormat.TURTLE, "brick-subset.ttl")
     declared = {t.subject.value for t in subset}
-    official = _subclasses(parse_rdf(BRICK_TTL.read_bytes(), ox.RdfFormat.TURTLE, str(BRICK_TTL)))
+    official = _subclasses(parse_rdf(OFFICIAL_BRICK.read_bytes(), ox.RdfFormat.TURTLE, str(OFFICIAL_BRICK)))
     missing, todo, seen = set(), list(roots), set()
     while todo:
         cls = todo.pop()
@@ -189,7 +188,7 @@ def test_the_brick_subset_holds_every_official_subclass_of_the_classes_the_rules
         todo += official[cls]
     assert len(roots) > 20 and sorted(missing) == []
     # every official alias of a class held (owl:equivalentClass) is held too, with the axiom
-    equivalent = [t for t in parse_rdf(BRICK_TTL.read_bytes(), ox.RdfFormat.TURTLE, str(BRICK_TTL))
+    equivalent = [t for t in parse_rdf(OFFICIAL_BRICK.read_bytes(), ox.RdfFormat.TURTLE, str(OFFICIAL_BRICK))
                   if t.predicate.value == "http://www.w3.org/2002/07/owl#equivalentClass" and isinstance(t.object, ox.NamedNode)]
     axioms = set(subset)
     assert sorted(str(t) for t in equivalent
@@ -230,7 +229,7 @@ def test_a_campus_aligned_in_independent_parts_side_by_side_derives_what_it_deri
     assert any(t.predicate.value == "https://w3id.org/fso#suppliesFluidTo" for t in whole)
 
 
-SCHOOL_TTL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "openfdd_ahu7_school" / "ahu7_brick_model.ttl"
+SCHOOL_TTL = SCHOOL / "ahu7_brick_model.ttl"
 
 
 @pytest.mark.parametrize("source", ["ventilation_case_study", "flexlab_ahu", "flexlab_ahu_brick", "school"])

@@ -5,16 +5,15 @@ The two files use the same node IRIs, so the assembled models are compared as th
 component (signature and the building nodes it represents), wire, boundary input, target, parameter
 and measurement link (column and unit)."""
 
-from pathlib import Path
 
 import pyoxigraph as ox
 import pytest
+from shared_data import SZVAV
 
 from service.assembly import assemble
 from service.resources import examples_dir
 from service.store import GraphStore, parse_rdf, skolemize
 
-SZVAV = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "lbnl_flexlab_single_zone_ahu" / "SZVAV.csv"
 EX = "https://example.org/flexlab-x3a#"
 
 

@@ -1,9 +1,10 @@
 """service/brick_report.py: what the alignment did not use is listed, with what would be needed."""
 
 import json
-from pathlib import Path
 
 import pytest
+from brick_report_model import REPORT_MODEL, REPORT_NAMESPACE
+from shared_data import OFFICIAL_BRICK
 from typer.testing import CliRunner
 
 from service.brick_report import brick_report, official_brick_classes
@@ -12,28 +13,18 @@ from service.resources import examples_dir
 from service.store import GraphStore
 
 BRICK = "https://brickschema.org/schema/Brick#"
-MODEL = """
-@prefix brick: <https://brickschema.org/schema/Brick#> .
-@prefix unit:  <http://qudt.org/vocab/unit/> .
-@prefix :      <https://example.org/report#> .
-:ahu a brick:Air_Handling_Unit ; brick:hasPart :fan, :chiller ; brick:hasPoint :sat .
-:fan a brick:Supply_Fan ; brick:regulates :sat .
-:chiller a brick:Chiller .
-:sat a brick:Supply_Air_Temperature_Sensor .
-:sp a brick:Supply_Air_Temprature_Setpoint ; brick:isPointOf :ahu .
-"""
 
 
 def test_unaligned_classes_unread_relations_and_missing_links_are_listed():
     store = GraphStore.embedded(None)
-    store.load_model("m", MODEL.encode())
+    store.load_model("m", REPORT_MODEL.encode())
     report = brick_report(store, "m")
     by_class = {c.class_iri.removeprefix(BRICK): c for c in report.unaligned_classes}
     assert set(by_class) == {"Chiller", "Supply_Air_Temprature_Setpoint"}
     assert by_class["Chiller"].count == 1 and by_class["Chiller"].unaligned == 1
     assert "brick:Supply_Air_Temperature_Sensor" in by_class["Supply_Air_Temprature_Setpoint"].needed  # misspelt
     assert [(r.predicate.removeprefix(BRICK), r.count) for r in report.unread_relations] == [("regulates", 1)]
-    sat = "https://example.org/report#sat"
+    sat = REPORT_NAMESPACE + "sat"
     assert report.points_without_unit == (sat,) and report.points_without_column == (sat,)
 
 
@@ -60,7 +51,6 @@ ex:sat a brick:Supply_Air_Temperature_Sensor .
     assert set(by_class) == {"Humidifier"} and by_class["Humidifier"].unaligned == 1
 
 
-OFFICIAL_BRICK = Path(__file__).resolve().parents[2] / "shared" / "ontologies" / "brick" / "Brick.ttl"
 
 
 @pytest.mark.skipif(not OFFICIAL_BRICK.is_file(), reason=f"the official Brick.ttl is not at {OFFICIAL_BRICK} (../shared)")
@@ -71,14 +61,14 @@ def test_the_official_ontology_tells_an_unmodelled_class_from_a_misspelt_one(tmp
     official = official_brick_classes(OFFICIAL_BRICK)
     assert BRICK + "Chiller" in official and BRICK + "Supply_Air_Temprature_Setpoint" not in official
     store = GraphStore.embedded(None)
-    store.load_model("m", MODEL.encode())
+    store.load_model("m", REPORT_MODEL.encode())
     by_class = {c.class_iri.removeprefix(BRICK): c.needed for c in brick_report(store, "m", official).unaligned_classes}
     assert by_class["Chiller"].startswith("official Brick, not in graphtwin's subset")
     misspelt = by_class["Supply_Air_Temprature_Setpoint"]
     assert misspelt.startswith("not official Brick")
     assert "Closest official classes: brick:Supply_Air_Temperature_Setpoint," in misspelt  # one graphtwin lacks
     model = tmp_path / "m.ttl"
-    model.write_text(MODEL)
+    model.write_text(REPORT_MODEL)
     result = CliRunner().invoke(app, ["brick-report", str(model), "--memory", "--json", "--brick-ontology", str(OFFICIAL_BRICK)])
     assert result.exit_code == 0, result.output
     assert {c["class_iri"].removeprefix(BRICK): c["needed"] for c in json.loads(result.output)["unaligned_classes"]} == by_class

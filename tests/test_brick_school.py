@@ -3,10 +3,10 @@ unit, written by its points only. What holds whatever the data: what assembles f
 is, what the Brick report says is missing, and that stating what it names completes the model."""
 
 import csv
-from pathlib import Path
 
 import pyoxigraph as ox
 import pytest
+from shared_data import SCHOOL
 
 from service.assembly import IncompleteModelError, assemble
 from service.brick_report import brick_report
@@ -18,7 +18,6 @@ from service.signature import load_signature_library
 from service.synthetic_data import generate_synthetic_data
 from service.store import GraphStore
 
-SCHOOL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "openfdd_ahu7_school"
 AHU7 = "http://openfdd.local/ahu7#"
 #: What the report asks for: an official class for the fan speed command, units for the commands.
 FIXES = """

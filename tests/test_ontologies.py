@@ -3,15 +3,15 @@ and every gt: term the project uses is declared."""
 
 import re
 from collections import defaultdict
-from pathlib import Path
 
 import pyoxigraph as ox
 import pytest
+from shared_data import OFFICIAL_ONTOLOGIES
 
 from service.namespaces import GT, OWL, RDF, RDFS, Namespace
 from service.resources import ontologies_dir, project_home
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "ontologies"
+SHARED = OFFICIAL_ONTOLOGIES
 OFFICIAL_NAMESPACES = ("https://saref.etsi.org/", "https://w3id.org/fso#", "https://brickschema.org/schema/Brick",
                        "https://w3id.org/rec#")
 #: The current releases the subsets follow (see each subset's header comment).

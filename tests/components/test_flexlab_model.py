@@ -2,10 +2,10 @@
 
 import csv
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import SZVAV
 
 from service.assembly import assemble
 from service.calibration_data import ModelData, read_model_data
@@ -14,7 +14,6 @@ from service.store import GraphStore
 
 EX = "https://example.org/flexlab-x3a#"
 UNIT = "http://qudt.org/vocab/unit/"
-SZVAV = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "lbnl_flexlab_single_zone_ahu" / "SZVAV.csv"
 
 
 @pytest.fixture(scope="module")

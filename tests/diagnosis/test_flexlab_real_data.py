@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import SZVAV
 
 from service.diagnosis import diagnose
 from service.resources import examples_dir
 from service.store import GraphStore
 
 EX = "https://example.org/flexlab-x3a#"
-SZVAV = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "lbnl_flexlab_single_zone_ahu" / "SZVAV.csv"
 SUPPLY = EX + "supply_air_temperature_sensor"
 HEATING = {EX + "heating_coil_valve", EX + "heating_coil"}
 TRAIN = ("2017-09-20", "2017-09-20 23:59")

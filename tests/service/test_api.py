@@ -5,12 +5,13 @@ import csv
 import io
 import threading
 import time
-from pathlib import Path
 
 import pyoxigraph as ox
 import pytest
+from brick_report_model import REPORT_MODEL, REPORT_NAMESPACE
 from case_study import CASE_STUDY, EX
 from fastapi.testclient import TestClient
+from shared_data import OFFICIAL_BRICK
 
 from service import api as api_module
 from service.api import create_app
@@ -64,21 +65,13 @@ def test_health_and_the_openapi_document_list_every_resource(client):
     assert "413" in paths["/sparql"]["post"]["responses"]
 
 
-OFFICIAL_BRICK = Path(__file__).resolve().parents[3] / "shared" / "ontologies" / "brick" / "Brick.ttl"
-BRICK_MODEL = b"""@prefix brick: <https://brickschema.org/schema/Brick#> . @prefix : <https://example.org/r#> .
-:ahu a brick:Air_Handling_Unit ; brick:hasPart :fan, :chiller ; brick:hasPoint :sat .
-:fan a brick:Supply_Fan . :chiller a brick:Chiller . :sat a brick:Supply_Air_Temperature_Sensor .
-:sp a brick:Supply_Air_Temprature_Setpoint ; brick:isPointOf :ahu .
-"""
-
-
 def test_the_brick_report_of_a_model_is_served(client, auth, settings, store):
-    assert client.put("/models/brick", content=BRICK_MODEL, headers={**auth, "Content-Type": "text/turtle"}).status_code == 201
+    assert client.put("/models/brick", content=REPORT_MODEL.encode(), headers={**auth, "Content-Type": "text/turtle"}).status_code == 201
     report = client.get("/models/brick/brick-report").json()
     assert report["official_ontology"] is False
     classes = {c["class_iri"].rsplit("#", 1)[1]: c for c in report["unaligned_classes"]}
     assert set(classes) == {"Chiller", "Supply_Air_Temprature_Setpoint"} and classes["Chiller"]["unaligned"] == 1
-    assert report["points_without_unit"] == ["https://example.org/r#sat"]
+    assert report["points_without_unit"] == [REPORT_NAMESPACE + "sat"]
     assert client.get("/models/nope/brick-report").status_code == 404
     if not OFFICIAL_BRICK.is_file():
         pytest.skip(f"the official Brick.ttl is not at {OFFICIAL_BRICK} (../shared): the rest needs it")
@@ -208,7 +201,7 @@ def test_measurements_in_a_unit_of_the_wrong_dimension_are_refused(client, auth,
 
 # ---------------------------------------------------------------------- SPARQL
 def test_sparql_select_by_get_and_post_in_every_result_format(client):
-    query = f"SELECT ?g (COUNT(*) AS ?n) WHERE {{ GRAPH ?g {{ ?s ?p ?o }} }} GROUP BY ?g ORDER BY ?g"
+    query = "SELECT ?g (COUNT(*) AS ?n) WHERE { GRAPH ?g { ?s ?p ?o } } GROUP BY ?g ORDER BY ?g"
     rows = _rows(client.get("/sparql", params={"query": query}))
     graphs = {r["g"]["value"]: int(r["n"]["value"]) for r in rows}
     assert len(graphs) >= 3 and all(n > 0 for n in graphs.values())
