@@ -174,6 +174,48 @@ def test_a_portfolio_is_calibrated_on_the_dask_cluster_and_its_results_are_query
     assert set(ran.values()) == set(dask_cluster.scheduler.workers)
 
 
+class _RacyResultFuture:
+    """A finished future whose ``result(timeout=...)`` fails as distributed's did in CI when the
+    result arrived as the timeout expired (an UnboundLocalError inside ``distributed.utils.sync``)."""
+
+    def __init__(self, value):
+        self.value, self.polled = value, 0
+
+    def done(self):
+        self.polled += 1
+        return self.polled > 3  # running for the first polls
+
+    def result(self, timeout=None):
+        if timeout is not None:
+            raise UnboundLocalError("cannot access local variable 'result' where it is not associated with a value")
+        return self.value
+
+
+class _InlineExecutor:
+    """Runs shipped work at submit, handing back a :class:`_RacyResultFuture`."""
+
+    name = "an inline executor"
+
+    def submit(self, function, *args):
+        return _RacyResultFuture(function(*args))
+
+    def cancel(self, future):
+        raise AssertionError("nothing was cancelled")
+
+    def shutdown(self):
+        pass
+
+
+def test_a_shipped_job_waits_on_done_and_takes_its_result_without_a_timeout(case_store, tmp_path):
+    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), {"assemble": assemble_job}, executor=_InlineExecutor())
+    try:
+        done = _wait(runner, runner.submit("assemble", {"model": "case"}).id)
+    finally:
+        runner.shutdown(wait=True)
+    assert done.status == "succeeded", done.error
+    assert case_store.assembly_graph("case") in case_store.backend.graphs()
+
+
 def test_shipped_work_reads_only_the_shipped_graphs_and_writes_nothing_until_the_commit(case_store, tmp_path):
     shipped = ship_job(case_store, "0f" * 16, {"model": "case"}, None)
     assert isinstance(shipped, ShippedJob) and shipped.measurements == {}
