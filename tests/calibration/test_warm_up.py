@@ -1,8 +1,9 @@
 """Every simulated window starts warmed up: a controller's integral and the thermal masses in the
 state the operation before the window leaves (the data's first day repeated before its first step),
 not empty. Seed 0's truth is a slow heating loop (K_p ≈ 0.012 /K, T_i ≈ 1,850 s) still winding down
-from the day setpoint at midnight, where the data starts: a cold start missed its first six hours
-by 2.6 K and bent the point fit's time constants to match that transient."""
+from the day setpoint at midnight, where the data starts: a cold start misses its first six hours
+by 5.7 K (coil outlet air; 2.6 K with the conditional-integration controller of before) and bent the
+point fit's time constants to match that transient."""
 
 from __future__ import annotations
 
@@ -29,11 +30,15 @@ def _rmse(observed, simulated, span=slice(None)):
 
 
 def test_the_truth_s_parameters_match_the_data_from_its_first_step(seed0):
+    """Warmed up, the truth misses the first six hours by 0.5 K (air) and 0.6 K (water), against 5.7
+    and 9.8 K cold: not by the noise (0.1 K), since the warm-up repeats the first day where the truth
+    ran another one, and this slow loop's integral remembers it for hours (the valve is 0.07 off at
+    midnight, 0.01 by six)."""
     observed = seed0.md.observed(seed0.train)
     warmed = seed0.md.simulate_targets(seed0.train, seed0.true_theta[None, :])
     cold = dataclasses.replace(seed0.md, warmup_s=0.0).simulate_targets(seed0.train, seed0.true_theta[None, :])
     for node in (AIR, WATER):
-        assert _rmse(observed[node], warmed[node][0], SIX_HOURS) < 0.5, node
+        assert _rmse(observed[node], warmed[node][0], SIX_HOURS) < 0.8, node
         assert _rmse(observed[node], cold[node][0], SIX_HOURS) > 2.0, node  # what the warm-up removes
 
 
