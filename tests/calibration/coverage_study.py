@@ -10,7 +10,7 @@ interval coverage from 90 % at each sensor (ACE)?
 Prints one row per seed, then the pooled coverage with its binomial standard error: a posterior that
 is right contains the truth 68 % of the time, whatever the number of parameters; the pooled figure
 tells a posterior that is too narrow (well below 68 %) from one unlucky draw. Each seed is a point fit
-and one PT-MCMC run, 6 to 14 minutes on one core (seeds 4–8 with the warm-up; 5 before it).
+and one PT-MCMC run, 6 to 9 minutes on one core (seeds 3–8, 2026-11-26).
 """
 
 from __future__ import annotations
