@@ -239,13 +239,17 @@ class ModelData:
             defaults when None).
         :param target_scales: residual scales per target node (e.g. the training window's, so a
             test window weighs alike).
-        :param gp_inputs: the discrepancy GP's inputs (:meth:`gp_input_nodes`): ``"time"`` (hours
-            since the data's first step) and boundary input nodes (their measured series, in the
-            simulator's unit; a gap holds the last value); empty: none (the calibrator's time index).
+        :param gp_inputs: the discrepancy GP's inputs, named as :meth:`gp_input_nodes` takes them:
+            ``"time"`` (hours since the data's first step) and boundary inputs by node IRI, local name
+            or CSV column (their measured series, in the simulator's unit; a gap holds the last
+            value); empty: none (the calibrator's time index).
         :param settling_s: the first ``settling_s`` seconds of each window are simulated but not
             compared: the warm-up settles the model's states, it cannot give them the building's
             (before the data's first step it repeats the first day; the building's day before differed).
+        :raises ValueError: a GP input that is neither time nor a boundary input (named, with those
+            that are).
         """
+        gp_inputs = self.gp_input_nodes(gp_inputs)
         windows = [window] if isinstance(window, slice) else list(window)
         lower, upper = self.bounds()
         start = self.default_theta() if default is None else np.clip(np.asarray(default, float), lower, upper)

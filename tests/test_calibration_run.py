@@ -219,6 +219,11 @@ def test_the_discrepancy_runs_over_the_boundary_inputs_the_user_chooses(syntheti
     problem = outcome.model_data.problem(train, gp_inputs=("time", meter))
     np.testing.assert_array_equal(problem.gp_inputs[:, 1], outcome.model_data.data.series[meter][train])
     np.testing.assert_allclose(np.diff(problem.gp_inputs[:, 0]), 600.0 / 3600.0)
+    # the Python API takes the names the CLI takes: CSV column, local name, IRI alike
+    for name in ("supply_air_flow", "supply_air_flow_meter"):
+        np.testing.assert_array_equal(outcome.model_data.problem(train, gp_inputs=("time", name)).gp_inputs, problem.gp_inputs)
+    with pytest.raises(ValueError, match="'wind_speed' are no boundary input"):
+        outcome.model_data.problem(train, gp_inputs=("wind_speed",))
     assert outcome.intervals["test"][EX + "coil_outlet_air_temperature_sensor"][0.9][0].shape == (36,)
 
 
