@@ -146,8 +146,8 @@ def test_structure_the_model_lacks_shows_in_the_point_fit_residuals(fan_heat, ex
 @pytest.mark.slow
 @bayesian_acceptance
 @pytest.mark.xfail(strict=False, reason=(
-    "not met at one sensor (README, Calibration acceptance): ACE within ±5 % at four sensors, +10 % at the coil "
-    "outlet water temperature, where the discrepancy widens the interval to 1.5 K over a 0.31 K error"))
+    "not met at one sensor (README, Calibration acceptance): ACE within ±5 % at four sensors, +9.3 % at the coil "
+    "outlet water temperature, where the discrepancy over time widens the interval over a 0.31 K error"))
 def test_the_discrepancy_absorbs_structure_the_model_lacks_and_intervals_stay_honest(fan_heat):
     fit, metrics = fan_heat.bayes()
     assert fit.converged_
