@@ -12,8 +12,8 @@ is right contains the truth 68 % of the time, whatever the number of parameters;
 tells a posterior that is too narrow (well below 68 %) from one unlucky draw; so does the root mean
 square of the offsets in units of their own uncertainty (1 when right), printed for the point fit's
 standard errors and for the posterior's intervals alike (both large: the data or the model; only the
-posterior's: the sampler). Each seed is a point fit
-and one PT-MCMC run, 6 to 9 minutes on one core (seeds 3–8, 2026-11-26).
+posterior's: the sampler). Each seed is a point fit and one PT-MCMC run, 6 to 9 minutes on one core
+(seeds 3–8, 2026-11-26).
 """
 
 from __future__ import annotations

@@ -166,7 +166,9 @@ def test_an_effect_is_not_credited_with_what_the_refit_base_parameters_gain(tmp_
     generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="FanMotorHeat", seed=1, n_days=3.0)
     report = diagnose(store, "case", data, train=("2026-01-12", "2026-01-13T23:50"), test=TEST, seed=0)
     summary = [(e.effect, e.node, e.estimates, e.delta_bic, e.test_improvement) for e in report.effects[:3]]
-    first, *others = [e for e in report.effects if e.significant]
+    significant = [e for e in report.effects if e.significant]
+    assert significant, summary
+    first, *others = significant
     assert (first.effect, first.node) == ("FanMotorHeat", EX + "supply_fan") and report.effects[0] is first, summary
     assert all((e.effect, e.node) == ("SensorOffset", EX + "coil_outlet_air_temperature_sensor")
                and e.delta_bic > first.delta_bic + 100 for e in others), summary
