@@ -21,7 +21,8 @@ from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .namespaces import local_name
 from .simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
 
-__all__ = ["DEFAULT_GP_INPUTS", "GAP_RECOVERY_S", "WARMUP_PERIOD_S", "model_warmup_s", "warmup_period_steps",
+__all__ = ["DEFAULT_GP_INPUTS", "GAP_RECOVERY_S", "SETTLING_S", "WARMUP_PERIOD_S", "model_warmup_s",
+           "model_start_memory_s", "warmup_period_steps",
            "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
 
 #: The discrepancy GP's inputs unless the user names others: time alone (hours since the data's start).
@@ -30,6 +31,10 @@ DEFAULT_GP_INPUTS: tuple[str, ...] = ("time",)
 #: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
 #: the model's states come out of the gap off (as at a window's start: ``ModelData.problem``'s settling).
 GAP_RECOVERY_S = 3600.0
+
+#: Unscored start of every window, s: the warm-up settles the model's states to the model's own
+#: trajectory, not to the building's (longer where the warm-up is a guess: ``ModelData.unscored_start_s``).
+SETTLING_S = 3600.0
 
 #: Period repeated before the data's first step in a warm-up, s (the first value held in data
 #: shorter than this).
@@ -89,6 +94,12 @@ def model_warmup_s(model: AssembledModel) -> float:
     day repeated) controllers' integrals and thermal masses come from their cold start to the state
     the operation leaves."""
     return max((c.model_class.settling_time_s() for c in model.components.values()), default=0.0)
+
+
+def model_start_memory_s(model: AssembledModel) -> float:
+    """How long ``model``'s outputs remember a wrong start state [s]: its components' longest
+    :attr:`~service.component.ComponentModel.start_memory_s` (six hours with a PI loop)."""
+    return max((c.model_class.start_memory_s for c in model.components.values()), default=0.0)
 
 
 def warmup_period_steps(n_steps: int, step_s: float) -> int:
@@ -220,6 +231,16 @@ class ModelData:
             raise ValueError(f"GP input {name} has no measured value in the window")
         return held_over_gaps(values)
 
+    def unscored_start_s(self, window: slice) -> float:
+        """Seconds at the start of ``window`` that are simulated but not scored: :data:`SETTLING_S`,
+        or what is left of the model's start memory (:func:`model_start_memory_s`) after the measured
+        data before the window, when longer: before the data's first step the warm-up repeats the
+        first day, and the states it leaves (a controller's integral) are a guess, not the
+        building's (its day before differed). A window deep enough in the data starts from a warm-up
+        on measured operation."""
+        history_s = (window.start or 0) * self.data.step_s
+        return max(SETTLING_S, model_start_memory_s(self.model) - history_s)
+
     def default_theta(self) -> np.ndarray:
         return np.array([ref.spec.default for ref in self.model.estimated_parameters])
 
@@ -230,7 +251,7 @@ class ModelData:
     def problem(
         self, window: slice | Sequence[slice], *, default: np.ndarray | None = None,
         fixed: Mapping[str, float] | None = None, target_scales: Mapping[str, float] | None = None,
-        gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS, settling_s: float = 3600.0,
+        gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS, settling_s: float | None = None,
     ) -> CalibrationProblem:
         """The calibration problem of ``window`` (or of several windows, concatenated; each is
         simulated on its own): θ = the model's estimated parameters.
@@ -244,8 +265,9 @@ class ModelData:
             or CSV column (their measured series, in the simulator's unit; a gap holds the last
             value); empty: none (the calibrator's time index).
         :param settling_s: the first ``settling_s`` seconds of each window are simulated but not
-            compared: the warm-up settles the model's states, it cannot give them the building's
-            (before the data's first step it repeats the first day; the building's day before differed).
+            compared: the warm-up settles the model's states, it cannot give them the building's.
+            None: :meth:`unscored_start_s` of each window (an hour; six with a PI loop at the
+            data's start).
         :raises ValueError: a GP input that is neither time nor a boundary input (named, with those
             that are).
         """
@@ -253,9 +275,10 @@ class ModelData:
         windows = [window] if isinstance(window, slice) else list(window)
         lower, upper = self.bounds()
         start = self.default_theta() if default is None else np.clip(np.asarray(default, float), lower, upper)
-        settling = int(round(settling_s / self.data.step_s))
         observed: dict[str, list[np.ndarray]] = {}
         for part in windows:
+            unscored_s = self.unscored_start_s(part) if settling_s is None else settling_s
+            settling = int(round(unscored_s / self.data.step_s))
             for node, values in self.observed(part).items():
                 values = values.copy()
                 values[:settling] = np.nan

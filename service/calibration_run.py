@@ -89,16 +89,17 @@ def continuation(train: slice, test: slice) -> slice | None:
     return slice(train.start, test.stop) if test.start >= train.start else None
 
 
-def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray, settling_s: float = 3600.0) -> dict[str, np.ndarray]:
+def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray,
+                 settling_s: float | None = None) -> dict[str, np.ndarray]:
     """Target node → prediction on ``test`` for one θ: the continuation of the training run when the
     test follows the training start, else a run of its own (warmed up over the data before it) whose
     first ``settling_s`` are NaN (the warm-up settles the model's states, it cannot give them the
-    building's)."""
+    building's; None: :meth:`ModelData.unscored_start_s`)."""
     joined = continuation(train, test)
     if joined is not None:
         offset = test.start - joined.start
         return {k: v[0][offset:] for k, v in md.simulate_targets(joined, theta[None, :]).items()}
-    settling = int(round(settling_s / md.data.step_s))
+    settling = int(round((md.unscored_start_s(test) if settling_s is None else settling_s) / md.data.step_s))
     out = {}
     for node, values in md.simulate_targets(test, theta[None, :]).items():
         values = values[0].copy()

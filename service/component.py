@@ -104,6 +104,12 @@ class ComponentModel:
     #: warm-up a simulated window needs (:func:`service.calibration_data.model_warmup_s`). None: a
     #: day for a model with states (:data:`DEFAULT_SETTLING_S`), nothing for a memoryless one.
     settling_s: ClassVar[float | None] = None
+    #: How long the outputs remember a wrong start state at typical parameters [s]: when the warm-up
+    #: before a window reaches back past the data's first step, the state it gives the window is a
+    #: guess, and calibration leaves this much of the window unscored
+    #: (:meth:`service.calibration_data.ModelData.unscored_start_s`). Shorter than :attr:`settling_s`,
+    #: which holds at the priors' slowest corner.
+    start_memory_s: ClassVar[float] = 0.0
 
     @classmethod
     def memoryless(cls) -> bool:

@@ -239,12 +239,12 @@ def dominant_parameters_by_regime(
     top: int = 3,
     n_trajectories: int = 10,
     seed: int | None = 0,
-    settling_s: float = 3600.0,
+    settling_s: float | None = None,
 ) -> list[list[dict]]:
     """Per regime, the ``top`` parameters that move the model's misfit most there (Morris μ*).
 
     The measure is :func:`calibration_morris_by_regime` on the calibration problem of ``window``
-    (all targets, the first ``settling_s`` not compared); one ensemble run of
+    (all targets, the first ``settling_s`` not compared; None: ``ModelData.unscored_start_s``); one ensemble run of
     ``n_trajectories · (n_parameters + 1)`` members.
 
     :param labels: ``ndarray[window length]`` regime per step of the window (−1: left out), e.g.

@@ -23,7 +23,7 @@ the cost, the number of simulate calls, the estimates with standard errors, and 
 cross-validation on held-out periods (:func:`contiguous_folds`): the training window is cut into
 ``n_folds`` contiguous blocks; each block in turn is held out, both strategies are fitted (Morris
 and plan included) on the remaining blocks, and the held-out block is simulated on its own (its
-first ``settling_s`` not scored: the warm-up settles the model's states, not to the building's) and
+unscored start not scored: the warm-up settles the model's states, not to the building's) and
 scored by the weighted RMSE ``sqrt(mean_{k,t} ((y_k(t) − ŷ_k(t)) / s_k)²)`` with the training
 window's target scales ``s_k``.
 The regimes come from the boundary inputs only (:class:`~service.operating_regimes.OperatingRegimes`,
@@ -193,6 +193,13 @@ class SuccessiveCalibrator(BaseEstimator):
         return self
 
 
+def _fold_min_steps(model_data: ModelData, window: slice, settling_s: float | None) -> int:
+    """Shortest block a fold may have: its unscored start (the first block's, the longest) and two
+    steps to score."""
+    unscored_s = model_data.unscored_start_s(window) if settling_s is None else settling_s
+    return int(round(unscored_s / model_data.data.step_s)) + 2
+
+
 def contiguous_folds(window: slice, n_folds: int, *, min_steps: int = 1) -> list[tuple[list[slice], slice]]:
     """Blocked cross-validation of ``window``: ``n_folds`` contiguous blocks of (nearly) equal
     length; fold i holds out block i and fits on the blocks before and after it (one slice each,
@@ -252,7 +259,7 @@ def cross_validate(
     n_folds: int = 3,
     target_scales: dict[str, float] | None = None,
     seed: int = 0,
-    settling_s: float = 3600.0,
+    settling_s: float | None = None,
     n_starts: int = 2,
     n_candidates: int = 32,
     max_nfev: int = 40,
@@ -272,9 +279,8 @@ def cross_validate(
         raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
     settings = {"n_starts": n_starts, "n_candidates": n_candidates, "max_nfev": max_nfev}
     scales = dict(target_scales or model_data.problem(window, settling_s=settling_s).target_scales)
-    settling = int(round(settling_s / model_data.data.step_s))
     scores = []
-    for fit_windows, held_out in contiguous_folds(window, n_folds, min_steps=settling + 2):
+    for fit_windows, held_out in contiguous_folds(window, n_folds, min_steps=_fold_min_steps(model_data, window, settling_s)):
         fit_problem = model_data.problem(fit_windows, target_scales=scales, settling_s=settling_s)
         fit_labels = np.concatenate([labels[w] for w in fit_windows])
         theta = _fit(strategy, fit_problem, fit_labels, settings, seed).theta_
@@ -404,7 +410,7 @@ def compare_strategies(
     rules: Sequence[str] = (),
     n_folds: int = 3,
     seed: int = 0,
-    settling_s: float = 3600.0,
+    settling_s: float | None = None,
     n_starts: int = 2,
     n_candidates: int = 32,
     max_nfev: int = 40,
@@ -426,7 +432,7 @@ def compare_strategies(
     n_regimes = int(labels.max()) + 1 if (labels >= 0).any() else 0
     settings = {"n_starts": n_starts, "n_candidates": n_candidates, "max_nfev": max_nfev}
     if n_folds:  # refuse impossible folds before any fit
-        contiguous_folds(train, n_folds, min_steps=int(round(settling_s / model_data.data.step_s)) + 2)
+        contiguous_folds(train, n_folds, min_steps=_fold_min_steps(model_data, train, settling_s))
     problem = model_data.problem(train, settling_s=settling_s)
 
     strategies, fitted = {}, {}

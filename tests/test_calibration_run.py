@@ -152,7 +152,8 @@ def test_bounds_that_exclude_a_mapped_value_are_refused_before_anything_is_writt
 def test_nan_gaps_are_left_out_not_filled(synthetic, tmp_path):
     """A long gap in a target leaves those steps out of that target; a long gap in a boundary input
     leaves them out of every target (the simulator only holds the input there), and the hour after
-    it (the model's states catch up); the fit is unharmed."""
+    it (the model's states catch up); the fit is unharmed. The window starts at the data's first step,
+    so its first six hours are not scored either (the PI loop's guessed start state)."""
     store, path, _ = synthetic
     day = range(144)
     target_gap, input_gap = range(40, 60), range(90, 110)  # 20 steps each, beyond the 5-step interpolation
@@ -160,8 +161,8 @@ def test_nan_gaps_are_left_out_not_filled(synthetic, tmp_path):
     gappy = _edited_csv(gappy, gappy, "supply_air_flow", input_gap)
     outcome = calibrate(store, "case", gappy, train=("2026-01-12", "2026-01-12T23:59"), seed=0)
     metrics = outcome.record.metrics["train"]
-    warmup = recovery = 6  # the first hour, and the hour after the input's gap, are simulated, not compared
-    compared = len(day) - warmup - len(input_gap) - recovery
+    unscored, recovery = 36, 6  # the first six hours, and the hour after the input's gap: simulated, not compared
+    compared = len(day) - unscored - len(input_gap) - recovery
     assert metrics[EX + "valve_position_sensor"].n == compared - len(target_gap)
     assert metrics[EX + "coil_outlet_air_temperature_sensor"].n == compared
     assert metrics[EX + "fan_power_meter"].rmse < 0.03 * metrics[EX + "fan_power_meter"].mean_observed

@@ -3,8 +3,8 @@
 Synthetic truth: ``generate_synthetic_data`` (seed 3) runs the case-study model with parameters moved
 from their defaults towards random bounds, on two days of varied operation at 10-minute steps, and
 adds the sensors' noise (0.1 K, 0.005 valve position, 1 % of the mean fan power). Training window:
-the first day (144 steps, the first hour not compared); test window: the second day, predicted as
-the continuation of the training run.
+the first day (144 steps, the first six hours not compared: the PI loop's start state is a guess);
+test window: the second day, predicted as the continuation of the training run.
 
 The model is simulated as ``graphtwin calibrate`` does (the 600 s step sub-divided for the PI loop,
 ``loop_substeps``); the truth the same way, so the model is exact and the acceptance is about the

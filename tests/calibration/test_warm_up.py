@@ -53,6 +53,26 @@ def test_a_window_after_the_data_s_start_warms_up_on_the_data_before_it(seed0):
         assert np.max(np.abs(alone[node] - continued[node])) < 0.02, node
 
 
+def test_a_window_at_the_data_s_start_is_scored_once_its_guessed_start_state_is_forgotten(seed0):
+    """At the data's start the warm-up's integral is a guess: with the truth's own parameters the
+    model misses hours 1–6 by 4–6 times the noise (coil outlet air 0.46 K, water 0.60 K, valve 0.034)
+    and the rest of the day by about the noise (1.0–1.4 times), so the training day is scored from
+    its seventh hour.
+    The test day, warmed up on the measured training day, is scored after an hour; a window two hours
+    into the data after what is left of the six."""
+    md = seed0.md
+    assert md.unscored_start_s(seed0.train) == 6 * 3600
+    assert md.unscored_start_s(seed0.test) == 3600
+    assert md.unscored_start_s(slice(12, 144)) == 4 * 3600
+    observed = md.observed(seed0.train)
+    truth = md.simulate_targets(seed0.train, seed0.true_theta[None, :])
+    for node, noise in ((AIR, 0.1), (WATER, 0.1), (EX + "valve_position_sensor", 0.005)):
+        assert _rmse(observed[node], truth[node][0], slice(6, 36)) > 3 * noise, node
+        assert _rmse(observed[node], truth[node][0], slice(36, None)) < 1.5 * noise, node
+        scored = np.isfinite(seed0.problem.observed[node])
+        assert not scored[:36].any() and scored[36:].all(), node
+
+
 def test_point_calibration_on_a_start_in_mid_transient_predicts_the_next_day_within_the_noise(seed0):
     outcome = calibrate(seed0.store, "case", seed0.truth.path, train=("2026-01-12", "2026-01-12T23:59"),
                         test=("2026-01-13", None), seed=0)
@@ -63,9 +83,10 @@ def test_point_calibration_on_a_start_in_mid_transient_predicts_the_next_day_wit
 
 def test_the_warm_up_is_as_long_as_the_model_s_slowest_state_needs():
     """A day with a PI loop; none for static components (the FLEXLAB unit's coils, mixing box and
-    fan); five of its slowest time constants for a sensor lag added to them."""
+    fan); five of its slowest time constants for a sensor lag added to them. The start memory (what
+    is left unscored after a guessed start) six hours with a PI loop, none without."""
     from service.assembly import EffectRequest, assemble
-    from service.calibration_data import model_warmup_s
+    from service.calibration_data import model_start_memory_s, model_warmup_s
     from service.hot_water_loop import HotWaterLoop
     from service.resources import examples_dir
     from service.store import GraphStore
@@ -74,9 +95,10 @@ def test_the_warm_up_is_as_long_as_the_model_s_slowest_state_needs():
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
     store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
     assert model_warmup_s(assemble(store, "case")) == 86400.0
+    assert model_start_memory_s(assemble(store, "case")) == 6 * 3600.0
     assert HotWaterLoop.settling_time_s() == 5 * (900 + 900 + 300 + 600)
     flexlab = assemble(store, "flexlab")
-    assert model_warmup_s(flexlab) == 0.0
+    assert model_warmup_s(flexlab) == 0.0 and model_start_memory_s(flexlab) == 0.0
     sensor = next(flexlab.measurement(c).node for c in flexlab.targets)
     lagged = assemble(store, "flexlab", extra_effects=[EffectRequest("SensorLag", sensor)])
     assert model_warmup_s(lagged) == 5 * 1800.0

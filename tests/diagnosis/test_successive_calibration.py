@@ -214,12 +214,12 @@ def test_per_regime_metrics_of_both_strategies_are_computed_on_the_regime_steps(
     comparison = compare_strategies(md, train, labels, test=test, n_folds=0, **cheap)
     assert set(comparison.strategies) == {"joint", "successive"} and comparison.strategies["joint"].cv == []
     problem = md.problem(train)
-    warmup = 6  # the first hour of the training window is simulated, not compared
+    unscored = 36  # the training window's first six hours (the data's start, a PI loop) are simulated, not compared
     for result in comparison.strategies.values():
         predicted = {k: v[0] for k, v in problem.run(result.theta[None, :]).items()}
         for row in result.regime_metrics["train"]:
             steps = labels[train] == row["regime"]
-            steps[:warmup] = False
+            steps[:unscored] = False
             for node, values in md.observed(train).items():
                 measured = steps & np.isfinite(values)
                 assert row["n_measured"][node] == measured.sum() > 0
@@ -268,6 +268,7 @@ def test_impossible_folds_are_refused_before_any_fit(case_store, tmp_path):
                             n_days=1.0)
     with pytest.raises(ValueError, match="n_folds ≥ 2"):
         compare_calibration_strategies(case_store, "case", path, train=(None, None), n_folds=1)
-    # A held-out block needs the 1 h warm-up (6 steps) plus 2 compared steps: 30 blocks of 48 min are too short.
-    with pytest.raises(ValueError, match="30 folds of a 144-step window give blocks of 4 steps, fewer than the 8"):
+    # A held-out block needs the unscored start (the first block's: 6 h at the data's start with a PI
+    # loop, 36 steps) plus 2 compared steps: 30 blocks of 48 min are too short.
+    with pytest.raises(ValueError, match="30 folds of a 144-step window give blocks of 4 steps, fewer than the 38"):
         compare_calibration_strategies(case_store, "case", path, train=(None, None), n_folds=30)
