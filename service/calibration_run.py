@@ -259,7 +259,8 @@ def calibrate(
         start, start_runs, start_note = calibrated_start(store, start_from, model_name, model)
     problem = md.problem(train_slice, gp_inputs=gp_nodes, default=start)
     n_par = problem.n_parameters
-    settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s}
+    settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s,
+                "unscored_start_s": md.unscored_start_s(train_slice)}
     if start_from is not None:
         settings["start_from"] = {"model": start_from, "runs": start_runs}
     if only_when:

@@ -639,6 +639,8 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         *[(f"{name} window", f"{start} – {end}") for name, (start, end) in windows],
         *([("compared only where", " and ".join(run.settings["only_when"]))] if run.settings.get("only_when") else []),
         *([("warm-up before each window", f"{run.settings['warmup_s'] / 3600:g} h")] if "warmup_s" in run.settings else []),
+        *([("training window not scored over its first", f"{run.settings['unscored_start_s'] / 3600:g} h")]
+          if "unscored_start_s" in run.settings else []),
         *([("started from", _start_text(run.settings["start_from"]))] if "start_from" in run.settings else []),
         ("finished", run.ended), ("run graph", store.run_graph(run.run_id).value),
         ("diagnosis", diagnosis.iri if diagnosis else "none"),

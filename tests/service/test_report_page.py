@@ -381,6 +381,7 @@ def test_a_run_with_an_operating_filter_says_so_and_reproduces_its_metrics(case)
     page = report_html(case.store, run.record.run_id, locate_data=data_file_locator(case.data))
     assert "<dt>compared only where</dt><dd>supply_air_flow &gt; 0.9</dd>" in page
     assert "<dt>warm-up before each window</dt><dd>24 h</dd>" in page  # the case study's PI loop
+    assert "<dt>training window not scored over its first</dt><dd>6 h</dd>" in page  # it starts the data
     series = recompute_series(case.store, read_run(case.store, run.record.run_id), case.data)
     for sensor, metrics in run.record.metrics["test"].items():  # the filtered steps are left out again
         assert series.rmse[sensor] == pytest.approx(metrics.rmse, rel=1e-6), sensor
