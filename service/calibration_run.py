@@ -36,7 +36,7 @@ import pyoxigraph as ox
 from .assembled_model import AssembledModel
 from .assembly import assemble, without_model
 from .assembly_triples import assembly_iri, assembly_triples
-from .calibration_data import DEFAULT_GP_INPUTS, ModelData, read_model_data
+from .calibration_data import DEFAULT_GP_INPUTS, SETTLING_S, ModelData, read_model_data
 from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
 from .measurements import parse_timestamp
@@ -250,6 +250,11 @@ def calibrate(
         if overlap > 0:
             window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
                                 "partly on data the calibration fitted")
+    unscored_s = md.unscored_start_s(train_slice)
+    if unscored_s > SETTLING_S:
+        window_notes.append(f"the training window's first {unscored_s / 3600:g} h are simulated, not scored: before the "
+                            "data's first step the model's start state is a guess, and its slowest loop carries it that "
+                            "long; data from before the window would let the fit use them")
     gp_nodes = md.gp_input_nodes(gp_inputs)
     if method == "point" and gp_nodes != DEFAULT_GP_INPUTS:
         raise ValueError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
@@ -260,7 +265,7 @@ def calibrate(
     problem = md.problem(train_slice, gp_inputs=gp_nodes, default=start)
     n_par = problem.n_parameters
     settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s,
-                "unscored_start_s": md.unscored_start_s(train_slice)}
+                "unscored_start_s": unscored_s}
     if start_from is not None:
         settings["start_from"] = {"model": start_from, "runs": start_runs}
     if only_when:

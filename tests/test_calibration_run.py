@@ -41,6 +41,8 @@ def test_point_calibration_matches_the_truth_within_the_noise(point_run):
     assert metrics[EX + "fan_power_meter"].rmse < 0.03 * metrics[EX + "fan_power_meter"].mean_observed
     assert point_run.record.settings["warmup_s"] == 86400.0  # recorded with the run: its PI loop's day
     assert point_run.record.settings["unscored_start_s"] == 6 * 3600.0  # the training day starts the data
+    assert any(w.startswith("the training window's first 6 h are simulated, not scored")
+               for w in point_run.record.diagnostics["warnings"])
 
 
 def test_identified_parameters_are_recovered(synthetic, point_run):
