@@ -241,6 +241,12 @@ class ModelData:
         history_s = (window.start or 0) * self.data.step_s
         return max(SETTLING_S, model_start_memory_s(self.model) - history_s)
 
+    def unscored_start_steps(self, window: slice, settling_s: float | None = None) -> int:
+        """Data steps at the start of ``window`` that are not scored: ``settling_s`` seconds, or
+        :meth:`unscored_start_s` when None."""
+        unscored_s = self.unscored_start_s(window) if settling_s is None else settling_s
+        return int(round(unscored_s / self.data.step_s))
+
     def default_theta(self) -> np.ndarray:
         return np.array([ref.spec.default for ref in self.model.estimated_parameters])
 
@@ -277,8 +283,7 @@ class ModelData:
         start = self.default_theta() if default is None else np.clip(np.asarray(default, float), lower, upper)
         observed: dict[str, list[np.ndarray]] = {}
         for part in windows:
-            unscored_s = self.unscored_start_s(part) if settling_s is None else settling_s
-            settling = int(round(unscored_s / self.data.step_s))
+            settling = self.unscored_start_steps(part, settling_s)
             for node, values in self.observed(part).items():
                 values = values.copy()
                 values[:settling] = np.nan

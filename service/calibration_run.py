@@ -99,7 +99,7 @@ def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray,
     if joined is not None:
         offset = test.start - joined.start
         return {k: v[0][offset:] for k, v in md.simulate_targets(joined, theta[None, :]).items()}
-    settling = int(round((md.unscored_start_s(test) if settling_s is None else settling_s) / md.data.step_s))
+    settling = md.unscored_start_steps(test, settling_s)
     out = {}
     for node, values in md.simulate_targets(test, theta[None, :]).items():
         values = values[0].copy()

@@ -196,8 +196,7 @@ class SuccessiveCalibrator(BaseEstimator):
 def _fold_min_steps(model_data: ModelData, window: slice, settling_s: float | None) -> int:
     """Shortest block a fold may have: its unscored start (the first block's, the longest) and two
     steps to score."""
-    unscored_s = model_data.unscored_start_s(window) if settling_s is None else settling_s
-    return int(round(unscored_s / model_data.data.step_s)) + 2
+    return model_data.unscored_start_steps(window, settling_s) + 2
 
 
 def contiguous_folds(window: slice, n_folds: int, *, min_steps: int = 1) -> list[tuple[list[slice], slice]]:

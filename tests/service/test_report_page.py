@@ -42,10 +42,10 @@ from service.synthetic_data import generate_synthetic_data
 
 #: Named like a measurement upload (16 hex digits), so the HTTP service finds it as the run's data.
 UPLOAD_ID = "0123456789abcdef"
-#: Half a day each: a 6-hour window leaves the 17-parameter fit of the model with the leak a basin other
-#: than the truth's (its recalibration then misses the improvement the diagnosis found)
-#: Two days: a training day whose first six hours are not scored (the data's start, a PI loop) still
-#: shows the leak at night, where the valve is nearly shut.
+#: A day each: a training day whose first six hours are not scored (the data's start, a PI loop) still
+#: shows the leak at night, where the valve is nearly shut; half a day scored from its seventh hour did
+#: not (the leak's refit lost out of sample), and a 6-hour window left the 17-parameter fit of the model
+#: with the leak a basin other than the truth's.
 TRAIN, TEST = ("2026-01-12T00:00", "2026-01-12T23:59"), ("2026-01-13T00:00", "2026-01-13T23:59")
 CATALOG = ("ValveLeakage", "FanMotorHeat")
 TOKEN = "report-token-0123456789"
