@@ -13,12 +13,22 @@ two. That is right when a call's cost is the per-step work of the vectorised sim
 of 20 costs what one member costs); a simulator whose cost grows with the members (an FMU per
 member) wants it off, and pays p extra members only where it needs a Jacobian.
 
-Uncertainty from the linearisation at the optimum θ̂ (Gauss–Newton / Laplace):
-``Cov(θ̂) = σ̂² (JᵀJ)⁻¹`` with ``J`` the Jacobian of the weighted residuals in physical units and
-``σ̂² = Σ r² / (n − p)`` (``n`` measured values, ``p`` parameters), computed through the singular
-value decomposition of the unit-scaled Jacobian so that a flat direction gives huge, not infinite or
-NaN, variances. The bounds are ignored by this approximation; an interval that crosses a bound is
-one of the verdicts below.
+Uncertainty from the linearisation at the optimum θ̂ (Gauss–Newton / Laplace), with each target's
+own noise: the weights ``1/s²`` make temperatures, positions and powers count comparably, but they
+are not the inverse noise variances (a valve position sensor's residuals were 1/35 of the coil
+outlet air temperature's in the case study's scaled units), so one pooled ``σ̂²`` would overstate the
+uncertainty of parameters the quiet targets pin and understate that of the noisy targets'. The
+covariance is the sandwich ``Cov(θ̂) = (JᵀJ)⁻¹ Jᵀ D J (JᵀJ)⁻¹``, ``J`` the Jacobian of the weighted
+residuals in physical units and ``D`` diagonal with each residual's target variance
+``σ̂²_k = Σ_k r² / (n_k (1 − p/n))`` (``n_k`` of the ``n`` measured values are target ``k``'s, each
+target carrying its share of the ``p`` parameters' degrees of freedom); with equal variances it is
+the textbook ``σ̂² (JᵀJ)⁻¹``, ``σ̂² = Σ r² / (n − p)``. On 30 synthetic truths (103 identified
+parameters; tests/calibration/case_study_truth.py, seeds 9–38) the offsets from the truth in these
+standard errors have a root mean square of 1.09, 71 % within one and 93 % within two (normal: 1,
+68 %, 95 %), where the pooled variance gave 1.31, 66 % and 91 %. Through the singular value
+decomposition ``J = U S Vᵀ`` of the unit-scaled Jacobian it is ``V S⁻¹ (Uᵀ D U) S⁻¹ Vᵀ``, so a flat
+direction gives huge, not infinite or NaN, variances. The bounds are ignored by this
+approximation; an interval that crosses a bound is one of the verdicts below.
 
 A parameter is *poorly identified*, with every reason that applies, when
   * it takes part (|loading| > :attr:`PointCalibrator.flat_loading`) in a flat direction: a right
@@ -217,13 +227,17 @@ class PointCalibrator(BaseEstimator):
         n, p = residuals.size, problem.n_parameters
         if n <= p:
             raise ValueError(f"{n} measured values cannot determine {p} parameters (need n > p)")
-        sigma2 = float(residuals @ residuals) / (n - p)
-        _, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
+        counts = np.array([mask.sum() for mask in problem.masks.values()])
+        target_of = np.repeat(np.arange(counts.size), counts)
+        noise_variance = np.divide(np.bincount(target_of, weights=residuals**2, minlength=counts.size), counts * (1 - p / n),
+                                   out=np.zeros(counts.size), where=counts > 0)
+        u, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
         self.singular_values_ = singular
         floor = singular[0] * 1e-12 if singular[0] > 0 else 1e-300
         clipped = np.maximum(singular, floor)
         width = problem.upper - problem.lower
-        unit_covariance = (vt.T / clipped**2) @ vt * sigma2
+        meat = u.T @ (u * noise_variance[target_of][:, None])
+        unit_covariance = (vt.T / clipped) @ meat @ (vt / clipped[:, None])
         self.covariance_ = unit_covariance * np.outer(width, width)
         self.standard_errors_ = np.sqrt(np.diag(self.covariance_))
         self.correlation_ = _correlation(self.covariance_, self.standard_errors_)

@@ -75,6 +75,36 @@ def test_linear_model_gives_the_ordinary_least_squares_estimate_and_covariance()
     assert fit.correlation_[0, 1] == pytest.approx(covariance[0, 1] / np.sqrt(covariance[0, 0] * covariance[1, 1]), rel=1e-4)
 
 
+def test_standard_errors_carry_each_targets_own_noise():
+    """Two targets scaled alike with noises 25× apart, one parameter each: each standard error is its
+    own target's (the exact per-target least-squares one), and over repeated noise the offsets from
+    the truth in those standard errors are standard normal. One pooled variance would make the quiet
+    target's parameter look 18× less certain than it is and the noisy one's 1.4× more."""
+    t = np.linspace(0.0, 1.0, 60)
+    noise = {"quiet": 0.02, "noisy": 0.5}
+    truth = np.array([1.5, -0.8])
+
+    def problem_for(rng):
+        observed = {"quiet": truth[0] * t + noise["quiet"] * rng.normal(size=t.size),
+                    "noisy": truth[1] * t + noise["noisy"] * rng.normal(size=t.size)}
+        return CalibrationProblem(
+            parameter_names=("a", "b"), lower=np.array([-5.0, -5.0]), upper=np.array([5.0, 5.0]),
+            simulate=lambda theta: {"quiet": theta[:, :1] * t, "noisy": theta[:, 1:2] * t},
+            observed=observed, target_scales={"quiet": 1.0, "noisy": 1.0}), observed
+
+    rng = np.random.default_rng(11)
+    problem, observed = problem_for(rng)
+    fit = PointCalibrator(n_starts=1, n_candidates=4, random_state=0).fit(problem)
+    dof_share = 1 - 2 / (2 * t.size)  # each target carries its share of the two parameters' degrees of freedom
+    for j, key in enumerate(("quiet", "noisy")):
+        slope = observed[key] @ t / (t @ t)
+        variance = np.sum((observed[key] - slope * t) ** 2) / (t.size * dof_share)
+        assert fit.standard_errors_[j] == pytest.approx(np.sqrt(variance / (t @ t)), rel=1e-4)
+    z = np.array([(f.theta_ - truth) / f.standard_errors_ for f in (
+        PointCalibrator(n_starts=1, n_candidates=4, random_state=0).fit(problem_for(rng)[0]) for _ in range(150))])
+    np.testing.assert_allclose(np.sqrt(np.mean(z**2, axis=0)), 1.0, atol=0.2)
+
+
 def test_jacobian_and_start_screening_are_one_simulate_call_each():
     calls: list[int] = []
     problem, *_ = linear_problem(calls, default=np.array([0.0, 0.0]))
