@@ -14,7 +14,7 @@ none is left: a fixpoint (rules only add triples and mint IRIs from the nodes th
 blank nodes, which a CONSTRUCT makes anew on every run — so this terminates). On a Brick campus the 16
 rules take 21 runs a part, each costly one (point links, flow edges, sensor placement) one, where a
 confirming round of every rule after the last addition doubled the time. The order makes the rules
-stratified: a rule may test for the absence of a triple (``FILTER NOT EXISTS``) only when the triple
+stratified: a rule may test for the absence of a triple (``FILTER NOT EXISTS``, ``MINUS``) only when the triple
 is stated in the model or derived by a rule earlier in the order, so that its answer cannot change
 later. The Brick rules use this: the typing rules (``0N-brick-*.rq``) run first, the flow rules
 (``5N-brick-*.rq``) after the device classes of ``50`` (whose entailed ``saref:Device`` types the
