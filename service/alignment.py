@@ -58,7 +58,7 @@ import re
 from collections import defaultdict
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import chain
 from typing import NamedTuple
@@ -358,7 +358,8 @@ def _namespace(iri: str) -> str:
 @dataclass(frozen=True)
 class _Context:
     """What every part's alignment shares (read-only, so threads share it): the ontology as N-Triples
-    and as lines; for each class (N-Triples) the lines `` <rdf:type> <super> .`` of its rule-named
+    and as lines, and the lines of it some rule can read (:meth:`unread`: what a part's scratch store
+    loads; a third of the ontology subsets); for each class (N-Triples) the lines `` <rdf:type> <super> .`` of its rule-named
     superclasses by the ontology's and the model's ``rdfs:subClassOf`` (each line without its
     subject); what each rule reads, and the predicates (N-Triples) some rule reads only some objects
     of; what any rule reads (:meth:`unread`); the rules' texts; the vocabulary prefixes of
@@ -366,6 +367,7 @@ class _Context:
 
     ontology: bytes
     ontology_lines: frozenset[bytes]
+    ontology_read: bytes
     type_lines: dict[bytes, tuple[bytes, ...]]
     reads: tuple[QueryReads, ...]
     restricted: frozenset[bytes]
@@ -401,8 +403,13 @@ class _Context:
             f"<{prefix}".encode() for r in reads for prefix in r.predicate_prefixes)
         declared = {t.subject.value for t in ontology if t.predicate == _RDF_TYPE and t.object in _DECLARATIONS}
         vocabulary = tuple(sorted({f"<{_namespace(iri)}".encode() for iri in declared | {_QUDT_NAMESPACE}}))
-        return cls(text, frozenset(text.split(b"\n")), type_lines, reads, restricted, read_objects, read_prefixes,
-                   rules, vocabulary)
+        lines = text.split(b"\n")
+        context = cls(text, frozenset(lines), text, type_lines, reads, restricted, read_objects, read_prefixes,
+                      rules, vocabulary)
+        terms = [line.split(b" ", 2) for line in lines if line]
+        unread_predicates, unread_pairs = context.unread({t[1] for t in terms}, {(t[1], t[2]) for t in terms if t[1] in restricted})
+        return replace(context, ontology_read=_ntriples([b" ".join(t) for t in terms if t[1] not in unread_predicates
+                                                          and (t[1], t[2]) not in unread_pairs]))
 
 
 def _derived(model_text: bytes, context: _Context) -> list[bytes]:
@@ -410,7 +417,7 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
     the lines derived, in order. Triples are lines of N-Triples throughout — the store evaluates a
     rule and writes its result without Python's lock, and lines hash and compare at C speed."""
     scratch = ox.Store()
-    scratch.load(model_text + context.ontology, ox.RdfFormat.N_TRIPLES, lenient=True)  # Oxigraph wrote it
+    scratch.load(model_text + context.ontology_read, ox.RdfFormat.N_TRIPLES, lenient=True)  # Oxigraph wrote it
     stated = model_text.split(b"\n")
     known = set(stated)  # stated, derived or entailed
     known |= context.ontology_lines
