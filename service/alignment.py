@@ -359,16 +359,16 @@ def _namespace(iri: str) -> str:
 class _Context:
     """What every part's alignment shares (read-only, so threads share it): the ontology as N-Triples
     and as lines, and the lines of it some rule can read (:meth:`unread`: what a part's scratch store
-    loads; a third of the ontology subsets); for each class (N-Triples) the lines `` <rdf:type> <super> .`` of its rule-named
-    superclasses by the ontology's and the model's ``rdfs:subClassOf`` (each line without its
-    subject); what each rule reads, and the predicates (N-Triples) some rule reads only some objects
+    loads; a third of the ontology subsets); for each class (N-Triples) the lines
+    `` <rdf:type> <super> .`` of its rule-named superclasses by the ontology's and the model's
+    ``rdfs:subClassOf``, each without its subject and with its object ``<super> .``; what each rule reads, and the predicates (N-Triples) some rule reads only some objects
     of; what any rule reads (:meth:`unread`); the rules' texts; the vocabulary prefixes of
     :func:`independent_parts`."""
 
     ontology: bytes
     ontology_lines: frozenset[bytes]
     ontology_read: bytes
-    type_lines: dict[bytes, tuple[bytes, ...]]
+    type_lines: dict[bytes, tuple[tuple[bytes, bytes], ...]]
     reads: tuple[QueryReads, ...]
     restricted: frozenset[bytes]
     read_objects: dict[bytes, frozenset[str] | None]
@@ -390,7 +390,7 @@ class _Context:
     @classmethod
     def of(cls, ontology: list[ox.Triple], model_class_axioms: list[ox.Triple] = ()) -> _Context:
         text = ox.serialize(ontology, format=ox.RdfFormat.N_TRIPLES)
-        type_lines = {str(c).encode(): tuple(b" %s %s ." % (_TYPE, str(s).encode()) for s in supers)
+        type_lines = {str(c).encode(): tuple((b" %s %s ." % (_TYPE, str(s).encode()), b"%s ." % str(s).encode()) for s in supers)
                       for c, supers in _named_superclasses([*ontology, *model_class_axioms]).items()}
         rules = tuple(text for _name, text in alignment_rules())
         reads = tuple(map(query_reads, rules))  # parsed here, not on the threads
@@ -415,24 +415,20 @@ class _Context:
 def _derived(model_text: bytes, context: _Context) -> list[bytes]:
     """The rules run to their fixpoint on the N-Triples ``model_text`` (see :func:`inferred_ntriples`):
     the lines derived, in order. Triples are lines of N-Triples throughout — the store evaluates a
-    rule and writes its result without Python's lock, and lines hash and compare at C speed."""
+    rule and writes its result without Python's lock, and lines hash and compare at C speed; a line
+    is split once, when it is new."""
     scratch = ox.Store()
     scratch.load(model_text + context.ontology_read, ox.RdfFormat.N_TRIPLES, lenient=True)  # Oxigraph wrote it
     stated = model_text.split(b"\n")
     known = set(stated)  # stated, derived or entailed
     known |= context.ontology_lines
+    known.add(b"")
     derived: list[bytes] = []
+    added: defaultdict[bytes, set[bytes]] = defaultdict(set)
 
-    def add(text: bytes) -> list[bytes]:
-        """Add to the scratch store the lines of ``text`` not known yet that a rule can read, with
-        the types they entail; returns those not known yet (entailed ones not among them) and
-        records in ``added`` their predicates, with the objects of the restricted ones."""
-        fresh = [line for line in dict.fromkeys(text.split(b"\n")) if line not in known]
-        known.update(fresh)
-        entailed = [line for line in _entailed(fresh, context.type_lines) if line not in known]
-        known.update(entailed)
-        new = fresh + entailed
-        terms = [line.split(b" ", 2) for line in new]  # one comprehension per step: C loops
+    def load(new: list[bytes], terms: list[list[bytes]]) -> None:
+        """Load the ``new`` lines (split: ``terms``) that a rule can read into the scratch store, and
+        record in ``added`` their predicates, with the objects of the restricted ones."""
         predicates = {t[1] for t in terms}
         restricted = predicates & context.restricted
         pairs = {(t[1], t[2]) for t in terms if t[1] in restricted} if restricted else set()
@@ -445,11 +441,9 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
             new = [line for line, (_s, p, o) in zip(new, terms, strict=True)
                    if p not in unread_predicates and (p, o) not in unread_pairs]
         scratch.load(b"\n".join(new), ox.RdfFormat.N_TRIPLES, lenient=True)
-        return fresh
 
-    added: defaultdict[bytes, set[bytes]] = defaultdict(set)
-    known.add(b"")
-    add(b"\n".join(_entailed(stated, context.type_lines)))
+    entailed = _entailed([line.split(b" ", 2) for line in stated if _TYPE_INFIX in line], context.type_lines, known)
+    load(list(entailed), list(entailed.values()))
     texts = context.rules
     # A rule's answer is a function of what it reads, so it need not run again until a triple it could
     # read was added (by any rule, itself included) since its last run.
@@ -460,20 +454,26 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
         rule = pending.index(True)
         pending[rule] = False
         added.clear()
-        derived += add(scratch.query(texts[rule]).serialize(format=ox.RdfFormat.N_TRIPLES))
+        answer = scratch.query(texts[rule]).serialize(format=ox.RdfFormat.N_TRIPLES)
+        fresh = [line for line in dict.fromkeys(answer.split(b"\n")) if line not in known]
+        known.update(fresh)
+        terms = [line.split(b" ", 2) for line in fresh]  # one comprehension per step: C loops
+        entailed = _entailed(terms, context.type_lines, known)
+        load(fresh + list(entailed), terms + list(entailed.values()))
+        derived += fresh
         values = {p[1:-1].decode(): ({_object_value(o) for o in objects} if p in context.restricted else ())
                   for p, objects in added.items()}
         pending = [waiting or other.may_read(values) for waiting, other in zip(pending, context.reads, strict=True)]
     raise RuntimeError(f"alignment rules in {queries_dir() / 'alignment'} did not reach a fixpoint in {MAX_ROUNDS} runs per rule")
 
 
-def _entailed(lines: Iterable[bytes], type_lines: dict[bytes, tuple[bytes, ...]]) -> list[bytes]:
-    """The ``rdf:type`` lines that the type lines among ``lines`` entail (rule-named superclasses)."""
-    entailed = []
-    for line in [line for line in lines if _TYPE_INFIX in line]:
-        subject, predicate, obj = line.split(b" ", 2)
-        if predicate == _TYPE and obj[:-2] in type_lines:
-            entailed += [subject + suffix for suffix in type_lines[obj[:-2]]]
+def _entailed(terms: list[list[bytes]], type_lines: dict[bytes, tuple[tuple[bytes, bytes], ...]],
+              known: set[bytes]) -> dict[bytes, list[bytes]]:
+    """The ``rdf:type`` lines not ``known`` (they join it) that the split lines ``terms`` entail
+    (rule-named superclasses), each with its terms."""
+    entailed = {line: [subject, _TYPE, obj] for subject, predicate, stated in terms if predicate == _TYPE
+                for suffix, obj in type_lines.get(stated[:-2], ()) if (line := subject + suffix) not in known}
+    known.update(entailed)
     return entailed
 
 
