@@ -179,7 +179,7 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
         raise ValueError("the alignment needs a model and ontology without blank nodes: skolemise them first")
     with cyclic_gc_paused():
         if text.count(b"\n") < 2 * part_triples:
-            return [_ntriples(_derived(text, context))]
+            return [_ntriples(_derived(text, context).lines)]
         model_parts = independent_parts(text, context.vocabulary, part_triples)
         minted: dict[bytes, int] = {}
         with ThreadPoolExecutor(workers or usable_cpu_count()) as pool:
@@ -200,7 +200,7 @@ class _PartResult(NamedTuple):
     contested: list[bytes]
 
     @classmethod
-    def of(cls, model_parts: ModelParts, k: int, minted: dict[bytes, int], derived: list[bytes]) -> _PartResult:
+    def of(cls, model_parts: ModelParts, k: int, minted: dict[bytes, int], derived: _Derived) -> _PartResult:
         """Part ``k``'s ``derived`` lines sorted by their subject's owner; ``minted``: the owner of
         every subject outside the model so far, shared by the parts' threads (``dict.setdefault`` is
         atomic under Python's lock), settled once per distinct subject. Run on the part's thread, where
@@ -208,14 +208,14 @@ class _PartResult(NamedTuple):
         each)."""
         node_ids, node_part, claim = model_parts.node_ids, model_parts.node_part, minted.setdefault
         contested_subjects = set()
-        for subject in {line[: line.index(b" ")] for line in derived}:
+        for subject in derived.subjects:
             node = node_ids.get(subject)
             if (claim(subject, k) if node is None else node_part[node]) != k:
                 contested_subjects.add(subject)
         if not contested_subjects:
-            return cls(derived, _ntriples(derived), [])
+            return cls(derived.lines, _ntriples(derived.lines), [])
         owned, contested = [], []
-        for line in derived:
+        for line in derived.lines:
             (contested if line[: line.index(b" ")] in contested_subjects else owned).append(line)
         return cls(owned, _ntriples(owned), contested)
 
@@ -412,9 +412,16 @@ class _Context:
                                                           and (t[1], t[2]) not in unread_pairs]))
 
 
-def _derived(model_text: bytes, context: _Context) -> list[bytes]:
+class _Derived(NamedTuple):
+    """What the rules derive from a model: N-Triples ``lines`` in order, and their ``subjects``."""
+
+    lines: list[bytes]
+    subjects: set[bytes]
+
+
+def _derived(model_text: bytes, context: _Context) -> _Derived:
     """The rules run to their fixpoint on the N-Triples ``model_text`` (see :func:`inferred_ntriples`):
-    the lines derived, in order. Triples are lines of N-Triples throughout — the store evaluates a
+    the lines derived, in order, and their subjects. Triples are lines of N-Triples throughout — the store evaluates a
     rule and writes its result without Python's lock, and lines hash and compare at C speed; a line
     is split once, when it is new."""
     scratch = ox.Store()
@@ -424,6 +431,7 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
     known |= context.ontology_lines
     known.add(b"")
     derived: list[bytes] = []
+    subjects: set[bytes] = set()
     added: defaultdict[bytes, set[bytes]] = defaultdict(set)
 
     def load(new: list[bytes], terms: list[list[bytes]]) -> None:
@@ -450,7 +458,7 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
     pending = [True] * len(texts)
     for _run in range(MAX_ROUNDS * len(texts)):
         if True not in pending:
-            return derived
+            return _Derived(derived, subjects)
         rule = pending.index(True)
         pending[rule] = False
         added.clear()
@@ -461,6 +469,7 @@ def _derived(model_text: bytes, context: _Context) -> list[bytes]:
         entailed = _entailed(terms, context.type_lines, known)
         load(fresh + list(entailed), terms + list(entailed.values()))
         derived += fresh
+        subjects.update([t[0] for t in terms])
         values = {p[1:-1].decode(): ({_object_value(o) for o in objects} if p in context.restricted else ())
                   for p, objects in added.items()}
         pending = [waiting or other.may_read(values) for waiting, other in zip(pending, context.reads, strict=True)]
