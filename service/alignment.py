@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import re
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Sized
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import lru_cache
@@ -75,7 +75,7 @@ from .ntriples import triple_list
 from .resources import queries_dir
 from .sparql_reads import QueryReads, query_reads
 
-__all__ = ["MAX_ROUNDS", "PART_TRIPLES", "ModelParts", "alignment_rules", "independent_parts", "inferred_ntriples", "inferred_triples", "rule_terms"]
+__all__ = ["MAX_ROUNDS", "PART_TRIPLES", "BlankNodeError", "ModelParts", "alignment_rules", "independent_parts", "inferred_ntriples", "inferred_triples", "rule_terms"]
 
 _RDF_TYPE = ox.NamedNode("http://www.w3.org/1999/02/22-rdf-syntax-ns#type")
 _TYPE = str(_RDF_TYPE).encode()
@@ -84,7 +84,8 @@ _TYPE_OBJECT = re.compile(re.escape(_TYPE_INFIX) + rb"(<[^>\n]*>) \.")
 _BLANK_NODE_NAMESPACE = "urn:graphtwin:alignment:blank-node:"
 _SUBCLASS_OF = ox.NamedNode("http://www.w3.org/2000/01/rdf-schema#subClassOf")
 _EQUIVALENT_CLASS = ox.NamedNode("http://www.w3.org/2002/07/owl#equivalentClass")
-_CLASS_AXIOM_INFIXES = tuple(b" %s " % str(p).encode() for p in (_SUBCLASS_OF, _EQUIVALENT_CLASS))
+_CLASS_AXIOM_PREDICATES = frozenset(str(p).encode() for p in (_SUBCLASS_OF, _EQUIVALENT_CLASS))
+_CLASS_AXIOM_INFIXES = tuple(b" %s " % p for p in sorted(_CLASS_AXIOM_PREDICATES))
 _SCHEMA_PREDICATES = (b"<http://www.w3.org/2002/07/owl#", *(b"<http://www.w3.org/2000/01/rdf-schema#%s>" % p for p in (
     b"subClassOf", b"subPropertyOf", b"domain", b"range")))
 _QUDT_NAMESPACE = "http://qudt.org/vocab/"
@@ -101,10 +102,13 @@ _COMMENT = re.compile(r"(^|\s)#[^\n]*")
 MAX_ROUNDS = 8
 
 #: A model is aligned in independent parts of about this many triples (:func:`independent_parts`),
-#: side by side on threads (Oxigraph evaluates a query without holding Python's lock). Of 5k, 12k,
-#: 25k and 60k, 25k cost the least CPU on the 1M-triple campus (29.5 s; 34.6 s at 5k, where the
-#: per-part set-up and rule runs add up; 30.8 s at 60k).
-PART_TRIPLES = 25_000
+#: side by side on threads (Oxigraph evaluates a query without holding Python's lock). On the
+#: 1M-triple campus (2 CPUs, 2026-11-26), CPU and wall: 3k 17.7 s and 11.0 s, 5k 16.2 and 10.1,
+#: 10k 15.5–16.2 and 9.6–10.1, 12.5k 15.6–16.2 and 9.5–10.4, 25k 17.2–18.6 and 10.6–12.0, 35k 17.9
+#: and 11.8: the rules' path and join queries cost more than in proportion to a part's size, and
+#: below 10k the per-part set-up and rule runs add up (25k was best when each part's Python work
+#: was heavier).
+PART_TRIPLES = 10_000
 
 
 @lru_cache(maxsize=1)
@@ -165,22 +169,24 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
         process may run on).
     :param part_triples: the size the model's independent parts are packed into (see
         :func:`independent_parts`); a model smaller than two parts is aligned whole.
-    :raises ValueError: when the model or the ontology holds a blank node (a load into the scratch
+    :raises BlankNodeError: when the model or the ontology holds a blank node (a load into the scratch
         store would rename it; skolemise first, as :meth:`service.store.GraphStore.load_model` does,
         or call :func:`inferred_triples`).
     :raises RuntimeError: when the rules have not reached a fixpoint in :data:`MAX_ROUNDS` runs per
         rule (a rule that keeps minting new terms).
     """
     text = ox.serialize(model, format=ox.RdfFormat.N_TRIPLES)
-    model_axioms = ox.parse(b"\n".join(_lines_with(text, _CLASS_AXIOM_INFIXES)),
-                            format=ox.RdfFormat.N_TRIPLES)
-    context = _Context.of(list(ontology), [t.triple for t in model_axioms])
-    if _has_blank_node(text) or _has_blank_node(context.ontology):
-        raise ValueError("the alignment needs a model and ontology without blank nodes: skolemise them first")
+    ontology = list(ontology)
     with cyclic_gc_paused():
-        if text.count(b"\n") < 2 * part_triples:
+        if (len(model) if isinstance(model, Sized) else text.count(b"\n")) < 2 * part_triples:
+            if _has_blank_node(text):
+                raise BlankNodeError()
+            context = _Context.of(ontology, _lines_with(text, _CLASS_AXIOM_INFIXES))
             return [_ntriples(_derived(text, context).lines)]
-        model_parts = independent_parts(text, context.vocabulary, part_triples)
+        # a large model's pass over its lines finds its blank nodes and its class axioms (among the
+        # shared schema lines) on the way: three scans of its text fewer
+        model_parts = independent_parts(text, _vocabulary(ontology), part_triples)
+        context = _Context.of(ontology, [line for line in model_parts.shared if line.split(b" ", 2)[1] in _CLASS_AXIOM_PREDICATES])
         minted: dict[bytes, int] = {}
         with ThreadPoolExecutor(workers or usable_cpu_count()) as pool:
             results = list(pool.map(lambda k: _PartResult.of(model_parts, k, minted, _derived(
@@ -297,6 +303,8 @@ def independent_parts(text: bytes, vocabulary: tuple[bytes, ...], part_triples: 
     schema — triples whose predicate is OWL's or ``rdfs:subClassOf``, ``subPropertyOf``, ``domain``
     or ``range``, or whose subject is a class or vocabulary — that every part needs, as it needs the
     ontology.
+
+    :raises BlankNodeError: when a line holds a blank node.
     """
     classes = set(_TYPE_OBJECT.findall(text))  # a search of the text (C speed), not a test per line
     shared, body, subject_ids, starts, ends = [], [], [], [], []
@@ -305,12 +313,14 @@ def independent_parts(text: bytes, vocabulary: tuple[bytes, ...], part_triples: 
     schema: dict[bytes, bool] = {}
     # a subject's lines follow one another (Oxigraph writes a parsed model in its order), so what
     # decides on the subject is decided once per run of lines, and on the predicate once per predicate
-    subject_of_run, run_shared, start = None, False, -1
+    subject_of_run, run_shared, start, blank = None, False, -1, False
     for line in text.split(b"\n")[:-1]:
         subject, predicate, obj = line.split(b" ", 2)
         if subject != subject_of_run:
             subject_of_run, start = subject, -1
             run_shared = subject in classes or subject.startswith(vocabulary)
+            blank = blank or subject[0] == 95  # 95: '_' opens a blank node
+        blank = blank or obj[0] == 95
         if (is_schema := schema.get(predicate)) is None:
             is_schema = schema[predicate] = predicate.startswith(_SCHEMA_PREDICATES)
         if run_shared or is_schema:
@@ -323,6 +333,8 @@ def independent_parts(text: bytes, vocabulary: tuple[bytes, ...], part_triples: 
         if predicate != _TYPE and obj[0] != 34 and not obj.startswith(vocabulary):  # 34: '"' opens a literal
             starts.append(start)
             ends.append(node_id(obj[:-2], len(node_ids)))
+    if blank:
+        raise BlankNodeError()
     adjacency = coo_array((np.ones(len(starts), dtype=np.int8), (starts, ends)), shape=(len(node_ids), len(node_ids)))
     _count, node_component = connected_components(adjacency, directed=False)
     triple_component = node_component[np.asarray(subject_ids, dtype=np.int64)]
@@ -342,6 +354,20 @@ def independent_parts(text: bytes, vocabulary: tuple[bytes, ...], part_triples: 
     in_order = [body[i] for i in order]
     parts = [in_order[start:end] for start, end in zip([0, *ends_at[:-1]], ends_at, strict=True)]
     return ModelParts(shared, parts, node_ids, component_part[node_component].tolist())
+
+
+class BlankNodeError(ValueError):
+    """A model or ontology given to the alignment holds a blank node."""
+
+    def __init__(self) -> None:
+        super().__init__("the alignment needs a model and ontology without blank nodes: skolemise them first")
+
+
+def _vocabulary(ontology: list[ox.Triple]) -> tuple[bytes, ...]:
+    """N-Triples prefixes of the namespaces of the classes and properties the ``ontology`` declares,
+    and QUDT's (see :func:`independent_parts`)."""
+    declared = {t.subject.value for t in ontology if t.predicate == _RDF_TYPE and t.object in _DECLARATIONS}
+    return tuple(sorted({f"<{_namespace(iri)}".encode() for iri in declared | {_QUDT_NAMESPACE}}))
 
 
 def _has_blank_node(text: bytes) -> bool:
@@ -388,8 +414,14 @@ class _Context:
         return unread_predicates, unread_pairs
 
     @classmethod
-    def of(cls, ontology: list[ox.Triple], model_class_axioms: list[ox.Triple] = ()) -> _Context:
+    def of(cls, ontology: list[ox.Triple], model_class_axioms: list[bytes] = ()) -> _Context:
+        """The context of the ``ontology`` and the model's class axioms (N-Triples lines).
+
+        :raises BlankNodeError: when the ontology holds a blank node."""
         text = ox.serialize(ontology, format=ox.RdfFormat.N_TRIPLES)
+        if _has_blank_node(text):
+            raise BlankNodeError()
+        model_class_axioms = [t.triple for t in ox.parse(b"\n".join(model_class_axioms), format=ox.RdfFormat.N_TRIPLES)]
         type_lines = {str(c).encode(): tuple((b" %s %s ." % (_TYPE, str(s).encode()), b"%s ." % str(s).encode()) for s in supers)
                       for c, supers in _named_superclasses([*ontology, *model_class_axioms]).items()}
         rules = tuple(text for _name, text in alignment_rules())
@@ -401,8 +433,7 @@ class _Context:
             read_objects[predicate] = None if known is None or objects is None else known | objects
         read_prefixes = None if any(r.any_predicate for r in reads) else tuple(
             f"<{prefix}".encode() for r in reads for prefix in r.predicate_prefixes)
-        declared = {t.subject.value for t in ontology if t.predicate == _RDF_TYPE and t.object in _DECLARATIONS}
-        vocabulary = tuple(sorted({f"<{_namespace(iri)}".encode() for iri in declared | {_QUDT_NAMESPACE}}))
+        vocabulary = _vocabulary(ontology)
         lines = text.split(b"\n")
         context = cls(text, frozenset(lines), text, type_lines, reads, restricted, read_objects, read_prefixes,
                       rules, vocabulary)
