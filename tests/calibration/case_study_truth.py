@@ -37,7 +37,7 @@ class CaseStudyTruth:
         store.load_model("case", CASE_STUDY)
         path = folder / f"case-{hidden_effect}-{seed}.csv"
         self.truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
-                                             seed=seed, n_days=3.0, hidden_effect=hidden_effect)
+                                             seed=seed, n_days=2.0, hidden_effect=hidden_effect)
         model = assemble(store, "case")
         data = read_model_data(model, path)
         self.md = ModelData(model, data, loop_substeps(model, data.step_s))
