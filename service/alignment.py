@@ -388,8 +388,7 @@ class _Context:
     loads; a third of the ontology subsets); for each class (N-Triples) the lines
     `` <rdf:type> <super> .`` of its rule-named superclasses by the ontology's and the model's
     ``rdfs:subClassOf``, each without its subject and with its object ``<super> .``; what each rule reads, and the predicates (N-Triples) some rule reads only some objects
-    of; what any rule reads (:meth:`unread`); the rules' texts; the vocabulary prefixes of
-    :func:`independent_parts`."""
+    of; what any rule reads (:meth:`unread`); the rules' texts."""
 
     ontology: bytes
     ontology_lines: frozenset[bytes]
@@ -400,7 +399,6 @@ class _Context:
     read_objects: dict[bytes, frozenset[str] | None]
     read_prefixes: tuple[bytes, ...] | None
     rules: tuple[str, ...]
-    vocabulary: tuple[bytes, ...]
 
     def unread(self, predicates: set[bytes], pairs: set[tuple[bytes, bytes]]) -> tuple[frozenset, frozenset]:
         """Of some lines' ``predicates`` and the ``(predicate, object + " .")`` pairs of their
@@ -433,14 +431,13 @@ class _Context:
             read_objects[predicate] = None if known is None or objects is None else known | objects
         read_prefixes = None if any(r.any_predicate for r in reads) else tuple(
             f"<{prefix}".encode() for r in reads for prefix in r.predicate_prefixes)
-        vocabulary = _vocabulary(ontology)
-        lines = text.split(b"\n")
-        context = cls(text, frozenset(lines), text, type_lines, reads, restricted, read_objects, read_prefixes,
-                      rules, vocabulary)
-        terms = [line.split(b" ", 2) for line in lines if line]
+        context = cls(text, frozenset(text.split(b"\n")), text, type_lines, reads, restricted, read_objects,
+                      read_prefixes, rules)
+        lines = text.split(b"\n")[:-1]
+        terms = [line.split(b" ", 2) for line in lines]
         unread_predicates, unread_pairs = context.unread({t[1] for t in terms}, {(t[1], t[2]) for t in terms if t[1] in restricted})
-        return replace(context, ontology_read=_ntriples([b" ".join(t) for t in terms if t[1] not in unread_predicates
-                                                          and (t[1], t[2]) not in unread_pairs]))
+        return replace(context, ontology_read=_ntriples([line for line, (_s, p, o) in zip(lines, terms, strict=True)
+                                                          if p not in unread_predicates and (p, o) not in unread_pairs]))
 
 
 class _Derived(NamedTuple):

@@ -258,7 +258,7 @@ def test_units_linked_through_a_model_node_stay_in_one_part_and_classes_units_an
     ontology = _ontology()
     for extra, together in (("", set()), (plant, {"ahu1", "ahu4"})):
         campus = _campus(6, extra)
-        vocabulary = service.alignment._Context.of(ontology).vocabulary
+        vocabulary = service.alignment._vocabulary(ontology)
         model_parts = independent_parts(ox.serialize(campus, format=ox.RdfFormat.N_TRIPLES), vocabulary, part_triples=1)
         units = [{_unit_of(line) for line in part if line.startswith(b"<" + CAMPUS_NAMESPACE.encode() + b"ahu")}
                  for part in model_parts.parts]
