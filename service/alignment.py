@@ -8,8 +8,8 @@ device observes (the accepted spellings are listed in ``ontologies/README.md``).
 The rules run in a scratch in-memory store holding the model, the ontology subsets and what has been
 derived so far, in file-name order, each seeing what the rules before it derived. A rule runs again
 only when a triple it could read was added after its last run (:func:`service.sparql_reads.query_reads`:
-the predicates of its patterns with the objects they can take, so ``VALUES ?rule {"02-…"}`` on
-``gt:derivedByRule`` is not woken by every rule's provenance), the earliest such rule first, until
+the predicates of its patterns with the objects they can take, so ``?point gt:derivedByRule "02-…"``
+is not woken by every rule's provenance), the earliest such rule first, until
 none is left: a fixpoint (rules only add triples and mint IRIs from the nodes they read — never
 blank nodes, which a CONSTRUCT makes anew on every run — so this terminates). On a Brick campus the 17
 rules take 22 runs a part, each costly one (point links, flow edges, sensor placement) one, where a
