@@ -353,3 +353,27 @@ ex:sf a brick:Supply_Fan ; brick:feeds ex:room . ex:sat a brick:Supply_Air_Tempe
     placed = {t.object.value.rsplit("#", 1)[-1] for t in derived if t.predicate.value == GT + "measuresAtOutletOf"
               and t.subject.value.endswith("#sat")}
     assert placed == {"sf"}
+
+
+def test_a_unit_serves_the_spaces_its_parts_feed_reached_either_way_and_not_another_units():
+    """52-brick-served-spaces.rq: the spaces reached from a unit or its parts (at any depth) along
+    brick:feeds, an isFedBy read backwards; a space on another unit's path only is not served, nor a
+    space that feeds the unit (the walk is downstream); the return path closes at the served space."""
+    text = """@prefix brick: <https://brickschema.org/schema/Brick#> . @prefix ex: <https://example.org/served#> .
+ex:ahu a brick:Air_Handling_Unit ; brick:hasPart ex:section . ex:section brick:hasPart ex:oad, ex:rad, ex:sf .
+ex:oad a brick:Outside_Damper ; brick:feeds ex:sf . ex:rad a brick:Return_Damper ; brick:feeds ex:sf .
+ex:sf a brick:Supply_Fan ; brick:feeds ex:vav1 . ex:vav2 brick:isFedBy ex:sf .
+ex:vav1 a brick:VAV ; brick:feeds ex:room1 . ex:vav2 a brick:VAV . ex:room2 a brick:HVAC_Zone ; brick:isFedBy ex:vav2 .
+ex:room1 a brick:HVAC_Zone .
+ex:lobby a brick:HVAC_Zone ; brick:feeds ex:oad .
+ex:ahu2 a brick:Air_Handling_Unit ; brick:feeds ex:room3 . ex:room3 a brick:HVAC_Zone ."""
+    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "served"), _ontology())
+
+    def local(term):
+        return term.value.rsplit("#", 1)[-1]
+
+    served = {(local(t.subject), local(t.object)) for t in derived if t.predicate.value == GT + "servesSpace"}
+    assert served == {("ahu", "room1"), ("ahu", "room2"), ("ahu2", "room3")}
+    returns = {(local(t.subject), local(t.object)) for t in derived if t.predicate.value == GT + "flowEdgeTo"
+               and local(t.subject).startswith("room")}
+    assert returns == {("room1", "rad"), ("room2", "rad")}
