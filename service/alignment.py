@@ -432,9 +432,9 @@ class _Context:
             read_objects[predicate] = None if known is None or objects is None else known | objects
         read_prefixes = None if any(r.any_predicate for r in reads) else tuple(
             f"<{prefix}".encode() for r in reads for prefix in r.predicate_prefixes)
-        context = cls(text, frozenset(text.split(b"\n")), text, type_lines, reads, restricted, read_objects,
-                      read_prefixes, rules)
-        lines = text.split(b"\n")[:-1]
+        lines = text.split(b"\n")
+        context = cls(text, frozenset(lines), text, type_lines, reads, restricted, read_objects, read_prefixes, rules)
+        lines.pop()  # the empty string after the last newline
         terms = [line.split(b" ", 2) for line in lines]
         unread_predicates, unread_pairs = context.unread({t[1] for t in terms}, {(t[1], t[2]) for t in terms if t[1] in restricted})
         return replace(context, ontology_read=_ntriples([line for line, (_s, p, o) in zip(lines, terms, strict=True)
