@@ -11,15 +11,16 @@ only when a triple it could read was added after its last run (:func:`service.sp
 the predicates of its patterns with the objects they can take, so ``?point gt:derivedByRule "02-…"``
 is not woken by every rule's provenance), the earliest such rule first, until
 none is left: a fixpoint (rules only add triples and mint IRIs from the nodes they read — never
-blank nodes, which a CONSTRUCT makes anew on every run — so this terminates). On a Brick campus the 17
-rules take 22 runs a part, each costly one (point links, flow edges, sensor placement) one, where a
+blank nodes, which a CONSTRUCT makes anew on every run — so this terminates). On a Brick campus the 18
+rules take 23 runs a part, each costly one (point links, flow edges, sensor placement) one, where a
 confirming round of every rule after the last addition doubled the time. The order makes the rules
 stratified: a rule may test for the absence of a triple (``FILTER NOT EXISTS``, ``MINUS``) only when the triple
 is stated in the model or derived by a rule earlier in the order, so that its answer cannot change
 later. The Brick rules use this: the typing rules (``0N-brick-*.rq``) run first, the flow rules
 (``5N-brick-*.rq``) after the device classes of ``50`` (whose entailed ``saref:Device`` types the
-flow-edge rule reads), and the flow-edge and sensor placement rules read the units' served spaces of
-``52`` (a path closure both need, computed once), their supply outlets of ``53`` and the flow edges
+flow-edge rule reads), and the flow-edge and sensor placement rules read the units' parts at any
+depth of ``51`` and served spaces of ``52`` (path closures several rules need, each computed once),
+their supply outlets of ``53`` and the flow edges
 and mixing boxes of the rules before them. A rule that names the classes it reads (``?property a saref:Temperature``, not
 ``?property a ?class . ?class rdfs:subClassOf* …``) is woken by those types only: rule 50 so runs once,
 where reading every type it ran four times a part; and a rule that tests what another derives
