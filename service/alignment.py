@@ -28,12 +28,14 @@ rather than what it derives itself runs once (the mixing boxes of ``54`` were a 
 flow-edge rule, which their types then woke a second time).
 
 A large model is cut into independent parts (:func:`independent_parts`: no rule joins across them)
-aligned side by side, one scratch store per part on a thread per CPU: Oxigraph evaluates a rule and
-writes its result without holding Python's lock, and triples stay N-Triples lines from the model to
-the result (they hash and compare at C speed; a term object per triple cost more than the rules).
-A part's result is sorted on its thread by who owns each line's subject (:class:`_PartResult`): the
-few lines about a node another part owns — one both mint, or one the other states — are settled
-after, so the parts' texts are handed over as they are (:func:`inferred_ntriples`).
+aligned side by side, one scratch store per part, on a worker process per CPU
+(:mod:`service.alignment_workers`) or, for a smaller model, a thread per CPU (Oxigraph evaluates a
+rule and writes its result without holding Python's lock, but the bookkeeping of new lines takes
+turns on it); triples stay N-Triples lines from the model to the result (they hash and compare at C
+speed; a term object per triple cost more than the rules). A part's result is sorted by who owns each
+line's subject (:class:`_PartResult`): the few lines about a node another part owns — one both mint,
+or one the other states — are settled after, so the parts' texts are handed over as they are
+(:func:`inferred_ntriples`).
 
 A derived triple no rule can read (by :func:`service.sparql_reads.query_reads`: provenance, columns,
 units, assumption texts, most derived classes) is kept in the result but not loaded into the scratch
@@ -60,16 +62,16 @@ import re
 from collections import defaultdict
 from collections.abc import Iterable, Sized
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import lru_cache, partial
 from itertools import chain
 from typing import NamedTuple
 
 import numpy as np
 import pyoxigraph as ox
-from scipy.sparse import coo_array
-from scipy.sparse.csgraph import connected_components
 
+from .alignment_workers import AlignmentWorkers
 from .blank_nodes import skolemize
 from .cpu_count import usable_cpu_count
 from .cyclic_gc import cyclic_gc_paused
@@ -77,7 +79,7 @@ from .ntriples import triple_list
 from .resources import queries_dir
 from .sparql_reads import QueryReads, query_reads
 
-__all__ = ["MAX_ROUNDS", "PART_TRIPLES", "BlankNodeError", "ModelParts", "alignment_rules", "independent_parts", "inferred_ntriples", "inferred_triples", "rule_terms"]
+__all__ = ["MAX_ROUNDS", "PART_TRIPLES", "PROCESS_TRIPLES", "BlankNodeError", "ModelParts", "alignment_rules", "independent_parts", "inferred_ntriples", "inferred_triples", "rule_terms"]
 
 _RDF_TYPE = ox.NamedNode("http://www.w3.org/1999/02/22-rdf-syntax-ns#type")
 _TYPE = str(_RDF_TYPE).encode()
@@ -111,6 +113,12 @@ MAX_ROUNDS = 8
 #: below 10k the per-part set-up and rule runs add up (25k was best when each part's Python work
 #: was heavier).
 PART_TRIPLES = 10_000
+
+#: A model of at least this many triples is aligned in worker processes rather than threads (see
+#: :func:`inferred_ntriples`). Brick campus on 2 CPUs (2026-11-27), threads and processes: 100k
+#: 0.89 and 1.25–1.30 s (the workers' start is not hidden yet), 200k 1.83–2.00 and 1.78, 300k
+#: 2.82–2.91 and 2.65–2.70, 1M 8.79–8.91 and 7.99–8.17.
+PROCESS_TRIPLES = 200_000
 
 
 @lru_cache(maxsize=1)
@@ -160,17 +168,22 @@ def _named_superclasses(ontology: Iterable[ox.Triple]) -> dict[ox.NamedNode, tup
     return result
 
 
-def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], *,
-                      workers: int | None = None, part_triples: int = PART_TRIPLES) -> list[bytes]:
+def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple], *, workers: int | None = None,
+                      part_triples: int = PART_TRIPLES, processes: bool | None = None) -> list[bytes]:
     """What the alignment rules derive from ``model`` with the class hierarchy of the ``ontology``
     and of the model's own ``rdfs:subClassOf`` triples, as N-Triples text in chunks of whole lines
     (one per independent part, in the order of the model; joined, a million lines are a copy of
     ~200 MB the store's load does not need): every derived triple not already stated in either.
 
-    :param workers: threads aligning independent parts side by side (default: one per CPU this
-        process may run on).
+    :param workers: threads or processes aligning independent parts side by side (default: one per
+        CPU this process may run on).
     :param part_triples: the size the model's independent parts are packed into (see
         :func:`independent_parts`); a model smaller than two parts is aligned whole.
+    :param processes: align the parts in worker processes (:class:`service.alignment_workers.AlignmentWorkers`)
+        rather than threads (default: with more than one worker, for a model of
+        :data:`PROCESS_TRIPLES` or more). Threads share Python's lock for the rules' bookkeeping of
+        new lines (two reach 1.7x one); processes do not, but each part's text and result cross a
+        pipe, and the workers start anew on each call (~0.5 s, while this process cuts the model).
     :raises BlankNodeError: when the model or the ontology holds a blank node (a load into the scratch
         store would rename it; skolemise first, as :meth:`service.store.GraphStore.load_model` does,
         or call :func:`inferred_triples`).
@@ -179,53 +192,68 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
     """
     text = ox.serialize(model, format=ox.RdfFormat.N_TRIPLES)
     ontology = list(ontology)
+    n_triples = len(model) if isinstance(model, Sized) else text.count(b"\n")
     with cyclic_gc_paused():
-        if (len(model) if isinstance(model, Sized) else text.count(b"\n")) < 2 * part_triples:
+        if n_triples < 2 * part_triples:
             if _has_blank_node(text):
                 raise BlankNodeError()
             context = _Context.of(ontology, _lines_with(text, _CLASS_AXIOM_INFIXES))
             return [_ntriples(_derived(text, context).lines)]
-        # a large model's pass over its lines finds its blank nodes and its class axioms (among the
-        # shared schema lines) on the way: three scans of its text fewer
-        model_parts = independent_parts(text, _vocabulary(ontology), part_triples)
-        context = _Context.of(ontology, [line for line in model_parts.shared if line.split(b" ", 2)[1] in _CLASS_AXIOM_PREDICATES])
+        workers = workers or usable_cpu_count()
+        if processes is None:
+            processes = workers > 1 and n_triples >= PROCESS_TRIPLES
+        # worker processes start (importing this module) on the other CPU while this one cuts the model
+        with AlignmentWorkers(workers) if processes else nullcontext() as worker_processes:
+            # a large model's pass over its lines finds its blank nodes and its class axioms (among the
+            # shared schema lines) on the way: three scans of its text fewer
+            model_parts = independent_parts(text, _vocabulary(ontology), part_triples)
+            context = _Context.of(ontology, [line for line in model_parts.shared if line.split(b" ", 2)[1] in _CLASS_AXIOM_PREDICATES])
+            texts = (_ntriples(model_parts.shared + part) for part in model_parts.parts)
+            if worker_processes is not None:
+                aligned = worker_processes.map(context, texts)
+            else:
+                with ThreadPoolExecutor(workers) as pool:
+                    aligned = list(pool.map(partial(_aligned_part, context=context), texts))
         minted: dict[bytes, int] = {}
-        with ThreadPoolExecutor(workers or usable_cpu_count()) as pool:
-            results = list(pool.map(lambda k: _PartResult.of(model_parts, k, minted, _derived(
-                _ntriples(model_parts.shared + model_parts.parts[k]), context)), range(len(model_parts.parts))))
+        results = [_PartResult.of(model_parts, k, minted, *part) for k, part in enumerate(aligned)]
         return [*(result.text for result in results), _ntriples(_uncontested(model_parts, minted, results))]
 
 
+def _aligned_part(text: bytes, context: _Context) -> tuple[bytes, list[bytes]]:
+    """A part's N-Triples ``text`` aligned: what the rules derive as N-Triples text, and the
+    subjects of its lines (on a worker thread, or in an alignment worker process)."""
+    derived = _derived(text, context)
+    return _ntriples(derived.lines), list(derived.subjects)
+
+
 class _PartResult(NamedTuple):
-    """What one part derived: the lines about nodes it owns (``owned``, and as N-Triples ``text``) and
-    the ``contested`` ones, about a node another part owns, which that part may state or derive too.
+    """What one part derived: the lines about nodes it owns as N-Triples ``text``, and the
+    ``contested`` ones, about a node another part owns, which that part may state or derive too.
 
     A part owns the nodes its triples link (:attr:`ModelParts.node_part`) and the nodes its rules
-    mint — or name outside the model, such as classes and vocabulary — before any other part does."""
+    mint — or name outside the model, such as classes and vocabulary — before any later part does."""
 
-    owned: list[bytes]
     text: bytes
     contested: list[bytes]
 
     @classmethod
-    def of(cls, model_parts: ModelParts, k: int, minted: dict[bytes, int], derived: _Derived) -> _PartResult:
-        """Part ``k``'s ``derived`` lines sorted by their subject's owner; ``minted``: the owner of
-        every subject outside the model so far, shared by the parts' threads (``dict.setdefault`` is
-        atomic under Python's lock), settled once per distinct subject. Run on the part's thread, where
-        the lines are fresh in the cache (a pass over a million of them afterwards costs a cache miss
-        each)."""
+    def of(cls, model_parts: ModelParts, k: int, minted: dict[bytes, int], text: bytes, subjects: list[bytes]) -> _PartResult:
+        """Part ``k``'s derived N-Triples ``text`` (lines about ``subjects``) sorted by their subject's
+        owner; ``minted``: the owner of every subject outside the model so far (the parts are settled
+        in order, once per distinct subject). The text is split into lines only when some are
+        contested (none on a campus of independent units)."""
         node_ids, node_part, claim = model_parts.node_ids, model_parts.node_part, minted.setdefault
         contested_subjects = set()
-        for subject in derived.subjects:
+        for subject in subjects:
             node = node_ids.get(subject)
             if (claim(subject, k) if node is None else node_part[node]) != k:
                 contested_subjects.add(subject)
         if not contested_subjects:
-            return cls(derived.lines, _ntriples(derived.lines), [])
+            return cls(text, [])
         owned, contested = [], []
-        for line in derived.lines:
+        for line in text.split(b"\n")[:-1]:
             (contested if line[: line.index(b" ")] in contested_subjects else owned).append(line)
-        return cls(owned, _ntriples(owned), contested)
+        return cls(_ntriples(owned), contested)
 
 
 def _uncontested(model_parts: ModelParts, minted: dict[bytes, int], results: list[_PartResult]) -> list[bytes]:
@@ -237,7 +265,7 @@ def _uncontested(model_parts: ModelParts, minted: dict[bytes, int], results: lis
         node = model_parts.node_ids.get(subject)
         owner = minted[subject] if node is None else model_parts.node_part[node]
         if owner not in known_of:
-            known_of[owner] = set(model_parts.parts[owner]) | set(results[owner].owned)
+            known_of[owner] = set(model_parts.parts[owner]) | set(results[owner].text.split(b"\n"))
         if line not in known_of[owner]:
             kept.setdefault(line)
     return list(kept)
@@ -308,6 +336,11 @@ def independent_parts(text: bytes, vocabulary: tuple[bytes, ...], part_triples: 
 
     :raises BlankNodeError: when a line holds a blank node.
     """
+    # imported here: an alignment worker process (service.alignment_workers) needs none of SciPy,
+    # and importing it would add a fifth to the worker's start
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
     classes = set(_TYPE_OBJECT.findall(text))  # a search of the text (C speed), not a test per line
     shared, body, subject_ids, starts, ends = [], [], [], [], []
     node_ids: dict[bytes, int] = {}

@@ -224,10 +224,11 @@ def _campus(n_units: int, extra: str = "") -> list[ox.Triple]:
     return skolemize(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "campus"), "urn:campus/genid/")
 
 
-def test_a_campus_aligned_in_independent_parts_side_by_side_derives_what_it_derives_whole():
+@pytest.mark.parametrize("processes", [False, True], ids=["threads", "processes"])
+def test_a_campus_aligned_in_independent_parts_side_by_side_derives_what_it_derives_whole(processes):
     ontology, campus = _ontology(), _campus(6)
     whole = inferred_triples(campus, ontology)
-    in_parts = inferred_triples(campus, ontology, part_triples=len(campus) // 5, workers=3)
+    in_parts = inferred_triples(campus, ontology, part_triples=len(campus) // 5, workers=3, processes=processes)
     assert len(in_parts) == len(set(in_parts)) and set(in_parts) == set(whole)
     assert any(t.predicate.value == "https://w3id.org/fso#suppliesFluidTo" for t in whole)
 
@@ -272,10 +273,12 @@ def test_units_linked_through_a_model_node_stay_in_one_part_and_classes_units_an
         assert set(inferred_triples(campus, ontology, part_triples=1, workers=2)) == set(whole)
 
 
-def test_a_node_several_parts_mint_or_another_part_states_is_derived_as_it_is_whole(monkeypatch):
+@pytest.mark.parametrize("processes", [False, True], ids=["threads", "processes"])
+def test_a_node_several_parts_mint_or_another_part_states_is_derived_as_it_is_whole(monkeypatch, processes):
     """Parts are aligned apart, so a rule may mint in one part a node that another part mints too or
     states: every unit mints the same node (its lines once each), and ahu1's twin is stated by a
-    part of its own (what the model states is not derived)."""
+    part of its own (what the model states is not derived). Worker processes get the rules with
+    the context they are started with (the patched library here)."""
     minting = ("99-mint.rq", """PREFIX brick: <https://brickschema.org/schema/Brick#>
         CONSTRUCT { <urn:everywhere> <urn:sees> ?ahu ; a brick:Site . ?twin a brick:Supply_Fan ; <urn:twinOf> ?ahu . }
         WHERE { ?ahu a brick:Air_Handling_Unit . BIND(IRI(CONCAT(STR(?ahu), "_twin")) AS ?twin) }""")
@@ -285,7 +288,7 @@ def test_a_node_several_parts_mint_or_another_part_states_is_derived_as_it_is_wh
     campus = _campus(6, f"\n{twin} a brick:Supply_Fan ; rdfs:label \"stated twin\" .")
     ontology = _ontology()
     whole = inferred_triples(campus, ontology)
-    in_parts = inferred_triples(campus, ontology, part_triples=1, workers=3)
+    in_parts = inferred_triples(campus, ontology, part_triples=1, workers=3, processes=processes)
     assert len(in_parts) == len(set(in_parts)) and set(in_parts) == set(whole)
     everywhere = [t for t in whole if t.subject == ox.NamedNode("urn:everywhere")]
     assert len(everywhere) == 7  # a brick:Site once, and each of the six units seen

@@ -1,7 +1,7 @@
 """Brick → SAREF/FSO alignment at scale: a generated Brick campus (tests/bench/brick_campus.py: the
 Brick FLEXLAB unit with VAV zones, every tenth unit described by its points only) aligned by the
 rules in queries/alignment (service.alignment.inferred_ntriples, as GraphStore.load_model runs them:
-independent parts side by side on one thread per CPU), against loading the same triples
+independent parts side by side in one worker process per CPU), against loading the same triples
 into an in-memory Oxigraph store (the baseline, measured in the same run). In memory: the alignment
 runs in a scratch in-memory store whatever the backend, so disk is not the point.
 
@@ -16,6 +16,7 @@ ratio with the load it was measured beside.
 from __future__ import annotations
 
 import argparse
+import resource
 import time
 
 import pyoxigraph as ox
@@ -28,6 +29,12 @@ from service.sparql_reads import query_reads
 from service.store import parse_rdf, skolemize
 
 GOAL_S = 10.0
+
+
+def _children_cpu_s() -> float:
+    """CPU seconds of this process's ended child processes (the alignment's worker processes)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def main() -> None:
@@ -60,14 +67,16 @@ def main() -> None:
         load_s = time.perf_counter() - start
         del baseline
 
-        start, start_cpu = time.perf_counter(), time.process_time()
+        start, start_cpu, start_workers_cpu = time.perf_counter(), time.process_time(), _children_cpu_s()
         derived = inferred_ntriples(triples, ontology)
         align_s, align_cpu_s = time.perf_counter() - start, time.process_time() - start_cpu
+        workers_cpu_s = _children_cpu_s() - start_workers_cpu
         lines = [line for chunk in derived for line in chunk.splitlines()]
         fluid = sum(1 for line in lines if b" <https://w3id.org/fso#suppliesFluidTo> " in line)
         met.append(align_s < GOAL_S)
         print(f"run {run}: plain load into an in-memory store {load_s:.2f} s (the baseline); alignment: {len(lines)} triples "
-              f"derived ({fluid} fso:suppliesFluidTo) in {align_s:.2f} s (CPU {align_cpu_s:.2f} s on {usable_cpu_count()} CPUs) "
+              f"derived ({fluid} fso:suppliesFluidTo) in {align_s:.2f} s (CPU {align_cpu_s + workers_cpu_s:.2f} s on {usable_cpu_count()} CPUs: "
+              f"this process {align_cpu_s:.2f} s, worker processes {workers_cpu_s:.2f} s) "
               f"= {align_s / load_s:.1f}x the plain load; goal < {GOAL_S:.0f} s: {'met' if align_s < GOAL_S else 'NOT met'}")
     print(f"goal < {GOAL_S:.0f} s met in {sum(met)} of {len(met)} runs")
 

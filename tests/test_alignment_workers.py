@@ -1,0 +1,63 @@
+"""Alignment worker processes (service/alignment_workers.py): parts aligned in fresh interpreters
+give what the parent's own alignment gives, and a failing or dead worker is a clear error."""
+
+import dataclasses
+import os
+import signal
+
+import pyoxigraph as ox
+import pytest
+
+from service.alignment import _aligned_part, _Context, _ntriples, _vocabulary, independent_parts
+from service.alignment_workers import AlignmentWorkerError, AlignmentWorkers
+from service.resources import ontologies_dir
+from service.store import parse_rdf, skolemize
+from tests.bench.brick_campus import campus_turtle
+
+
+@pytest.fixture(scope="module")
+def ontology():
+    return skolemize([t for p in sorted(ontologies_dir().glob("*.ttl"))
+                      for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))], "urn:ontology/genid/")
+
+
+@pytest.fixture(scope="module")
+def context(ontology):
+    return _Context.of(ontology)
+
+
+@pytest.fixture(scope="module")
+def unit_texts(ontology) -> list[bytes]:
+    """The N-Triples texts of the independent parts of a small Brick campus, one per unit."""
+    campus = skolemize(parse_rdf(campus_turtle(4, n_zones=2, points_only_every=2).encode(), ox.RdfFormat.TURTLE, "c"),
+                       "urn:campus/genid/")
+    parts = independent_parts(ox.serialize(campus, format=ox.RdfFormat.N_TRIPLES), _vocabulary(ontology), part_triples=1)
+    return [_ntriples(parts.shared + part) for part in parts.parts]
+
+
+def test_workers_answer_each_part_in_order_as_the_parent_would(context, unit_texts):
+    texts = unit_texts
+    assert len(texts) == 4
+    with AlignmentWorkers(2) as workers:
+        aligned = workers.map(context, texts)
+        again = workers.map(context, texts[::-1])  # a second call on the same workers
+    mine = [_aligned_part(text, context) for text in texts]
+    assert len(aligned) == len(texts) and all(text for text, _subjects in aligned)
+    for (text, subjects), (my_text, my_subjects) in zip(aligned, mine, strict=True):
+        assert set(text.split(b"\n")) == set(my_text.split(b"\n")) and set(subjects) == set(my_subjects)
+    assert [set(text.split(b"\n")) for text, _ in again] == [set(text.split(b"\n")) for text, _ in aligned[::-1]]
+
+
+def test_a_rule_failing_in_a_worker_is_raised_with_the_workers_traceback(context):
+    broken = dataclasses.replace(context, rules=("CONSTRUCT { ?s ?p ?o } WHERE { ?s ?p }",) * len(context.rules))
+    with AlignmentWorkers(2) as workers, pytest.raises(AlignmentWorkerError, match=r"(?s)failed:.*Traceback.*SyntaxError"):
+        workers.map(broken, [_ntriples([b"<urn:a> <urn:b> <urn:c> ."])] * 3)
+
+
+def test_a_worker_that_died_is_reported_with_its_exit_status(context, unit_texts):
+    with AlignmentWorkers(1) as workers:
+        process = workers._processes[0]
+        os.kill(process.pid, signal.SIGKILL)
+        process.wait()
+        with pytest.raises(AlignmentWorkerError, match=rf"worker {process.pid} exited with status -{int(signal.SIGKILL)}"):
+            workers.map(context, unit_texts)
