@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import os
+from joblib import cpu_count
 
 __all__ = ["usable_cpu_count"]
 
 
 def usable_cpu_count() -> int:
-    """The CPUs this process may be scheduled on (its affinity mask where the OS has one, as
-    ``taskset`` or a container's ``--cpuset-cpus`` set it; else every CPU), at least 1."""
-    if hasattr(os, "sched_getaffinity"):
-        return max(len(os.sched_getaffinity(0)), 1)
-    return os.cpu_count() or 1
+    """The CPUs this process may use, at least 1 (joblib's count): the fewest of the machine's CPUs,
+    its affinity mask (``taskset``, a container's ``--cpuset-cpus``), its cgroup's CPU bandwidth
+    limit (a container's ``--cpus``, a Kubernetes CPU limit: a process that counted the host's CPUs
+    there would start a worker per host CPU and share two) and ``LOKY_MAX_CPU_COUNT``."""
+    return cpu_count(only_physical_cores=False)
