@@ -181,7 +181,7 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
         :func:`independent_parts`); a model smaller than two parts is aligned whole.
     :param processes: align the parts in worker processes (:class:`service.alignment_workers.AlignmentWorkers`)
         rather than threads (default: with more than one worker, for a model of
-        :data:`PROCESS_TRIPLES` or more). Threads share Python's lock for the rules' bookkeeping of
+        :data:`PROCESS_TRIPLES` or more, where a worker process starts; threads otherwise). Threads share Python's lock for the rules' bookkeeping of
         new lines (two reach 1.7x one); processes do not, but each part's text and result cross a
         pipe, and the workers start anew on each call (~0.5 s, while this process cuts the model).
     :raises BlankNodeError: when the model or the ontology holds a blank node (a load into the scratch
@@ -200,10 +200,15 @@ def inferred_ntriples(model: Iterable[ox.Triple], ontology: Iterable[ox.Triple],
             context = _Context.of(ontology, _lines_with(text, _CLASS_AXIOM_INFIXES))
             return [_ntriples(_derived(text, context).lines)]
         workers = workers or usable_cpu_count()
-        if processes is None:
-            processes = workers > 1 and n_triples >= PROCESS_TRIPLES
-        # worker processes start (importing this module) on the other CPU while this one cuts the model
-        with AlignmentWorkers(workers) if processes else nullcontext() as worker_processes:
+        worker_processes = None
+        if processes or processes is None and workers > 1 and n_triples >= PROCESS_TRIPLES:
+            # they start (importing this module) on the other CPU while this one cuts the model
+            try:
+                worker_processes = AlignmentWorkers(workers)
+            except OSError:
+                if processes:  # asked for, not chosen: say why not
+                    raise
+        with worker_processes or nullcontext():
             # a large model's pass over its lines finds its blank nodes and its class axioms (among the
             # shared schema lines) on the way: three scans of its text fewer
             model_parts = independent_parts(text, _vocabulary(ontology), part_triples)

@@ -40,14 +40,24 @@ class AlignmentWorkerError(RuntimeError):
 class AlignmentWorkers:
     """``n`` worker processes, started on creation; use as a context manager (they end on exit).
 
+    :raises OSError: when a worker process cannot be started (the ones started are ended).
+
     :meth:`map` sends each worker the context, then parts one at a time to whichever worker is free
     (one thread per worker waits on its pipe, without Python's lock)."""
 
     def __init__(self, n: int) -> None:
         # the worker imports this package from where this process found it, whatever its own path
         path = os.pathsep.join(p for p in (_PACKAGE_PARENT, os.environ.get("PYTHONPATH")) if p)
-        self._processes = [subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                            env={**os.environ, "PYTHONPATH": path}) for _ in range(max(n, 1))]
+        self._processes: list[subprocess.Popen] = []
+        try:
+            for _ in range(max(n, 1)):
+                self._processes.append(subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
+                                                        stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": path}))
+        except OSError:  # no interpreter to start (an embedded Python, a process limit): none left running
+            for process in self._processes:
+                process.kill()
+            self.close()
+            raise
 
     def map(self, context: Any, texts: Iterable[bytes]) -> list[tuple[bytes, list[bytes]]]:
         """:func:`service.alignment._aligned_part` of each text with ``context``, in order.

@@ -4,11 +4,13 @@ give what the parent's own alignment gives, and a failing or dead worker is a cl
 import dataclasses
 import os
 import signal
+import subprocess
 
 import pyoxigraph as ox
 import pytest
 
-from service.alignment import _aligned_part, _Context, _ntriples, _vocabulary, independent_parts
+import service.alignment
+from service.alignment import _aligned_part, _Context, _ntriples, _vocabulary, independent_parts, inferred_triples
 from service.alignment_workers import AlignmentWorkerError, AlignmentWorkers
 from service.resources import ontologies_dir
 from service.store import parse_rdf, skolemize
@@ -61,3 +63,27 @@ def test_a_worker_that_died_is_reported_with_its_exit_status(context, unit_texts
         process.wait()
         with pytest.raises(AlignmentWorkerError, match=rf"worker {process.pid} exited with status -{int(signal.SIGKILL)}"):
             workers.map(context, unit_texts)
+
+
+def test_workers_that_cannot_start_leave_none_running_and_the_alignment_falls_back_to_threads(monkeypatch, ontology):
+    started = []
+    real_popen = subprocess.Popen
+
+    def second_fails(*args, **kwargs):
+        if started:
+            raise OSError("process limit reached")
+        started.append(real_popen(*args, **kwargs))
+        return started[0]
+
+    monkeypatch.setattr(subprocess, "Popen", second_fails)
+    with pytest.raises(OSError, match="process limit"):
+        AlignmentWorkers(2)
+    assert started and started[0].poll() is not None  # the one started was ended
+
+    campus = skolemize(parse_rdf(campus_turtle(4, n_zones=2, points_only_every=2).encode(), ox.RdfFormat.TURTLE, "c"),
+                       "urn:campus/genid/")
+    whole = set(inferred_triples(campus, ontology))
+    monkeypatch.setattr(service.alignment, "PROCESS_TRIPLES", 1)  # processes chosen: they fail to start, threads align
+    assert set(inferred_triples(campus, ontology, part_triples=1, workers=2)) == whole
+    with pytest.raises(OSError, match="process limit"):  # asked for: the reason is raised
+        inferred_triples(campus, ontology, part_triples=1, workers=2, processes=True)
