@@ -54,9 +54,7 @@ class AlignmentWorkers:
                 self._processes.append(subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
                                                         stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": path}))
         except OSError:  # no interpreter to start (an embedded Python, a process limit): none left running
-            for process in self._processes:
-                process.kill()
-            self.close()
+            self.close(kill=True)
             raise
 
     def map(self, context: Any, texts: Iterable[bytes]) -> list[tuple[bytes, list[bytes]]]:
@@ -91,8 +89,12 @@ class AlignmentWorkers:
                 future.result()
         return [results[k] for k in range(len(results))]
 
-    def close(self) -> None:
-        """End the workers: end of input, then a wait (a worker still busy is killed)."""
+    def close(self, *, kill: bool = False) -> None:
+        """End the workers: end of input, then a wait (a worker still busy after it is killed; all of
+        them at once with ``kill``)."""
+        if kill:
+            for process in self._processes:
+                process.kill()
         for process in self._processes:
             try:
                 process.stdin.close()
@@ -110,10 +112,7 @@ class AlignmentWorkers:
         return self
 
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None) -> None:
-        if error is not None:
-            for process in self._processes:
-                process.kill()
-        self.close()
+        self.close(kill=error is not None)
 
 
 def _serve() -> None:

@@ -28,7 +28,7 @@ def skolemize(triples: Iterable[ox.Triple], prefix: str,
 
 
 def _skolemized(triples: list[ox.Triple], prefix: str, names: dict[ox.BlankNode, ox.NamedNode]) -> list[ox.Triple]:
-    """:func:`skolemize` of a list (``names`` filled in place)."""
+    """:func:`skolemize` of a list of its own, renamed in place (``names`` filled in place)."""
     blank = ox.BlankNode
     # most triples of a model hold no blank node: those are kept as they are (making a new triple
     # for each of a million cost 3.5 s)
@@ -51,8 +51,7 @@ def _skolemized(triples: list[ox.Triple], prefix: str, names: dict[ox.BlankNode,
             named = names[term] = ox.NamedNode(value)
         return named
 
-    renamed = list(triples)
     for i in with_blank:
         t = triples[i]
-        renamed[i] = ox.Triple(iri(t.subject), t.predicate, iri(t.object))
-    return renamed
+        triples[i] = ox.Triple(iri(t.subject), t.predicate, iri(t.object))
+    return triples

@@ -8,19 +8,16 @@ import subprocess
 
 import pyoxigraph as ox
 import pytest
+from brick_models import campus_triples, ontology_triples
 
 import service.alignment
 from service.alignment import _aligned_part, _Context, _ntriples, _vocabulary, independent_parts, inferred_triples
 from service.alignment_workers import AlignmentWorkerError, AlignmentWorkers
-from service.resources import ontologies_dir
-from service.store import parse_rdf, skolemize
-from tests.bench.brick_campus import campus_turtle
 
 
 @pytest.fixture(scope="module")
 def ontology():
-    return skolemize([t for p in sorted(ontologies_dir().glob("*.ttl"))
-                      for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))], "urn:ontology/genid/")
+    return ontology_triples()
 
 
 @pytest.fixture(scope="module")
@@ -31,9 +28,7 @@ def context(ontology):
 @pytest.fixture(scope="module")
 def unit_texts(ontology) -> list[bytes]:
     """The N-Triples texts of the independent parts of a small Brick campus, one per unit."""
-    campus = skolemize(parse_rdf(campus_turtle(4, n_zones=2, points_only_every=2).encode(), ox.RdfFormat.TURTLE, "c"),
-                       "urn:campus/genid/")
-    parts = independent_parts(ox.serialize(campus, format=ox.RdfFormat.N_TRIPLES), _vocabulary(ontology), part_triples=1)
+    parts = independent_parts(ox.serialize(campus_triples(4), format=ox.RdfFormat.N_TRIPLES), _vocabulary(ontology), part_triples=1)
     return [_ntriples(parts.shared + part) for part in parts.parts]
 
 
@@ -80,8 +75,7 @@ def test_workers_that_cannot_start_leave_none_running_and_the_alignment_falls_ba
         AlignmentWorkers(2)
     assert started and started[0].poll() is not None  # the one started was ended
 
-    campus = skolemize(parse_rdf(campus_turtle(4, n_zones=2, points_only_every=2).encode(), ox.RdfFormat.TURTLE, "c"),
-                       "urn:campus/genid/")
+    campus = campus_triples(4)
     whole = set(inferred_triples(campus, ontology))
     monkeypatch.setattr(service.alignment, "PROCESS_TRIPLES", 1)  # processes chosen: they fail to start, threads align
     assert set(inferred_triples(campus, ontology, part_triples=1, workers=2)) == whole

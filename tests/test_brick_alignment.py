@@ -8,6 +8,7 @@ from collections import defaultdict
 
 import pyoxigraph as ox
 import pytest
+from brick_models import campus_triples, ontology_triples
 from shared_data import OFFICIAL_BRICK, SCHOOL
 
 import service.alignment
@@ -16,7 +17,7 @@ from service.assembly import IncompleteModelError, assemble
 from service.resources import examples_dir, ontologies_dir
 from service.sparql_reads import QueryReads
 from service.store import GraphStore, parse_rdf, skolemize
-from tests.bench.brick_campus import CAMPUS_NAMESPACE, campus_turtle
+from tests.bench.brick_campus import CAMPUS_NAMESPACE
 
 BRICK = "https://brickschema.org/schema/Brick#"
 GT = "https://w3id.org/graphtwin/ontology#"
@@ -53,11 +54,6 @@ def store():
 
 def _nodes(model, iris):
     return sorted(model.components[i].node.removeprefix(EX) for i in iris)
-
-
-def _ontology() -> list[ox.Triple]:
-    return skolemize([t for p in sorted(ontologies_dir().glob("*.ttl"))
-                      for t in parse_rdf(p.read_bytes(), ox.RdfFormat.TURTLE, str(p))], "urn:ontology/genid/")
 
 
 def test_a_unit_described_by_its_points_gets_the_equipment_they_imply(store):
@@ -138,7 +134,7 @@ def test_a_unit_without_a_fan_command_is_incomplete_and_says_so():
 
 
 def test_the_rules_reach_their_fixpoint_in_one_pass_and_leave_saref_models_alone(store):
-    ontology = _ontology()
+    ontology = ontology_triples()
     model = store.graph_triples(store.model_graph("points"))
     derived = inferred_triples(model, ontology)
     assert derived and inferred_triples(model + derived, ontology) == []
@@ -151,7 +147,7 @@ def test_the_rules_reach_their_fixpoint_in_one_pass_and_leave_saref_models_alone
 def test_re_running_only_the_rules_whose_reads_changed_reaches_the_same_fixpoint(store, example, monkeypatch):
     """The scheduler skips a rule until a triple it could read was added; with every rule re-run after
     every addition (the reads analysis switched off) the derived triples are the same."""
-    ontology = _ontology()
+    ontology = ontology_triples()
     model = (store.graph_triples(store.model_graph("points")) if example == "points" else
              parse_rdf((examples_dir() / example / "model.ttl").read_bytes(), ox.RdfFormat.TURTLE, example))
     scheduled = inferred_triples(model, ontology)
@@ -207,7 +203,7 @@ def test_two_coils_at_one_path_position_are_both_fed_and_both_feed_the_next():
     two heating coils (position 1) sit side by side between the mixing section and the cooling coil."""
     model = parse_rdf(POINTS_ONLY.replace(":fan_cmd a", ':hw2_cmd a brick:Valve_Command ; brick:isPointOf :ahu ; '
                                           'rdfs:label "Htg Valve 2" .\n:fan_cmd a').encode(), ox.RdfFormat.TURTLE, "two")
-    ontology = _ontology()
+    ontology = ontology_triples()
     derived = inferred_triples(model, ontology)
     placed = {t.subject for t in derived if t.predicate.value == GT + "assumedPathPosition"}
     feeds = {(t.subject.value.removeprefix(EX), t.object.value.removeprefix(EX)) for t in derived
@@ -217,16 +213,9 @@ def test_two_coils_at_one_path_position_are_both_fed_and_both_feed_the_next():
                      ("chw_cmd_coil", "ahu_supply_fan"), ("ahu_supply_fan", "ahu_served_zone")}
 
 
-def _campus(n_units: int, extra: str = "") -> list[ox.Triple]:
-    """A small Brick campus (tests/bench/brick_campus.py: every third unit described by its points
-    only), blank nodes as IRIs, with ``extra`` Turtle appended."""
-    text = campus_turtle(n_units, n_zones=2, points_only_every=3) + extra
-    return skolemize(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "campus"), "urn:campus/genid/")
-
-
 @pytest.mark.parametrize("processes", [False, True], ids=["threads", "processes"])
 def test_a_campus_aligned_in_independent_parts_side_by_side_derives_what_it_derives_whole(processes):
-    ontology, campus = _ontology(), _campus(6)
+    ontology, campus = ontology_triples(), campus_triples(6)
     whole = inferred_triples(campus, ontology)
     in_parts = inferred_triples(campus, ontology, part_triples=len(campus) // 5, workers=3, processes=processes)
     assert len(in_parts) == len(set(in_parts)) and set(in_parts) == set(whole)
@@ -244,7 +233,7 @@ def test_every_model_cut_into_its_finest_parts_derives_what_it_derives_whole(sou
     if not path.is_file():
         pytest.skip(f"{path} is absent (../shared/realdata is not checked out here)")
     model = skolemize(parse_rdf(path.read_bytes(), ox.RdfFormat.TURTLE, str(path)), "urn:model/genid/")
-    ontology = _ontology()
+    ontology = ontology_triples()
     whole = inferred_triples(model, ontology)
     assert whole and set(inferred_triples(model, ontology, part_triples=1, workers=2)) == set(whole)
 
@@ -259,9 +248,9 @@ def test_units_linked_through_a_model_node_stay_in_one_part_and_classes_units_an
     plant = f"""
 <{CAMPUS_NAMESPACE}plant> a brick:Chiller ; rdfs:label "plant" ;
     brick:feeds <{CAMPUS_NAMESPACE}ahu1#cooling_coil>, <{CAMPUS_NAMESPACE}ahu4#cooling_coil> ."""
-    ontology = _ontology()
+    ontology = ontology_triples()
     for extra, together in (("", set()), (plant, {"ahu1", "ahu4"})):
-        campus = _campus(6, extra)
+        campus = campus_triples(6, extra)
         vocabulary = service.alignment._vocabulary(ontology)
         model_parts = independent_parts(ox.serialize(campus, format=ox.RdfFormat.N_TRIPLES), vocabulary, part_triples=1)
         units = [{_unit_of(line) for line in part if line.startswith(b"<" + CAMPUS_NAMESPACE.encode() + b"ahu")}
@@ -285,8 +274,8 @@ def test_a_node_several_parts_mint_or_another_part_states_is_derived_as_it_is_wh
     shipped = alignment_rules()
     monkeypatch.setattr(service.alignment, "alignment_rules", lambda: shipped + (minting,))
     twin = f"<{CAMPUS_NAMESPACE}ahu1#ahu_twin>"
-    campus = _campus(6, f"\n{twin} a brick:Supply_Fan ; rdfs:label \"stated twin\" .")
-    ontology = _ontology()
+    campus = campus_triples(6, f"\n{twin} a brick:Supply_Fan ; rdfs:label \"stated twin\" .")
+    ontology = ontology_triples()
     whole = inferred_triples(campus, ontology)
     in_parts = inferred_triples(campus, ontology, part_triples=1, workers=3, processes=processes)
     assert len(in_parts) == len(set(in_parts)) and set(in_parts) == set(whole)
@@ -300,15 +289,15 @@ def test_a_node_several_parts_mint_or_another_part_states_is_derived_as_it_is_wh
 def test_the_n_triples_alignment_asks_for_blank_nodes_to_be_skolemised_first():
     model = parse_rdf(POINTS_ONLY.encode(), ox.RdfFormat.TURTLE, "points")
     with pytest.raises(BlankNodeError, match="blank nodes"):
-        inferred_ntriples(model, _ontology())
+        inferred_ntriples(model, ontology_triples())
     # a model aligned in parts finds them in its pass over the lines: as a subject, an object, a type
-    campus = _campus(2)
+    campus = campus_triples(2)
     blank, fan = ox.BlankNode("b1"), campus[0].subject
     for triple in (ox.Triple(blank, ox.NamedNode("urn:p"), fan), ox.Triple(fan, ox.NamedNode("urn:p"), blank),
                    ox.Triple(fan, ox.NamedNode("http://www.w3.org/1999/02/22-rdf-syntax-ns#type"), blank)):
         with pytest.raises(BlankNodeError, match="blank nodes"):
-            inferred_ntriples([*campus, triple], _ontology(), part_triples=1)
-    derived = inferred_triples(model, _ontology())  # blank nodes aligned as IRIs and named back
+            inferred_ntriples([*campus, triple], ontology_triples(), part_triples=1)
+    derived = inferred_triples(model, ontology_triples())  # blank nodes aligned as IRIs and named back
     series = {t.object.value for t in derived if t.predicate.value == GT + "timeSeriesId"}
     assert "rat_column" in series and not any("alignment:blank-node" in str(t) for t in derived)
 
@@ -352,7 +341,7 @@ ex:ead a brick:Exhaust_Damper ; brick:feeds ex:ef . ex:ef a brick:Exhaust_Fan .
 ex:oad a brick:Outside_Damper ; brick:feeds ex:mix . ex:rad a brick:Return_Damper ; brick:feeds ex:mix .
 ex:mix a brick:HVAC_Equipment ; brick:feeds ex:ccl . ex:ccl a brick:Cooling_Coil ; brick:feeds ex:sf .
 ex:sf a brick:Supply_Fan ; brick:feeds ex:room . ex:sat a brick:Supply_Air_Temperature_Sensor ."""
-    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "relief"), _ontology())
+    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "relief"), ontology_triples())
     placed = {t.object.value.rsplit("#", 1)[-1] for t in derived if t.predicate.value == GT + "measuresAtOutletOf"
               and t.subject.value.endswith("#sat")}
     assert placed == {"sf"}
@@ -370,7 +359,7 @@ ex:vav1 a brick:VAV ; brick:feeds ex:room1 . ex:vav2 a brick:VAV . ex:room2 a br
 ex:room1 a brick:HVAC_Zone .
 ex:lobby a brick:HVAC_Zone ; brick:feeds ex:oad .
 ex:ahu2 a brick:Air_Handling_Unit ; brick:feeds ex:room3 . ex:room3 a brick:HVAC_Zone ."""
-    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "served"), _ontology())
+    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "served"), ontology_triples())
 
     def local(term):
         return term.value.rsplit("#", 1)[-1]
@@ -391,7 +380,7 @@ ex:economizer a brick:Economizer ; brick:hasPart ex:oad . ex:rad brick:isPartOf 
 ex:oad a brick:Outside_Damper . ex:rad a brick:Return_Damper . ex:actuator brick:isPartOf ex:oad .
 ex:vav a brick:VAV ; brick:hasPart ex:reheat . ex:reheat a brick:Hot_Water_Coil .
 ex:ahu2 a brick:Air_Handling_Unit ; brick:hasPart ex:fan2 . ex:fan2 a brick:Supply_Fan ."""
-    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "parts"), _ontology())
+    derived = inferred_triples(parse_rdf(text.encode(), ox.RdfFormat.TURTLE, "parts"), ontology_triples())
     parts = {(t.subject.value.rsplit("#", 1)[-1], t.object.value.rsplit("#", 1)[-1]) for t in derived
              if t.predicate.value == GT + "partOfUnit"}
     assert parts == {("economizer", "ahu"), ("oad", "ahu"), ("rad", "ahu"), ("actuator", "ahu"), ("fan2", "ahu2")}
