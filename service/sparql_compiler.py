@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import pyoxigraph as ox
 
-from .namespaces import PREFIXES, S4BLDG
+from .namespaces import PREFIXES, RDF, RDFS, S4BLDG
 from .signature import PatternTriple, Rule, Signature
 
 __all__ = ["CompiledQuery", "QueryPart", "Traversal", "compile_signature"]
@@ -76,12 +76,18 @@ class Traversal:
 class QueryPart:
     """A piece of the pattern joined by exact triples: ``text`` is its SELECT query binding
     ``nodes`` (None when the part is one node reached only by traverses: the instances of
-    ``classes``); ``block`` is the optional block it belongs to (None: required)."""
+    ``classes``); ``block`` is the optional block it belongs to (None: required). The query is not
+    DISTINCT: the matcher drops repeated rows (cheaper in Python than in the store).
+
+    ``reads``: each predicate its triples use, with the objects they can take (``rdf:type``: the
+    classes listed; a fixed IRI; None: any), so the matcher can leave out of its dataset a graph that
+    holds none of them (see :meth:`~service.signature_matcher.MatchSession.dataset_for`)."""
 
     nodes: tuple[str, ...]
     text: str | None
     classes: tuple[str, ...] = ()
     block: int | None = None
+    reads: tuple[tuple[str, tuple[str, ...] | None], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -205,11 +211,37 @@ class _Writer:
             lines.append("}")
         return lines
 
-    def select(self, nodes, lines: list[str], title: str) -> str:
+    def reads(self, triples: list[PatternTriple], nodes) -> tuple[tuple[str, tuple[str, ...] | None], ...]:
+        """What a group over ``triples`` restricting the classes of ``nodes`` reads (see
+        :attr:`QueryPart.reads`): each exact triple's predicate with its fixed object or any object,
+        ``rdf:type`` with the classes listed (with the ``rdfs:subClassOf*`` path: any class, and the
+        subclass triples)."""
+        objects: dict[str, set[str] | None] = {}
+
+        def read(predicate: str, values) -> None:
+            if values is None or objects.get(predicate, set()) is None:
+                objects[predicate] = None
+            else:
+                objects.setdefault(predicate, set()).update(values)
+
+        for triple in triples:
+            if triple.rule is not Rule.TRAVERSE:
+                fixed = self.signature.nodes[triple.object].iri
+                read(triple.predicate, None if fixed is None else [fixed])
+        for node_id in nodes:
+            classes = self.signature.nodes[node_id].classes
+            if classes and self.subclasses is not None:
+                read(RDF.iri("type"), [sub for c in classes for sub in (c, *self.subclasses[c])])
+            elif classes:
+                read(RDF.iri("type"), None)
+                read(RDFS.iri("subClassOf"), None)
+        return tuple((p, None if o is None else tuple(sorted(o))) for p, o in sorted(objects.items()))
+
+    def select(self, nodes, lines: list[str], title: str, distinct: bool = True) -> str:
         projected = " ".join(f"?{n}" for n in nodes if not self.signature.nodes[n].iri)
         prefix_lines = "\n".join(f"PREFIX {p}: <{ns}>" for p, ns in PREFIXES.items())
         body = "\n".join(f"  {line}" for line in lines)
-        return f"{prefix_lines}\n# {title}\nSELECT DISTINCT {projected} WHERE {{\n{body}\n}}\n"
+        return f"{prefix_lines}\n# {title}\nSELECT {'DISTINCT ' if distinct else ''}{projected} WHERE {{\n{body}\n}}\n"
 
 
 def _components(nodes: list[str], triples: list[PatternTriple]) -> list[list[str]]:
@@ -298,7 +330,8 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
         lines = part_writer.group(triples, _fewest_first(component, set(component), instance_counts), set(component),
                                   [blocks[b] for b in mine], [owns[b] for b in mine])
         parts.append(QueryPart(tuple(n for n in bound if not signature.nodes[n].iri),
-                               writer.select(bound, lines, f"signature {signature.id}: part {len(parts) + 1}")))
+                               writer.select(bound, lines, f"signature {signature.id}: part {len(parts) + 1}", False),
+                               reads=part_writer.reads(triples + [t for b in mine for t in blocks[b]], bound)))
     for number, index in enumerate(matcher_blocks):
         own = [n for n in order if n in owns[index]]
         block_exact = [t for t in blocks[index] if t.rule is not Rule.TRAVERSE]
@@ -312,8 +345,8 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
             restricted = set(component) & owns[index]
             lines = part_writer.group(triples, _fewest_first(component, restricted, instance_counts), restricted, [], [])
             parts.append(QueryPart(tuple(n for n in component if not signature.nodes[n].iri),
-                                   writer.select(component, lines, f"signature {signature.id}: part {len(parts) + 1}"),
-                                   block=number))
+                                   writer.select(component, lines, f"signature {signature.id}: part {len(parts) + 1}", False),
+                                   block=number, reads=part_writer.reads(triples, restricted)))
 
     traversals = [
         _traversal(signature, t, number)

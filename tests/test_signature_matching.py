@@ -252,6 +252,54 @@ def test_a_part_query_starts_from_its_node_with_fewest_instances():
     assert _pairs(match_signature(store, signature, session=session), "room", "sensor") == [("r", "s1"), ("r", "s2")]
 
 
+def test_each_query_reads_the_graphs_that_hold_what_it_reads_and_the_matches_span_them():
+    # the model holds the fans, a second graph the inferred types and links, a third the ontology
+    model, inferred, ontology = (ox.NamedNode(f"{X}graph/{name}") for name in ("model", "inferred", "ontology"))
+    store = ox.Store()
+    store.load(ONTOLOGY.encode(), ox.RdfFormat.TURTLE, to_graph=ontology)
+    store.load(f"@prefix x: <{X}> . x:f1 a x:Fan ; x:hasValue x:pv1 . x:pv1 x:value 1.5 . x:f2 a x:Fan .".encode(),
+               ox.RdfFormat.TURTLE, to_graph=model)
+    store.load(f"@prefix x: <{X}> . x:pv1 a x:PropertyValue . x:f3 a x:Coil ; x:feeds x:s1 . x:s1 a x:Sensor .".encode(),
+               ox.RdfFormat.TURTLE, to_graph=inferred)
+    session = MatchSession(store, [model, inferred, ontology])
+    fan, value, feeds = X + "Fan", X + "value", X + "feeds"
+    rdf_type = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
+    assert session.dataset_for(((value, None),)) == [model]  # no other graph holds x:value
+    assert session.dataset_for(((feeds, None),)) == [model, inferred]
+    assert session.dataset_for(((rdf_type, (fan,)),)) == [model]  # only the model types fans
+    assert session.dataset_for(((rdf_type, (X + "PropertyValue",)),)) == [model, inferred]
+    assert session.dataset_for(((rdf_type, None),)) == [model, inferred, ontology]  # owl:Class is a type too
+    assert session.dataset_for(((value, None), ("http://www.w3.org/2000/01/rdf-schema#subClassOf", None))) == [
+        model, ontology]
+    nominal = signature_from_dict({
+        "id": "Nominal", "modeled_nodes": ["fan"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"fan": {"classes": [X + "Equipment"]}, "pv": {"classes": [X + "PropertyValue"]}, "v": {"literal": True}},
+        "triples": [{"subject": "fan", "predicate": X + "hasValue", "object": "pv", "rule": "optional"},
+                    {"subject": "pv", "predicate": value, "object": "v", "rule": "optional"}],
+    })
+    [part] = session.compiled(nominal).parts  # subclasses from the ontology; the value's type from the inferred graph
+    assert session.dataset_for(part.reads) == [model, inferred]
+    found = {m["fan"].rsplit("#")[-1]: m["v"] for m in match_signature(store, nominal, session=session)}
+    assert found == {"f1": "1.5", "f2": None, "f3": None}
+    assert _pairs(match_signature(store, _sensor_upstream(), session=session)) == [("f3", "s1")]
+
+
+def test_a_node_typed_twice_gives_one_match():
+    # typed with a class and its subclass, and the type stated in two graphs: the part's rows repeat
+    graph_a, graph_b = ox.NamedNode(X + "graph/a"), ox.NamedNode(X + "graph/b")
+    store = _store("")
+    store.load(f"@prefix x: <{X}> . x:f a x:Fan, x:Equipment ; x:feeds x:s . x:s a x:Sensor .".encode(),
+               ox.RdfFormat.TURTLE, to_graph=graph_a)
+    store.load(f"@prefix x: <{X}> . x:f a x:Fan .".encode(), ox.RdfFormat.TURTLE, to_graph=graph_b)
+    signature = signature_from_dict({
+        "id": "Feeds", "modeled_nodes": ["up"], "model": "service.measuring_device:MeasuringDevice",
+        "nodes": {"up": {"classes": [X + "Equipment"]}, "s": {"classes": [X + "Sensor"]}},
+        "triples": [{"subject": "up", "predicate": X + "feeds", "object": "s"}],
+    })
+    default = ox.DefaultGraph()
+    assert _pairs(match_signature(store, signature, default_graph=[graph_a, graph_b, default]), "up", "s") == [("f", "s")]
+
+
 def test_a_traverse_does_not_pass_through_a_building_space():
     # a fan coil recirculating room air: the sensor's nearest upstream device is the coil; the coil's
     # is nothing (across the room lies the supply sensor, whose air the room changes)
