@@ -54,6 +54,7 @@ _SUBCLASS = "http://www.w3.org/2000/01/rdf-schema#subClassOf"
 _ROW = "\0row"  # column of the input row index while an optional block is joined
 _UNBOUND = ""  # a row's term for a node its optional part left unbound
 _COUNT_CAP = 10_000  # instance counts stop there (counting 40k sensors costs 20 ms at 1M triples)
+_SCANNED_TRIPLES = 100_000  # a graph beyond the model with more is read by every query (see dataset_for)
 
 Row = tuple  # the terms (TSV text) of a row's bound nodes, in the order of its columns
 Reads = tuple[tuple[str, tuple[str, ...] | None], ...]  # predicate IRI, the objects read (None: any)
@@ -148,7 +149,7 @@ class MatchSession:
         self._counts: dict[tuple[str, ...], int] = {}
         self._part_rows: dict[str, list[Row]] = {}
         self._near: dict[tuple, dict[str, frozenset[str]]] = {}
-        self._graph_contents: dict[ox.NamedNode, tuple[frozenset[str], frozenset[str]]] = {}
+        self._graph_contents: dict[ox.NamedNode, tuple[frozenset[str], frozenset[str]] | None] = {}
         self._datasets: dict[Reads, list[ox.NamedNode] | None] = {}
         self.literals = _Literals()
         self.values = _Values(self.literals)
@@ -161,11 +162,12 @@ class MatchSession:
     def dataset_for(self, reads: Reads) -> list[ox.NamedNode] | None:
         """The session's graphs a query reading ``reads`` (predicate IRI → the objects its triples can
         take, None: any; :attr:`~service.sparql_compiler.QueryPart.reads`) can match a triple in: the
-        first graph (the model, which holds most of what patterns read) always, each other one only
-        when it holds one of those predicates (``rdf:type``: with one of those classes). The answers
-        are the same; a graph left out costs no lookups (over model + inferred + ontologies every
-        triple pattern is looked up in each: the signatures' part queries at 1M triples took 1.5 s
-        over the three, 1.2 s over the graphs they read)."""
+        first graph (the model) always, each other one when it holds one of those predicates
+        (``rdf:type``: with one of those classes) or is too large to look through (more than
+        :data:`_SCANNED_TRIPLES`: a Brick model's inferred view). The answers are the same; a graph
+        left out costs no lookups (over model + inferred + ontologies every triple pattern is looked
+        up in each: the signatures' part queries at 1M triples took 1.5 s over the three, 1.2 s over
+        the graphs they read)."""
         if self.default_graph is None:
             return None
         if reads not in self._datasets:
@@ -174,14 +176,24 @@ class MatchSession:
         return self._datasets[reads]
 
     def _holds(self, graph: ox.NamedNode, reads: Reads) -> bool:
-        if graph not in self._graph_contents:  # two scans of a graph other than the model: small
-            predicates = _select(self.store, "SELECT DISTINCT ?p WHERE { ?s ?p ?o }", ("p",), [graph])
-            classes = _select(self.store, f"SELECT DISTINCT ?c WHERE {{ ?s <{_RDF_TYPE}> ?c }}", ("c",), [graph])
-            self._graph_contents[graph] = (frozenset(p[1:-1] for (p,) in predicates),
-                                           frozenset(c[1:-1] for (c,) in classes if c.startswith("<")))
+        if graph not in self._graph_contents:
+            self._graph_contents[graph] = self._contents(graph)
+        if self._graph_contents[graph] is None:
+            return True
         predicates, classes = self._graph_contents[graph]
         return any(p in predicates and (p != _RDF_TYPE or objects is None or not classes.isdisjoint(objects))
                    for p, objects in reads)
+
+    def _contents(self, graph: ox.NamedNode) -> tuple[frozenset[str], frozenset[str]] | None:
+        """The predicates of ``graph`` and the classes typed in it; None when it holds more than
+        :data:`_SCANNED_TRIPLES` triples (the scan stops there: 20 ms)."""
+        query = (f"SELECT ?p (COUNT(*) AS ?n) WHERE {{ {{ SELECT ?p WHERE {{ ?s ?p ?o }} LIMIT {_SCANNED_TRIPLES + 1} }} }} "
+                 "GROUP BY ?p")
+        counted = _select(self.store, query, ("p", "n"), [graph])
+        if sum(int(n.split("^^")[0].strip('"')) for _, n in counted) > _SCANNED_TRIPLES:
+            return None
+        classes = _select(self.store, f"SELECT DISTINCT ?c WHERE {{ ?s <{_RDF_TYPE}> ?c }}", ("c",), [graph])
+        return (frozenset(p[1:-1] for p, _ in counted), frozenset(c[1:-1] for (c,) in classes if c.startswith("<")))
 
     def part_rows(self, part: QueryPart) -> list[Row]:
         """The distinct rows of ``part``'s query (over ``part.nodes``); a query another signature's

@@ -3,6 +3,7 @@
 import pyoxigraph as ox
 import pytest
 
+from service import signature_matcher
 from service.resources import signatures_dir
 from service.signature import load_signature, signature_from_dict
 from service.signature import load_signature_library
@@ -252,7 +253,7 @@ def test_a_part_query_starts_from_its_node_with_fewest_instances():
     assert _pairs(match_signature(store, signature, session=session), "room", "sensor") == [("r", "s1"), ("r", "s2")]
 
 
-def test_each_query_reads_the_graphs_that_hold_what_it_reads_and_the_matches_span_them():
+def test_each_query_reads_the_graphs_that_hold_what_it_reads_and_the_matches_span_them(monkeypatch):
     # the model holds the fans, a second graph the inferred types and links, a third the ontology
     model, inferred, ontology = (ox.NamedNode(f"{X}graph/{name}") for name in ("model", "inferred", "ontology"))
     store = ox.Store()
@@ -282,6 +283,9 @@ def test_each_query_reads_the_graphs_that_hold_what_it_reads_and_the_matches_spa
     found = {m["fan"].rsplit("#")[-1]: m["v"] for m in match_signature(store, nominal, session=session)}
     assert found == {"f1": "1.5", "f2": None, "f3": None}
     assert _pairs(match_signature(store, _sensor_upstream(), session=session)) == [("f3", "s1")]
+    # a graph too large to look through is read by every query
+    monkeypatch.setattr(signature_matcher, "_SCANNED_TRIPLES", 3)  # the inferred graph holds 4, the ontology more
+    assert MatchSession(store, [model, inferred, ontology]).dataset_for(((value, None),)) == [model, inferred, ontology]
 
 
 def test_a_node_typed_twice_gives_one_match():
