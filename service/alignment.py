@@ -75,6 +75,7 @@ from .alignment_workers import AlignmentWorkers
 from .blank_nodes import skolemize
 from .cpu_count import usable_cpu_count
 from .cyclic_gc import cyclic_gc_paused
+from .namespaces import GT, GTR, RDF, RDFS
 from .ntriples import triple_list
 from .resources import queries_dir
 from .sparql_reads import QueryReads, query_reads
@@ -125,6 +126,18 @@ PROCESS_TRIPLES = 200_000
 def alignment_rules() -> tuple[tuple[str, str], ...]:
     """``(file name, query text)`` of every rule in ``queries/alignment``, in file-name order."""
     return tuple((p.name, p.read_text(encoding="utf-8")) for p in sorted((queries_dir() / "alignment").glob("*.rq")))
+
+
+def alignment_rule_triples() -> list[ox.Triple]:
+    """The rules as triples: each a ``gt:AlignmentRule`` ``gtr:alignment/rule/<file name>`` with its
+    file name (``rdfs:label``) and text (``gt:queryText``). The store keeps them beside the inferred
+    graphs they derived (:meth:`service.store.GraphStore.ensure_ontologies`)."""
+    triples = []
+    for name, text in alignment_rules():
+        rule = GTR[f"alignment/rule/{name}"]
+        triples += [ox.Triple(rule, RDF.type, GT.AlignmentRule), ox.Triple(rule, RDFS.label, ox.Literal(name)),
+                    ox.Triple(rule, GT.queryText, ox.Literal(text))]
+    return triples
 
 
 @lru_cache(maxsize=1)

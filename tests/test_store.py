@@ -7,12 +7,13 @@ import pyoxigraph as ox
 import pytest
 
 from service.store import (
-    ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, StoreInUseError, bind_values, insert_data_update,
+    ALIGNMENT_RULES_GRAPH, ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, StoreInUseError, bind_values, insert_data_update,
 )
 
 from case_study import CASE_STUDY, EX
 from store_holder import held_by_another_process
 
+SAREF = "https://saref.etsi.org/core/"
 BROKEN = b"""@prefix ex: <https://example.org/x#> .
 ex:a ex:b ex:c .
 ex:d zz:e ex:f .
@@ -88,6 +89,57 @@ def test_replacing_a_model_removes_its_assembly_in_the_same_write(case_store):
     assert case_store.assembly_graph("case") not in case_store.backend.graphs()
     assert len(updates) == 1 and f"DROP SILENT GRAPH {case_store.assembly_graph('case')}" in updates[0]
     assert case_store.backend.triple_count(other) == 1
+
+
+def test_a_model_loaded_again_unchanged_is_left_as_it_is(case_store):
+    """Every CLI command loads its model file: one the store holds triple for triple is not written
+    again, and keeps its inferences and its assembly; a changed one replaces them."""
+    assembly = [ox.Triple(ox.NamedNode(EX + "c"), ox.NamedNode(EX + "p"), ox.Literal("assembled"))]
+    case_store.write_graph(case_store.assembly_graph("case"), assembly)
+    inferred = set(case_store.graph_triples(case_store.inferred_graph("case")))
+    writes = []
+    replace_graphs = case_store.backend.replace_graphs
+    case_store.backend.replace_graphs = lambda graphs: (writes.append(list(graphs)), replace_graphs(graphs))
+    reordered = b"\n".join(reversed(case_store.backend.dump(case_store.model_graph("case"), ox.RdfFormat.N_TRIPLES).splitlines()))
+    assert case_store.load_model("case", reordered, "nt") == case_store.backend.triple_count(case_store.model_graph("case"))
+    assert writes == []
+    assert case_store.graph_triples(case_store.assembly_graph("case")) == assembly
+    assert set(case_store.graph_triples(case_store.inferred_graph("case"))) == inferred
+    case_store.load_model("case", reordered + b"\n<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
+    assert writes == [[case_store.model_graph("case"), case_store.inferred_graph("case"), case_store.assembly_graph("case")]]
+    assert case_store.assembly_graph("case") not in case_store.backend.graphs()
+
+
+def test_a_model_changed_in_the_store_is_loaded_again_from_its_file(case_store):
+    # a SPARQL update removed a triple: the file is no longer what the store holds
+    graph = case_store.model_graph("case")
+    held = set(case_store.graph_triples(graph))
+    case_store.backend.update(f"DELETE {{ GRAPH {graph} {{ ?s ?p ?o }} }} WHERE {{ GRAPH {graph} {{ ?s ?p ?o }} "
+                              f"FILTER(?p = <https://saref.etsi.org/core/hasValue>) }}")
+    assert set(case_store.graph_triples(graph)) < held
+    case_store.load_model("case", CASE_STUDY)
+    assert set(case_store.graph_triples(graph)) == held
+
+
+def test_a_store_derived_with_other_alignment_rules_gets_its_inferences_again(tmp_path):
+    store = GraphStore.embedded(tmp_path / "data")
+    store.load_model("case", CASE_STUDY)
+    inferred = set(store.graph_triples(store.inferred_graph("case")))
+    rules = set(store.graph_triples(ALIGNMENT_RULES_GRAPH))
+    assert {t.object.value for t in rules if t.predicate.value.endswith("label")} >= {"20-property-of.rq", "40-quantity-kinds.rq"}
+    # what an older graphtwin left: one rule fewer, and its inferences without what that rule derives
+    store.backend.update(f"DELETE WHERE {{ GRAPH {ALIGNMENT_RULES_GRAPH} {{ ?rule <http://www.w3.org/2000/01/rdf-schema#label> "
+                         f"\"20-property-of.rq\" ; ?p ?o }} }}")
+    older = [t for t in inferred if t.predicate.value not in (SAREF + "isPropertyOf", SAREF + "hasProperty")]
+    assert len(older) < len(inferred)
+    store.write_graph(store.inferred_graph("case"), older)
+    del store
+    reopened = GraphStore.embedded(tmp_path / "data")
+    assert reopened.ensure_ontologies() is True
+    assert set(reopened.graph_triples(ALIGNMENT_RULES_GRAPH)) == rules
+    assert set(reopened.graph_triples(reopened.inferred_graph("case"))) == inferred
+    reopened.load_model("case", CASE_STUDY)  # the file unchanged: the inferences stay the fresh ones
+    assert set(reopened.graph_triples(reopened.inferred_graph("case"))) == inferred
 
 
 class _LookingTogether:
