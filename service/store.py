@@ -20,10 +20,11 @@ endpoint with the graph store protocol). Contracts, as pyoxigraph's:
 * every write is one transaction: a reader sees a graph before or after, never half of it; a model
   and what alignment infers from it are written together (:meth:`GraphStore.write_graphs`), and
   the model's old assembly is removed in the same write (a model loaded again unchanged is not
-  written: :meth:`GraphStore.load_model`). The embedded store replaces existing
+  written: :meth:`GraphStore.load_model`). The embedded store in memory replaces existing
   graphs by loading the new triples into staging graphs (``gtr:staging/…``, a query over every
-  named graph may see them for that moment) and moving them into place in one update, several
-  times faster than ``INSERT DATA``; its writes run one at a time, so two writes of the same graphs
+  named graph may see them for that moment) and moving them into place in one update, twice as fast
+  as ``INSERT DATA``; on disk by one ``INSERT DATA`` update (:meth:`EmbeddedBackend.replace_graphs`);
+  its writes run one at a time, so two writes of the same graphs
   at once leave the last one whole, never both merged;
 * a load parses everything first and raises :class:`ModelLoadError` (file, line, column) before
   anything is written: a failed load leaves the store as it was. A leading UTF-8 byte-order mark
@@ -355,13 +356,18 @@ class EmbeddedBackend:
         self.replace_graphs({graph: triples})
 
     def replace_graphs(self, graphs):
-        """One N-Quads load (a transaction) when none of ``graphs`` exists yet; else the load into
-        staging graphs, then one update that moves them into place. Either is several times faster
-        than parsing the same triples as ``INSERT DATA``."""
+        """One N-Quads load (a transaction) when none of ``graphs`` exists yet. Else, in memory, the
+        load into staging graphs, then one update that moves them into place (2× faster than parsing
+        the triples as ``INSERT DATA``); on disk, where moving a graph copies and deletes it in one
+        RocksDB transaction, one ``DROP`` + ``INSERT DATA`` update (a 300k-triple model replaced in
+        28 s, not 48–54 s)."""
         texts = {g: [chunk for chunk in ntriples_chunks(t) if chunk] for g, t in graphs.items()}
         with self._write_lock:
             if not any(self.store.contains_named_graph(g) for g in texts):
                 self.store.load(_nquads(texts), ox.RdfFormat.N_QUADS, lenient=True)  # Oxigraph wrote the lines
+                return
+            if self.path is not None:
+                self.update(insert_data_update(texts))
                 return
             run = uuid.uuid4().hex
             staging = {g: ox.NamedNode(f"{STAGING}{run}/{i}") for i, g in enumerate(texts) if texts[g]}
@@ -532,7 +538,7 @@ class GraphStore:
         transaction that also removes the model's assembly graph (it described the model replaced);
         blank nodes are skolemised (module docstring). A model the store holds already, triple for
         triple, is left as it is, inferences and assembly included (every CLI command loads its model
-        file: on disk, replacing a 300k-triple model took 54 s, finding it unchanged 3 s).
+        file: on disk, finding a 300k-triple model unchanged takes 3 s, replacing it 28–31 s).
 
         :param source: a file path, or the RDF as bytes.
         :param format: ``ttl``, ``nt``, ``rdf``, ``jsonld`` or a media type; from the suffix when None
