@@ -226,6 +226,36 @@ def test_several_graphs_are_replaced_together_and_staging_leaves_nothing_behind(
     assert EmbeddedBackend(tmp_path / "store").graphs() == sorted([g2, other], key=lambda g: g.value)
 
 
+@pytest.mark.parametrize("on_disk", [True, False])
+def test_a_small_change_is_written_as_the_difference(tmp_path, on_disk):
+    """A model edited and loaded again: one update deletes the lines it lost and inserts the new ones;
+    a difference holding a blank node (which ``DELETE DATA`` cannot name) rewrites the graphs."""
+    backend = EmbeddedBackend(tmp_path / "store" if on_disk else None)
+    graph, other = ox.NamedNode("https://example.org/g/model"), ox.NamedNode("https://example.org/g/assembly")
+    p = ox.NamedNode("https://example.org/p")
+    triples = [ox.Triple(ox.NamedNode(f"https://example.org/s{i}"), p, ox.Literal(i)) for i in range(20)]
+    backend.replace_graphs({graph: triples, other: [ox.Triple(p, p, p)]})
+    updates = []
+    update = backend.update
+    backend.update = lambda sparql: (updates.append(sparql), update(sparql))
+
+    def held():
+        return set(backend.query(f"CONSTRUCT {{ ?s ?p ?o }} WHERE {{ GRAPH {graph} {{ ?s ?p ?o }} }}"))
+
+    edited = triples[1:] + [ox.Triple(ox.NamedNode("https://example.org/new"), p, ox.Literal("new"))]
+    backend.replace_graphs({graph: edited, other: []})
+    assert held() == set(edited) and other not in backend.graphs()
+    [sparql] = updates
+    assert "DELETE DATA" in sparql and "INSERT DATA" in sparql and sparql.count("https://example.org/s") == 1
+    backend.replace_graphs({graph: edited})
+    assert len(updates) == 1  # nothing changed, nothing written
+    with_blank = edited[:-1] + [ox.Triple(ox.BlankNode(), p, ox.Literal("blank"))]
+    backend.replace_graphs({graph: with_blank})
+    assert "DELETE DATA" not in updates[-1]
+    assert {t.object.value for t in held()} == {t.object.value for t in with_blank}
+    assert backend.graphs() == [graph]
+
+
 def test_on_disk_store_keeps_models_across_reopen(tmp_path):
     store = GraphStore.embedded(tmp_path / "data")
     store.load_model("case", CASE_STUDY)
