@@ -13,7 +13,7 @@ import os
 import re
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -26,9 +26,6 @@ from .assembly import AssemblyError, EffectRequest, assemble
 from .assembly_summary import assembly_to_dict, print_assembly
 from .assembly_triples import assembly_triples
 from .calibration_data import DEFAULT_GP_INPUTS
-from .calibration_run import calibrate, parse_window
-from .diagnosis import DiagnosisReport, diagnose
-from .error_history import error_history
 from .effect_recording import applied_effect_triples, record_effect_in_file
 from .measurements import MeasurementError
 from .namespaces import local_name
@@ -37,6 +34,9 @@ from .signature import SignatureError, load_signature_library
 from .sparql_compiler import compile_signature
 from .store import GraphStore, ModelLoadError, StoreInUseError
 from .units import unit_label
+
+if TYPE_CHECKING:  # the calibration and diagnosis modules are imported by the commands that run them
+    from .diagnosis import DiagnosisReport  # (SciPy, scikit-learn: a second of `graphtwin --help`)
 
 __all__ = ["app"]
 
@@ -219,6 +219,8 @@ def calibrate_command(
     memory: MemoryOption = False,
 ) -> None:
     """Calibrate MODEL against DATA; estimates, metrics and provenance are written to the store."""
+    from .calibration_run import calibrate, parse_window
+
     graph_store = open_store(store, memory)
     try:
         model_name = _load(graph_store, model, name)
@@ -392,6 +394,9 @@ def _save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
 
 def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects,
                   only_when, start_from) -> None:
+    from .calibration_run import parse_window
+    from .diagnosis import diagnose
+
     graph_store = open_store(store, memory)
     try:
         model_name = _load(graph_store, model, name)
@@ -457,6 +462,7 @@ def compare_strategies_command(
     """Joint against successive (regime by regime, Morris-planned) point calibration on TRAIN: RMSE
     and R² per operating regime and a blocked cross-validation, so you see which converges better.
     Nothing is written to the store."""
+    from .calibration_run import parse_window
     from .successive_calibration import compare_calibration_strategies
 
     graph_store = open_store(store, memory)
@@ -604,6 +610,8 @@ def history_command(
 ) -> None:
     """Test-window error per sensor and operating regime across the versions of a model (base,
     base+effect, …)."""
+    from .error_history import error_history
+
     graph_store = open_store(store, False)
     history = error_history(graph_store, model)
     if not history.versions:
@@ -683,6 +691,9 @@ def demo_command(
     store: StoreOption = Path("graphtwin-data"),
 ) -> None:
     """The whole loop on the case study with a hidden effect: before, where it fails, what is missing, after."""
+    from .calibration_run import calibrate
+    from .diagnosis import diagnose
+    from .error_history import error_history
     from .plots import plot_error_history, plot_measured_vs_model
     from .synthetic_data import generate_synthetic_data
 

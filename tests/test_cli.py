@@ -4,6 +4,8 @@ import csv
 import gc
 import io
 import json
+import subprocess
+import sys
 
 import pyoxigraph as ox
 from case_study import CASE_STUDY, EX
@@ -251,3 +253,12 @@ def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():
     rows = {line.split("│")[1].strip(): line for line in captured.get().splitlines() if line.count("│") > 2}
     assert "0.31 °C" in rows["setpoint > 18.5 °C"]
     assert "nan" not in rows["setpoint ≤ 14 °C"] and "–" in rows["setpoint ≤ 14 °C"]
+
+
+def test_the_command_line_starts_without_the_calibration_libraries():
+    """`graphtwin --help`, `assemble` and `query` do not import SciPy's optimisers or scikit-learn (a
+    second of start-up); the commands that calibrate import them when they run."""
+    probe = ("import sys, service.cli; print(sorted(m for m in ('scipy.optimize', 'sklearn', 'service.diagnosis', "
+             "'service.calibration_run') if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
+    assert loaded == "[]"
