@@ -84,6 +84,7 @@ from .resources import queries_dir, signatures_dir
 from .settings import Settings
 from .signature import load_signature_library
 from .sparql_endpoint_backend import SparqlEndpointError
+from .sparql_writes import written_graphs
 from .store import EmbeddedBackend, GraphStore, ModelLoadError, drain, query_bound, rdf_format
 
 __all__ = ["create_app", "ApiError", "MeasurementUploads", "query_form", "negotiate"]
@@ -629,12 +630,18 @@ async def sparql_post(
 
 
 def _update(store: GraphStore, text: str) -> None:
+    """Run the update, then derive again the inferences of every model whose graph it can have
+    changed (:func:`~service.sparql_writes.written_graphs`)."""
+    written = written_graphs(text)
     try:
         store.backend.update(text)
     except (SyntaxError, ValueError) as exc:
         raise ApiError(400, f"SPARQL Update syntax error: {exc}") from None
     except (RuntimeError, OSError) as exc:  # the store refused it as it ran (DROP of a graph that does not exist)
         raise ApiError(400, f"the update failed, nothing was changed: {exc}") from None
+    for name in store.models():
+        if written is None or store.model_graph(name).value in written:
+            store.realign(name)
 
 
 @router.post("/sparql/update", status_code=204, tags=["sparql"], dependencies=[WriteAccess],
@@ -643,7 +650,8 @@ def _update(store: GraphStore, text: str) -> None:
                  "application/x-www-form-urlencoded": {"schema": {"type": "object", "properties": {
                      "update": {"type": "string"}}}}}}})
 async def sparql_update(request: Request, service: ServiceDep) -> Response:
-    """SPARQL 1.1 Update (one transaction; a syntax error changes nothing)."""
+    """SPARQL 1.1 Update (one transaction; a syntax error changes nothing). A model whose graph it
+    changes gets its inferences derived again (the alignment rules: what the signatures match)."""
     body = await _read_body(request, service.settings.max_upload_bytes)
     content_type = (request.headers.get("content-type") or "").split(";")[0].strip().lower()
     if content_type == "application/sparql-update":

@@ -65,7 +65,7 @@ class QueryReads:
 
 #: rdflib's SPARQL grammar (pyparsing) is not safe to use from two threads at once: the first
 #: parses of two models loaded side by side failed with parse errors on valid rules.
-_PARSER_LOCK = threading.Lock()
+RDFLIB_PARSER_LOCK = threading.Lock()
 
 
 @lru_cache(maxsize=None)
@@ -74,7 +74,7 @@ def query_reads(text: str) -> QueryReads:
 
     :raises pyparsing.ParseException: when ``text`` is not SPARQL rdflib can parse.
     """
-    with _PARSER_LOCK:
+    with RDFLIB_PARSER_LOCK:
         algebra = prepareQuery(text).algebra["p"]
     collector = _Collector()
     collector.walk(algebra, {})

@@ -285,6 +285,24 @@ def test_sparql_update_with_the_token_writes(client, auth):
     assert client.get("/sparql", params={"query": ask}).json()["boolean"] is True
 
 
+def test_an_update_to_a_model_graph_derives_its_inferences_again(client, auth, store):
+    """A sensor added with the SAREF v3 spelling is matched only through what the alignment derives."""
+    sensor, fan_flow = "https://example.org/added_sensor", f"<{EX}supply_air_flow>"
+    update = (f"INSERT DATA {{ GRAPH {store.model_graph('case')} {{ <{sensor}> "
+              f"<https://saref.etsi.org/core/measuresProperty> {fan_flow} }} }}")
+    other = "INSERT DATA { GRAPH <https://example.org/g> { <https://example.org/a> <https://example.org/b> 1 } }"
+    realigned = []
+    realign = store.realign
+    store.realign = lambda name: (realigned.append(name), realign(name))[1]
+    assert client.post("/sparql/update", data={"update": other}, headers=auth).status_code == 204
+    assert realigned == []  # no model graph named
+    assert client.post("/sparql/update", data={"update": update}, headers=auth).status_code == 204
+    assert realigned == ["case"]
+    ask = (f"ASK {{ GRAPH {store.inferred_graph('case')} {{ <{sensor}> <https://saref.etsi.org/core/observes> "
+           f"{fan_flow} }} }}")
+    assert client.get("/sparql", params={"query": ask}).json()["boolean"] is True
+
+
 def test_a_query_over_the_time_limit_gets_503(tmp_path, store, monkeypatch):
     release = threading.Event()
     monkeypatch.setattr(api_module, "_execute", lambda *args: release.wait(30) and b"")
