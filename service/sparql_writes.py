@@ -52,9 +52,8 @@ def _named_graphs(operation: CompValue):
                 yield _graph(operation["withClause"])
     elif name in ("Clear", "Drop", "Load"):
         target = operation["graphiri"] if "graphiri" in operation else "DEFAULT"  # LOAD without INTO
-        if target == "DEFAULT":
-            return
-        yield _graph(target) if isinstance(target, URIRef) else None  # ALL, NAMED
+        if target != "DEFAULT":
+            yield _graph(target)  # None for ALL and NAMED
     elif name in ("Add", "Copy", "Move"):
         source, target = operation["graph"]
         if name == "Move" and isinstance(source, URIRef):
