@@ -45,7 +45,7 @@ import pyoxigraph as ox
 
 from .cyclic_gc import cyclic_gc_paused
 from .signature import Rule, Signature
-from .sparql_compiler import CompiledQuery, QueryPart, Traversal, compile_signature
+from .sparql_compiler import CompiledQuery, QueryPart, Reads, Traversal, compile_signature
 
 __all__ = ["Match", "MatchSession", "match_signature", "missing_class_report"]
 
@@ -57,7 +57,6 @@ _COUNT_CAP = 10_000  # instance counts stop there (counting 40k sensors costs 20
 _SCANNED_TRIPLES = 100_000  # a graph beyond the model with more is read by every query (see dataset_for)
 
 Row = tuple  # the terms (TSV text) of a row's bound nodes, in the order of its columns
-Reads = tuple[tuple[str, tuple[str, ...] | None], ...]  # predicate IRI, the objects read (None: any)
 
 
 class Match(dict):
@@ -88,6 +87,11 @@ def _ask(store, sparql: str, default_graph) -> bool:
         kwargs = {"default_graph": list(default_graph)} if default_graph is not None else {}
         return bool(store.query(sparql, **kwargs))
     return store.query(sparql, default_graph=default_graph)
+
+
+def _integer(term: str) -> int:
+    """The value of an integer's term text (a bare ``42`` or ``"42"^^<…#integer>``: a COUNT's answer)."""
+    return int(term.split("^^")[0].strip('"'))
 
 
 def _is_literal(term: str) -> bool:
@@ -190,7 +194,7 @@ class MatchSession:
         query = (f"SELECT ?p (COUNT(*) AS ?n) WHERE {{ {{ SELECT ?p WHERE {{ ?s ?p ?o }} LIMIT {_SCANNED_TRIPLES + 1} }} }} "
                  "GROUP BY ?p")
         counted = _select(self.store, query, ("p", "n"), [graph])
-        if sum(int(n.split("^^")[0].strip('"')) for _, n in counted) > _SCANNED_TRIPLES:
+        if sum(_integer(n) for _, n in counted) > _SCANNED_TRIPLES:
             return None
         classes = _select(self.store, f"SELECT DISTINCT ?c WHERE {{ ?s <{_RDF_TYPE}> ?c }}", ("c",), [graph])
         return (frozenset(p[1:-1] for p, _ in counted), frozenset(c[1:-1] for (c,) in classes if c.startswith("<")))
@@ -247,7 +251,7 @@ class MatchSession:
             query = (f"SELECT (COUNT(*) AS ?n) WHERE {{ {{ SELECT ?x WHERE {{ VALUES ?c {{ {listed} }} "
                      f"?x <{_RDF_TYPE}> ?c }} LIMIT {_COUNT_CAP} }} }}")
             [(count,)] = self.select(query, ("n",), ((_RDF_TYPE, classes),))
-            self._counts[classes] = int(count.split("^^")[0].strip('"'))
+            self._counts[classes] = _integer(count)
         return self._counts[classes]
 
     def instance_terms(self, classes: tuple[str, ...]) -> frozenset[str]:

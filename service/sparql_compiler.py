@@ -39,7 +39,10 @@ import pyoxigraph as ox
 from .namespaces import PREFIXES, RDF, RDFS, S4BLDG
 from .signature import PatternTriple, Rule, Signature
 
-__all__ = ["CompiledQuery", "QueryPart", "Traversal", "compile_signature"]
+__all__ = ["CompiledQuery", "QueryPart", "Reads", "Traversal", "compile_signature"]
+
+#: What a query reads: each predicate IRI with the objects its triples can take (None: any).
+Reads = tuple[tuple[str, tuple[str, ...] | None], ...]
 
 
 @dataclass(frozen=True)
@@ -87,7 +90,7 @@ class QueryPart:
     text: str | None
     classes: tuple[str, ...] = ()
     block: int | None = None
-    reads: tuple[tuple[str, tuple[str, ...] | None], ...] = ()
+    reads: Reads = ()
 
 
 @dataclass(frozen=True)
@@ -211,7 +214,7 @@ class _Writer:
             lines.append("}")
         return lines
 
-    def reads(self, triples: list[PatternTriple], nodes) -> tuple[tuple[str, tuple[str, ...] | None], ...]:
+    def reads(self, triples: list[PatternTriple], nodes) -> Reads:
         """What a group over ``triples`` restricting the classes of ``nodes`` reads (see
         :attr:`QueryPart.reads`): each exact triple's predicate with its fixed object or any object,
         ``rdf:type`` with the classes listed (with the ``rdfs:subClassOf*`` path: any class, and the

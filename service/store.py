@@ -390,8 +390,10 @@ class EmbeddedBackend:
         removed, added, rewritten = {}, {}, 0
         for graph, chunks in texts.items():
             new = set(b"".join(chunks).splitlines())
+            if not new:  # dropped below: not read
+                continue
             held = set(self.dump(graph, ox.RdfFormat.N_TRIPLES).splitlines())
-            removed[graph], added[graph] = (held - new, new - held) if new else (set(), set())
+            removed[graph], added[graph] = held - new, new - held
             rewritten += len(new)
         changed = [line for lines in (*removed.values(), *added.values()) for line in lines]
         if 2 * len(changed) > rewritten or any(b"_:" in line for line in changed):
