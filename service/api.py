@@ -526,10 +526,11 @@ def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | N
         raise ApiError(415, str(exc)) from None
     replaced = store.has_model(name)
     try:
-        triples = store.load_model(name, data, fmt.media_type, source_name=f"model {name}")
+        loaded = store.load_model(name, data, fmt.media_type, source_name=f"model {name}")
     except ModelLoadError as exc:
         raise ApiError(400, str(exc), line=exc.line, column=exc.column) from None
-    return {"name": name, "graph": store.model_graph(name).value, "triples": triples, "replaced": replaced}
+    return {"name": name, "graph": store.model_graph(name).value, "triples": loaded.triples, "replaced": replaced,
+            "changed": loaded.changed}
 
 
 @router.get("/models/{name}/brick-report", response_model=BrickReportPublic, tags=["models"],

@@ -91,6 +91,9 @@ class BrickReportPublic(BaseModel):
 class ModelUploaded(ModelSummary):
     triples: int
     replaced: bool = Field(description="a model of this name existed and was replaced")
+    changed: bool = Field(description=(
+        "the store changed: false when it held this model already, triple for triple (its inferences, "
+        "assembly and runs are kept as they were)"))
 
 
 class MeasurementsInfo(BaseModel):

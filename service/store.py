@@ -51,7 +51,7 @@ import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 from xml.parsers import expat
 
 import pyoxigraph as ox
@@ -65,7 +65,7 @@ from .signature import Signature
 
 __all__ = [
     "drain",
-    "ModelLoadError", "StoreInUseError", "SparqlBackend", "bind_values", "insert_data_update", "EmbeddedBackend", "GraphStore",
+    "ModelLoad", "ModelLoadError", "StoreInUseError", "SparqlBackend", "bind_values", "insert_data_update", "EmbeddedBackend", "GraphStore",
     "rdf_format", "parse_rdf", "skolemize", "ONTOLOGY_GRAPH", "SIGNATURE_GRAPH",
 ]
 
@@ -88,6 +88,14 @@ class ModelLoadError(ValueError):
         self.source, self.line, self.column = source, line, column
         where = f"{source}, line {line}, column {column}" if line is not None else source
         super().__init__(f"{where}: {message}")
+
+
+class ModelLoad(NamedTuple):
+    """What :meth:`GraphStore.load_model` did: the triples the source holds, and whether the store
+    changed (False: it held that model already, triple for triple, and kept it as it was)."""
+
+    triples: int
+    changed: bool
 
 
 class StoreInUseError(OSError):
@@ -568,7 +576,7 @@ class GraphStore:
         return True
 
     def load_model(self, name: str, source: Path | bytes | str, format: str | None = None, *,
-                   source_name: str | None = None) -> int:
+                   source_name: str | None = None) -> ModelLoad:
         """Load (or replace) building model ``name`` with what alignment infers from it, in one
         transaction that also removes the model's assembly graph (it described the model replaced);
         blank nodes are skolemised (module docstring). A model the store holds already, triple for
@@ -578,7 +586,7 @@ class GraphStore:
         :param source: a file path, or the RDF as bytes.
         :param format: ``ttl``, ``nt``, ``rdf``, ``jsonld`` or a media type; from the suffix when None
             (Turtle for bytes).
-        :returns: the number of triples loaded.
+        :returns: the number of triples the source holds, and whether the store changed.
         :raises ModelLoadError: the source does not parse or is empty; the store is unchanged.
         :raises FileNotFoundError: no file at ``source``.
         """
@@ -600,13 +608,13 @@ class GraphStore:
         triples = skolemize(triples, f"{GTR}model/{name}/genid/")
         self.ensure_ontologies()
         if self._holds_model(name, triples):
-            return len(triples)
+            return ModelLoad(len(triples), changed=False)
         self.write_graphs({
             self.model_graph(name): triples,
             self.inferred_graph(name): inferred_ntriples(triples, self._ontology_triples),
             self.assembly_graph(name): [],
         })
-        return len(triples)
+        return ModelLoad(len(triples), changed=True)
 
     def _holds_model(self, name: str, triples: list[ox.Triple]) -> bool:
         """Whether model ``name``'s graph holds exactly ``triples`` (compared as N-Triples lines, which

@@ -101,11 +101,13 @@ def test_a_model_loaded_again_unchanged_is_left_as_it_is(case_store):
     replace_graphs = case_store.backend.replace_graphs
     case_store.backend.replace_graphs = lambda graphs: (writes.append(list(graphs)), replace_graphs(graphs))
     reordered = b"\n".join(reversed(case_store.backend.dump(case_store.model_graph("case"), ox.RdfFormat.N_TRIPLES).splitlines()))
-    assert case_store.load_model("case", reordered, "nt") == case_store.backend.triple_count(case_store.model_graph("case"))
+    held = case_store.backend.triple_count(case_store.model_graph("case"))
+    assert case_store.load_model("case", reordered, "nt") == (held, False)
     assert writes == []
     assert case_store.graph_triples(case_store.assembly_graph("case")) == assembly
     assert set(case_store.graph_triples(case_store.inferred_graph("case"))) == inferred
-    case_store.load_model("case", reordered + b"\n<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
+    edited = reordered + b"\n<https://example.org/a> <https://example.org/b> <https://example.org/c> ."
+    assert case_store.load_model("case", edited, "nt") == (held + 1, True)
     assert writes == [[case_store.model_graph("case"), case_store.inferred_graph("case"), case_store.assembly_graph("case")]]
     assert case_store.assembly_graph("case") not in case_store.backend.graphs()
 
@@ -178,7 +180,7 @@ def test_two_loads_of_a_new_model_at_once_leave_one_of_them_whole():
     for writer in writers:
         writer.join()
     subjects = {t.subject.value.split("/")[3] for t in store.graph_triples(store.model_graph("x"))}
-    assert loaded == [50, 50] and len(subjects) == 1 and store.backend.triple_count(store.model_graph("x")) == 50
+    assert loaded == [(50, True), (50, True)] and len(subjects) == 1 and store.backend.triple_count(store.model_graph("x")) == 50
 
 
 def test_a_store_another_process_holds_is_refused_with_a_clear_error(tmp_path):

@@ -31,7 +31,7 @@ def _snapshot(store: GraphStore) -> set:
 ])
 def test_a_utf8_byte_order_mark_is_skipped(fmt, doc):
     store = GraphStore.embedded(None)
-    assert store.load_model("m", BOM + doc, fmt) == 1
+    assert store.load_model("m", BOM + doc, fmt).triples == 1
     assert store.graph_triples(store.model_graph("m")) == [ox.Triple(*(ox.NamedNode(EX + n) for n in "abc"))]
     with pytest.raises(ModelLoadError) as info:  # positions count from the first character after it
         store.load_model("m", BOM + b"@prefix ex: <http://ex.org/> .\nex:a ex:b ex:c ex:d .\n", "ttl")
@@ -67,7 +67,7 @@ def test_json_ld_refuses_what_it_would_drop_and_names_the_iri(store, node, iri):
         store.load_model("m", json.dumps(doc).encode(), "jsonld")
     assert _snapshot(store) == before
     doc["@graph"].pop()
-    assert store.load_model("m", json.dumps(doc).encode(), "jsonld") == 2
+    assert store.load_model("m", json.dumps(doc).encode(), "jsonld").triples == 2
 
 
 _RDF_XML = b"""<?xml version='1.0'?>
@@ -89,7 +89,7 @@ def test_rdf_xml_that_is_not_well_formed_is_refused_with_line_and_column(store, 
         store.load_model("m", doc, "rdf")
     assert (info.value.line, info.value.column) == (line, column)
     assert _snapshot(store) == before
-    assert store.load_model("m", _RDF_XML, "rdf") == 2
+    assert store.load_model("m", _RDF_XML, "rdf").triples == 2
 
 
 def test_blank_nodes_added_to_an_exported_model_stay_apart_from_its_nodes():

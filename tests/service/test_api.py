@@ -89,13 +89,17 @@ def test_a_model_uploads_in_every_format_and_is_replaced(client, auth, store, fm
     body = ox.serialize(triples, format=fmt)
     created = client.put("/models/copy", content=body, headers={**auth, "Content-Type": fmt.media_type})
     assert created.status_code == 201, created.text
-    assert created.json()["triples"] == len(set(triples)) and not created.json()["replaced"]
+    assert created.json()["triples"] == len(set(triples)) and not created.json()["replaced"] and created.json()["changed"]
     assert store.backend.triple_count(store.model_graph("copy")) == len(set(triples))
     replaced = client.put("/models/copy", content=body[: len(body)], headers={**auth, "Content-Type": fmt.media_type})
-    assert replaced.status_code == 200 and replaced.json()["replaced"]
+    assert replaced.status_code == 200 and replaced.json()["replaced"] and not replaced.json()["changed"]
+    added = ox.Triple(ox.NamedNode("https://example.org/added"), ox.NamedNode("https://example.org/p"), ox.Literal("x"))
+    edited = client.put("/models/copy", content=ox.serialize([*triples, added], format=fmt),
+                        headers={**auth, "Content-Type": fmt.media_type})
+    assert edited.status_code == 200 and edited.json()["changed"] and edited.json()["triples"] == len(set(triples)) + 1
     assert [m["name"] for m in client.get("/models").json()["data"]] == ["case", "copy"]
     info = client.get("/models/copy").json()
-    assert info["triples"] == len(set(triples)) and info["inferred_triples"] > 0 and not info["assembled"]
+    assert info["triples"] == len(set(triples)) + 1 and info["inferred_triples"] > 0 and not info["assembled"]
 
 
 def test_malformed_rdf_is_refused_with_line_and_column_and_changes_nothing(client, auth, store, snapshot):
