@@ -484,7 +484,8 @@ def add_effect_command(
     model: ModelFileArgument,
     effect: Annotated[str, typer.Option(help="Effect signature id, e.g. FanMotorHeat.")],
     target: Annotated[str, typer.Option(help="IRI of the building node the effect applies to.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Where to write the new model (Turtle).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help=(
+        "Where to write the new model, in the format of its suffix (.ttl, .nt, .rdf, .jsonld)."))],
 ) -> None:
     """Record EFFECT at TARGET in the semantic model (as triples); re-assembly picks it up."""
     library = load_signature_library(signatures_dir())
@@ -494,8 +495,11 @@ def add_effect_command(
     check = GraphStore.embedded(None)
     try:
         _load(check, model, "check")
-        assemble(check, "check", library=library, extra_effects=[EffectRequest(effect, target)])
-        record_effect_in_file(model, output, applied_effect_triples(signature, target))
+        assemble(check, "check", library=library, extra_effects=[EffectRequest(effect, target)])  # it applies there
+        recorded = applied_effect_triples(signature, target)
+        if recorded[0] in check.graph_triples(check.model_graph("check")):
+            raise fail(f"{effect} is recorded at {target} in {model} already: nothing to add")
+        record_effect_in_file(model, output, recorded)
     except USER_ERRORS as exc:
         raise fail(exc) from None
     console.print(f"{effect} recorded at {target} in {output}")

@@ -7,8 +7,9 @@ An applied effect is data in the building graph, so a user can also write it by 
         rdfs:label "FanMotorHeat at supply_fan" ; prov:generatedAtTime "…"^^xsd:dateTime .
 
 ``queries/applied-effects.rq`` finds them; :func:`service.assembly.assemble` splices each one.
-For a Turtle source the new triples are appended to the user's text (prefixes, comments and layout
-kept); any other format is re-serialised as Turtle.
+The new model is written in the format of the output file's suffix (``.ttl``, ``.nt``, ``.rdf``,
+``.jsonld``); where source and output are both Turtle or both N-Triples the new triples are appended to
+the user's text (prefixes, comments and layout kept), otherwise the model is re-serialised.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import pyoxigraph as ox
 
 from .namespaces import GT, GTR, PROV, RDF, RDFS, XSD, local_name
 from .signature import Signature
+from .store import rdf_format
 
 __all__ = ["applied_effect_iri", "applied_effect_triples", "record_effect_in_file"]
 
@@ -44,19 +46,25 @@ def applied_effect_triples(signature: Signature, node: str, when: datetime | Non
 
 
 def record_effect_in_file(source: Path, output: Path, triples: list[ox.Triple]) -> None:
-    """Write ``source`` plus ``triples`` to ``output`` (Turtle).
+    """Write ``source`` plus ``triples`` to ``output``, in the format its suffix names.
 
-    :raises ValueError: when ``output`` is ``source`` (the user's file is never overwritten).
+    :raises ValueError: when ``output`` is ``source`` (the user's file is never overwritten) or its
+        suffix names no RDF format graphtwin writes.
     """
     if output.resolve() == source.resolve():
         raise ValueError(f"{output}: write the new model to another file; graphtwin keeps the original")
+    try:
+        source_format, output_format = rdf_format(source.suffix), rdf_format(output.suffix)
+    except ValueError as exc:
+        raise ValueError(f"{output}: {exc}") from None
     block = "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in triples)
     header = f"\n# Added by graphtwin add-effect ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC)\n"
-    if source.suffix.lower() in (".ttl", ".nt"):
+    if source_format == output_format and source_format in (ox.RdfFormat.TURTLE, ox.RdfFormat.N_TRIPLES):
         text = source.read_text(encoding="utf-8")
         output.write_text(text.rstrip("\n") + "\n" + header + block + "\n", encoding="utf-8")
         return
-    fmt = ox.RdfFormat.from_extension(source.suffix.lstrip(".").lower())
-    quads = list(ox.parse(path=str(source), format=fmt))
-    body = ox.serialize([ox.Triple(q.subject, q.predicate, q.object) for q in quads], format=ox.RdfFormat.TURTLE)
-    output.write_bytes(body + (header + block + "\n").encode("utf-8"))
+    held = [ox.Triple(q.subject, q.predicate, q.object) for q in ox.parse(path=str(source), format=source_format)]
+    body = ox.serialize(held + triples, format=output_format)
+    if output_format in (ox.RdfFormat.TURTLE, ox.RdfFormat.N_TRIPLES):  # the formats with comments
+        body += header.encode("utf-8")
+    output.write_bytes(body)

@@ -12,8 +12,9 @@ in the warnings: exports of real BMS trends contain them). Values are converted 
 consumes them (:mod:`service.units`).
 
 **Checks**, all reported at once in one :class:`MeasurementError` naming the column and the line:
-non-numeric cells, unparseable, duplicate or unsorted time stamps, columns missing for a boundary
-input or a target. Columns no device claims are listed in ``warnings`` (an error with ``strict``),
+non-numeric cells, unparseable, duplicate or unsorted time stamps, rows with more or fewer fields
+than the header (a cell added or lost would shift the others into the wrong columns), columns missing
+for a boundary input or a target, two columns naming one device. Columns no device claims are listed in ``warnings`` (an error with ``strict``),
 and so are frozen points: a sensor whose value holds exactly for 12 hours or more
 (:func:`frozen_spans`; not for devices whose signature says ``holds_values``, schedules and commands).
 A position, command or speed (a fraction 0–1 in the model) above 1.5 after conversion is an error
@@ -217,7 +218,7 @@ def _check_fraction(values: np.ndarray, where: str, unit: str, problems: list[st
         return
     peak, label = float(np.max(np.abs(finite))), unit_label(unit)
     if peak > _FRACTION_MAX:
-        problems.append(f"{where}: reaches {peak:g} as a fraction (0–1) after conversion from {label}: "
+        problems.append(f"{where}: reaches {peak:g}, but its unit ({label}) makes it a fraction (0–1): "
                         f"is it in percent? Declare saref:isMeasuredIn unit:PERCENT")
     elif 0 < peak <= 0.01 and unit.endswith("/PERCENT"):
         warnings.append(f"{where}: never above {peak:g} as a fraction (0–1) after conversion from {label}: "
@@ -262,6 +263,9 @@ def read_measurements(
     for node, spec in specs.items():
         names = spec.names()
         found = [i for i, h in enumerate(header[1:], start=1) if h in names]
+        if len(found) > 1:
+            problems.append(f"columns {', '.join(f'{i + 1} ({header[i]!r})' for i in found)} all name device {node}: "
+                            "keep one (which one the model reads would be a guess)")
         if found:
             claimed[node] = found[0]
         elif spec.required:
@@ -277,10 +281,13 @@ def read_measurements(
     first_with_offset: dict[bool, tuple[int, str]] = {}
     values = {node: np.full(len(rows), np.nan) for node in claimed}
     error_cells: dict[str, int] = {}
+    misshapen: list[str] = []
     for line, row in enumerate(rows, start=2):
         if not row or all(not c.strip() for c in row):
             problems.append(f"line {line}: empty row")
             continue
+        if len(row) != len(header):  # a cell added or lost shifts every cell after it into another column
+            misshapen.append(f"line {line}: {len(row)} fields, the header has {len(header)}")
         try:
             stamp, with_offset = _parsed_timestamp(row[0])
             times.append(stamp)
@@ -304,6 +311,8 @@ def read_measurements(
                 values[node][line - 2] = value
             else:
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a finite number")
+    problems += misshapen[:10] + ([f"… and {len(misshapen) - 10} more lines whose fields do not match the header"]
+                                  if len(misshapen) > 10 else [])
     if len(times) < 2:
         problems.append("fewer than two data rows")
     if len(first_with_offset) == 2:

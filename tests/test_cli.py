@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pyoxigraph as ox
+import pytest
 from case_study import CASE_STUDY, EX
 from store_holder import held_by_another_process
 from typer.testing import CliRunner
@@ -58,6 +59,24 @@ def test_add_effect_records_triples_that_reassembly_picks_up(tmp_path):
     store.load_model("v2", output)
     model = assemble(store, "v2")
     assert any(c.signature.id == "ValveLeakage" for c in model.components.values())
+
+
+@pytest.mark.parametrize("suffix", [".jsonld", ".rdf", ".nt"])
+def test_add_effect_writes_the_format_its_output_names_and_refuses_the_same_effect_twice(tmp_path, suffix):
+    output = tmp_path / f"with_effect{suffix}"
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "ValveLeakage",
+                                 "--target", EX + "heating_valve", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    store = GraphStore.embedded(None)
+    store.load_model("v2", output)  # parsed as its suffix says
+    assert any(c.signature.id == "ValveLeakage" for c in assemble(store, "v2").components.values())
+    again = runner.invoke(app, ["add-effect", str(output), "--effect", "ValveLeakage",
+                                "--target", EX + "heating_valve", "-o", str(tmp_path / f"twice{suffix}")])
+    assert again.exit_code == 2 and "is recorded at" in again.output and "already" in again.output
+    assert not (tmp_path / f"twice{suffix}").exists()
+    unknown = runner.invoke(app, ["add-effect", str(output), "--effect", "FanMotorHeat",
+                                  "--target", EX + "supply_fan", "-o", str(tmp_path / "v3.txt")])
+    assert unknown.exit_code == 2 and "v3.txt" in unknown.output and "unsupported RDF format" in unknown.output
 
 
 def test_add_effect_refuses_an_effect_that_does_not_apply(tmp_path):

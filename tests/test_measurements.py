@@ -223,10 +223,37 @@ def test_a_percent_column_declared_as_a_fraction_is_refused_and_the_reverse_is_w
     valve = "https://example.org/x#valve"
     as_fraction = {valve: replace(SPECS[valve], unit="http://qudt.org/vocab/unit/UNITLESS")}
     path = _write(tmp_path, "time,valve\n2025-01-01 00:00,20\n2025-01-01 00:10,40\n")
-    with pytest.raises(MeasurementError, match="column 'valve': reaches 40 as a fraction .* is it in percent"):
+    with pytest.raises(MeasurementError, match=r"column 'valve': reaches 40, but its unit \(1\) makes it a fraction \(0–1\): is it in percent"):
         read_measurements(path, as_fraction)
     path = _write(tmp_path, "time,valve\n2025-01-01 00:00,0.2\n2025-01-01 00:10,0.4\n")
     data = read_measurements(path, {valve: SPECS[valve]})
     assert data.series[valve] == pytest.approx([0.002, 0.004])
     assert any("never above 0.004 as a fraction" in w and "UNITLESS" in w for w in data.warnings)
     assert read_measurements(path, as_fraction).warnings == ()
+
+
+def test_a_row_with_a_cell_added_or_lost_is_refused_by_line(tmp_path):
+    """A cell added or lost shifts the cells after it into other columns: read as they stand, a
+    temperature would land in the valve's column without a word."""
+    rows = ["time,SAT,valve"] + [f"2025-01-01 00:{m:02d},{50 + m},{m}" for m in range(0, 30)]
+    rows[3] += ",99"  # line 4: one field too many
+    rows[6] = rows[6].rsplit(",", 1)[0]  # line 7: one too few
+    with pytest.raises(MeasurementError) as info:
+        read_measurements(_write(tmp_path, "\n".join(rows)), SPECS)
+    assert "line 4: 4 fields, the header has 3" in str(info.value)
+    assert "line 7: 2 fields, the header has 3" in str(info.value)
+    rows = ["time,SAT,valve"] + [f"2025-01-01 00:{m:02d},{50 + m},0,{m}" for m in range(0, 30)]
+    with pytest.raises(MeasurementError) as info:
+        read_measurements(_write(tmp_path, "\n".join(rows)), SPECS)
+    assert str(info.value).count("fields, the header has 3") == 10  # ten lines, then how many more
+    assert "… and 20 more lines whose fields do not match the header" in str(info.value)
+
+
+def test_two_columns_naming_one_device_are_refused(tmp_path):
+    """Which of the two the model would read is a guess (the first, before: silently)."""
+    path = _write(tmp_path, "time,SAT,valve,SAT\n2025-01-01 00:00,20,10,25\n2025-01-01 00:10,21,10,26\n")
+    with pytest.raises(MeasurementError, match=r"columns 2 \('SAT'\), 4 \('SAT'\) all name device https://example.org/x#sat"):
+        read_measurements(path, SPECS)
+    path = _write(tmp_path, "time,SAT,valve,sat\n2025-01-01 00:00,20,10,25\n2025-01-01 00:10,21,10,26\n")  # by series id and local name
+    with pytest.raises(MeasurementError, match=r"columns 2 \('SAT'\), 4 \('sat'\) all name device"):
+        read_measurements(path, SPECS)
