@@ -23,6 +23,7 @@ spliced into one port of the component that represents its ``splice.node``.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import re
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
@@ -36,11 +37,11 @@ from .assembled_model import (
 )
 from .cyclic_gc import cyclic_gc_paused
 from .measuring_device import MeasuringDevice
-from .namespaces import GTR, RDFS, distinct_local_names, local_name
+from .namespaces import GTR, OWL, RDF, RDFS, distinct_local_names, local_name
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
 from .signature_matcher import MatchSession, match_signature, missing_class_report
-from .store import GraphStore
+from .store import ONTOLOGY_GRAPH, GraphStore
 from .units import convert
 
 __all__ = ["AssemblyError", "IncompleteModelError", "assemble", "EffectRequest", "component_iri", "without_model",
@@ -143,6 +144,7 @@ def assemble(
         instances[instance.iri] = instance
 
     notes += _values_without_unit(store, instances, session)
+    notes += _undeclared_class_notes(store, model_name)
     effect_requests = list(extra_effects) + recorded_effects(store, model_name, library)
     connections, unconnected = _wire(instances)
     for request in effect_requests:
@@ -159,6 +161,9 @@ def assemble(
 
     fed = {c.target for c in connections}
     boundary = tuple(sorted(i for i in devices if i not in fed))
+    read = {c.source for c in connections}
+    notes += [f"{_short(instances[i].node)}: measured, but no component reads it (what it drives or sets is not "
+              f"in the model)" for i in boundary if i not in read]
     targets = tuple(sorted(i for i in devices if i in fed))
     mapped, estimated = _parameters(instances)
     return AssembledModel(
@@ -295,6 +300,27 @@ def _values_without_unit(store: GraphStore, instances: Mapping[str, ComponentIns
                     f"(add <{match.get(holder_node)}> <{unit_triple.predicate}> <a QUDT unit IRI> .)")
     return [found[(iri, m.name)] for iri, instance in instances.items() for m in instance.signature.parameters
             if (iri, m.name) in found]
+
+
+def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
+    """One sentence per class that no loaded ontology declares and that is all a signature could see
+    of the nodes it types (``queries/undeclared-classes.rq``), with the declared class its name is
+    closest to when one is close (a misspelling): those nodes are in no component."""
+    rows = store.run_named_query("undeclared-classes", model_graph=store.model_graph(model_name),
+                                 inferred_graph=store.inferred_graph(model_name), ontology_graph=ONTOLOGY_GRAPH)
+    undeclared = [(row["class"].value, int(row["nodes"].value), row["first_node"].value) for row in rows]
+    if not undeclared:
+        return []
+    declared = sorted({t.subject.value for t in store.graph_triples(ONTOLOGY_GRAPH)
+                       if t.predicate == RDF.type and t.object in (OWL.Class, RDFS.Class) and isinstance(t.subject, ox.NamedNode)})
+    notes = []
+    for cls, count, first in undeclared:
+        close = difflib.get_close_matches(cls, declared, n=1, cutoff=0.9)
+        nodes = first if count == 1 else f"{count} nodes, e.g. {first}"
+        notes.append(f"{_short(first)}: its class {cls} ({nodes}) is declared by no loaded ontology, and the node has "
+                     f"no other type a signature matches: no component models it"
+                     + (f" (did you mean {close[0]}?)" if close else ""))
+    return notes
 
 
 def _optional_block(signature: Signature, node: str, *, through: str, without: str) -> list[PatternTriple]:

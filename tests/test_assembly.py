@@ -231,3 +231,23 @@ def test_a_coil_without_a_fan_either_way_is_reported_with_both_directions_and_th
     assert any(p.startswith(f"{FLEXLAB}heating_coil is not modelled by HeatingCoil: no Fan upstream or downstream of "
                             f"{FLEXLAB}heating_coil along https://w3id.org/fso#suppliesFluidTo (the search stops at "
                             "MixingBox instances, building spaces") for p in info.value.problems), info.value.problems
+
+
+def test_a_misspelt_class_and_a_command_nothing_reads_are_notes():
+    """A coil typed with a class no ontology declares matches no signature: the assembly says so and
+    which declared class the name is close to; the valve command that drove it is then read by no
+    component, and that is said too (before, the coil silently vanished from the model)."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    store = GraphStore.embedded(None)
+    store.load_model("typo", text.replace("ex:heating_coil a gt:HeatingCoil", "ex:heating_coil a gt:HeatingColi").encode())
+    model = assemble(store, "typo")
+    assert model.component_for_node(FLEXLAB + "heating_coil") is None
+    assert ("heating_coil: its class https://w3id.org/graphtwin/ontology#HeatingColi (https://example.org/flexlab-x3a#heating_coil) "
+            "is declared by no loaded ontology, and the node has no other type a signature matches: no component models it "
+            "(did you mean https://w3id.org/graphtwin/ontology#HeatingCoil?)") in model.notes
+    assert "heating_coil_valve_command: measured, but no component reads it (what it drives or sets is not in the model)" in model.notes
+    store.load_model("right", text.encode())
+    right = assemble(store, "right")
+    assert not any("declared by no loaded ontology" in n or "heating_coil_valve_command" in n for n in right.notes), right.notes
