@@ -281,13 +281,14 @@ class MeasurementUploads:
 
 
 # ====================================================================== SPARQL protocol
-_PROLOGUE = re.compile(r"\s*(?:#[^\n]*(?:\n|$)|BASE\s*<[^>]*>|PREFIX\s*[^\s:<>]*:\s*<[^>]*>)", re.IGNORECASE)  # any PN_PREFIX
+_PROLOGUE = re.compile(r"\s*(?:#[^\n]*(?:\n|$)|BASE\s*<[^>]*>|PREFIX\s*[^\s:<>]*:\s*<[^>]*>"  # any PN_PREFIX
+                       r"|VERSION\s*(?:\"[^\"\n]*\"|'[^'\n]*'))", re.IGNORECASE)  # SPARQL 1.2's VERSION "1.2"
 _KEYWORD = re.compile(r"\s*([A-Za-z]+)")
 UPDATE_KEYWORDS = frozenset({"INSERT", "DELETE", "LOAD", "CLEAR", "CREATE", "DROP", "COPY", "MOVE", "ADD", "WITH"})
-RESULT_TYPES = {
-    "application/sparql-results+json": ox.QueryResultsFormat.JSON, "application/json": ox.QueryResultsFormat.JSON,
+RESULT_TYPES = {  # in the order a wildcard gets them; plain JSON, an alias, last
+    "application/sparql-results+json": ox.QueryResultsFormat.JSON,
     "application/sparql-results+xml": ox.QueryResultsFormat.XML, "text/csv": ox.QueryResultsFormat.CSV,
-    "text/tab-separated-values": ox.QueryResultsFormat.TSV,
+    "text/tab-separated-values": ox.QueryResultsFormat.TSV, "application/json": ox.QueryResultsFormat.JSON,
 }
 GRAPH_TYPES = {
     "text/turtle": ox.RdfFormat.TURTLE, "application/n-triples": ox.RdfFormat.N_TRIPLES,
@@ -296,7 +297,7 @@ GRAPH_TYPES = {
 
 
 def query_form(sparql: str) -> str | None:
-    """The first keyword after the prologue (comments, BASE, PREFIX), upper case: ``SELECT``,
+    """The first keyword after the prologue (comments, BASE, PREFIX, VERSION), upper case: ``SELECT``,
     ``CONSTRUCT``, ``ASK``, ``DESCRIBE``, or an update's ``INSERT``, ``DELETE``…; None when there is none."""
     position = 0
     while (match := _PROLOGUE.match(sparql, position)) and match.end() > position:
@@ -326,11 +327,13 @@ def fetching_keyword(sparql: str) -> str | None:
 
 
 def negotiate(accept: str | None, offers: list[str]) -> str | None:
-    """The offered media type the ``Accept`` header prefers (q-values, ``type/*``, ``*/*``); the first
-    offer when the header is absent; None when it accepts none of them."""
+    """The offered media type the ``Accept`` header prefers (RFC 9110 §12.5.1: each offer takes the
+    q-value of the most specific range that matches it, ``type/subtype`` over ``type/*`` over
+    ``*/*``, so ``q=0`` refuses a type a wildcard would admit); ties go to the range named first,
+    then to the first offer. The first offer when the header is absent; None when it accepts none."""
     if not accept or not accept.strip():
         return offers[0]
-    ranked = []
+    ranges = []  # (media range, q, position in the header)
     for index, part in enumerate(accept.split(",")):
         media, *params = [p.strip() for p in part.split(";")]
         quality = 1.0
@@ -340,19 +343,20 @@ def negotiate(accept: str | None, offers: list[str]) -> str | None:
                     quality = float(param[2:])
                 except ValueError:
                     quality = 0.0
-        if quality > 0 and media:
-            specificity = 0 if media == "*/*" else 1 if media.endswith("/*") else 2
-            ranked.append((-quality, -specificity, index, media.lower()))
-    for *_, media in sorted(ranked):
-        if media == "*/*":
-            return offers[0]
-        if media.endswith("/*"):
-            match = next((o for o in offers if o.startswith(media[:-1])), None)
-            if match:
-                return match
-        elif media in offers:
-            return media
-    return None
+        if media:
+            ranges.append((media.lower(), quality, index))
+
+    def preference(offer: str) -> tuple[float, int]:
+        matching = [(2 if media == offer else 1 if media != "*/*" else 0, quality, -index)
+                    for media, quality, index in ranges
+                    if media in (offer, "*/*") or media.endswith("/*") and offer.startswith(media[:-1])]
+        if not matching:
+            return 0.0, 0
+        _, quality, position = max(matching)
+        return quality, position
+
+    best = max(offers, key=lambda offer: (preference(offer), -offers.index(offer)))
+    return best if preference(best)[0] > 0 else None
 
 
 class _ResultTooLarge(Exception):
@@ -524,12 +528,11 @@ def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | N
         fmt = rdf_format(content_type or "text/turtle")
     except ValueError as exc:
         raise ApiError(415, str(exc)) from None
-    replaced = store.has_model(name)
     try:
         loaded = store.load_model(name, data, fmt.media_type, source_name=f"model {name}")
     except ModelLoadError as exc:
         raise ApiError(400, str(exc), line=exc.line, column=exc.column) from None
-    return {"name": name, "graph": store.model_graph(name).value, "triples": loaded.triples, "replaced": replaced,
+    return {"name": name, "graph": store.model_graph(name).value, "triples": loaded.triples, "replaced": loaded.replaced,
             "changed": loaded.changed}
 
 
@@ -633,16 +636,12 @@ async def sparql_post(
 def _update(store: GraphStore, text: str) -> None:
     """Run the update, then derive again the inferences of every model whose graph it can have
     changed (:func:`~service.sparql_writes.written_graphs`)."""
-    written = written_graphs(text)
     try:
-        store.backend.update(text)
+        store.update_models(text, written_graphs(text))
     except (SyntaxError, ValueError) as exc:
         raise ApiError(400, f"SPARQL Update syntax error: {exc}") from None
     except (RuntimeError, OSError) as exc:  # the store refused it as it ran (DROP of a graph that does not exist)
         raise ApiError(400, f"the update failed, nothing was changed: {exc}") from None
-    for name in store.models():
-        if written is None or store.model_graph(name).value in written:
-            store.realign(name)
 
 
 @router.post("/sparql/update", status_code=204, tags=["sparql"], dependencies=[WriteAccess],
@@ -652,7 +651,8 @@ def _update(store: GraphStore, text: str) -> None:
                      "update": {"type": "string"}}}}}}})
 async def sparql_update(request: Request, service: ServiceDep) -> Response:
     """SPARQL 1.1 Update (one transaction; a syntax error changes nothing). A model whose graph it
-    changes gets its inferences derived again (the alignment rules: what the signatures match)."""
+    changes gets its inferences derived again (the alignment rules: what the signatures match) and
+    loses its assembly, as a new upload does; a model graph it drops takes them with it."""
     body = await _read_body(request, service.settings.max_upload_bytes)
     content_type = (request.headers.get("content-type") or "").split(";")[0].strip().lower()
     if content_type == "application/sparql-update":

@@ -58,7 +58,7 @@ from datetime import datetime, timezone
 from enum import StrEnum
 from multiprocessing import get_context
 from pathlib import Path
-from urllib.parse import urlsplit
+from urllib.parse import quote, urlsplit
 
 import numpy as np
 import pyoxigraph as ox
@@ -370,7 +370,7 @@ def run_shipped_job(work: JobKind, job: ShippedJob) -> tuple[JobResult, bytes, l
         context = ShippedContext(job, Path(folder))
         try:
             outcome = work(GraphStore(writes), job.params, context)
-        except (JobCancelled, FileNotFoundError):
+        except (JobCancelled, FileNotFoundError, FileExistsError):
             raise
         except KeyError as exc:  # bad input: the same category and message, in a type that unpickles
             raise KeyError(*exc.args[:1]) from None
@@ -385,14 +385,26 @@ def run_shipped_job(work: JobKind, job: ShippedJob) -> tuple[JobResult, bytes, l
 def ship_job(store: GraphStore, job_id: str, params: dict,
              locate_measurements: Callable[[str], Path] | None) -> ShippedJob:
     """What :func:`run_shipped_job` needs for a job on ``store``: the graphs of
-    ``store.matching_dataset(params["model"])`` and the upload ``params["measurements"]``.
+    ``store.matching_dataset(params["model"])``, the upload ``params["measurements"]``, and where the
+    job reads another model, its graphs too: ``start_from``'s, with its assembly and its calibration
+    runs (the values it starts from), and an add-effect job's version when it exists (which effects
+    it records decides whether the job may write it).
 
     :raises KeyError: the upload does not exist; :raises ValueError: an invalid model name.
     """
-    quads = []
+    graphs: list[ox.NamedNode] = []
     if "model" in params:
-        for graph in store.matching_dataset(params["model"]):
-            quads += [ox.Quad(t.subject, t.predicate, t.object, graph) for t in store.graph_triples(graph)]
+        graphs += store.matching_dataset(params["model"])
+    start_from = params.get("start_from")
+    if start_from and store.has_model(start_from):
+        graphs += [*store.matching_dataset(start_from), store.assembly_graph(start_from)]
+        graphs += [row["g"] for row in store.run_named_query("calibration-run-graphs", model=start_from)]
+    if "effect" in params and "model" in params:
+        version = params.get("version") or f"{params['model']}+{params['effect']}"
+        if store.has_model(version):
+            graphs += store.matching_dataset(version)
+    quads = [ox.Quad(t.subject, t.predicate, t.object, graph)
+             for graph in dict.fromkeys(graphs) for t in store.graph_triples(graph)]
     files = {}
     upload = params.get("measurements")
     if upload is not None:
@@ -730,8 +742,8 @@ def assemble_job(store: GraphStore, params: dict, context: JobContext) -> JobRes
 def _result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:
     return {
         "run_graph": store.run_graph(run_id).value,
-        "calibrated_parameters": f"/queries/calibrated-parameters?model={model}",
-        "sensor_metrics": f"/queries/sensor-metrics?model={model}",
+        "calibrated_parameters": f"/queries/calibrated-parameters?model={quote(model, safe='')}",
+        "sensor_metrics": f"/queries/sensor-metrics?model={quote(model, safe='')}",  # a '+' in a name is no space
     }
 
 

@@ -48,7 +48,7 @@ from __future__ import annotations
 import re
 import threading
 import uuid
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
 from typing import NamedTuple, Protocol, runtime_checkable
@@ -73,7 +73,7 @@ Term = ox.NamedNode | ox.BlankNode | ox.Literal
 ONTOLOGY_GRAPH = graph_iri("ontology", "core")
 ALIGNMENT_RULES_GRAPH = graph_iri("alignment", "rules")
 SIGNATURE_GRAPH = graph_iri("signatures", "library")
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-+]*")
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-+]{0,127}")  # 128 at most: a name is a file name too (uploads)
 #: What pyoxigraph's syntax error messages start with (the position, given as ``lineno``/``offset``
 #: too): ``Parser error at line 3 between columns 16 and 20: ``, ``… at line 2 column 11: ``,
 #: ``… between line 2 column 11 and line 5 column 1: ``.
@@ -91,11 +91,13 @@ class ModelLoadError(ValueError):
 
 
 class ModelLoad(NamedTuple):
-    """What :meth:`GraphStore.load_model` did: the triples the source holds, and whether the store
-    changed (False: it held that model already, triple for triple, and kept it as it was)."""
+    """What :meth:`GraphStore.load_model` did: the triples the source holds, whether the store
+    changed (False: it held that model already, triple for triple, and kept it as it was), and
+    whether a model of that name was there before."""
 
     triples: int
     changed: bool
+    replaced: bool
 
 
 class StoreInUseError(OSError):
@@ -483,6 +485,9 @@ class GraphStore:
     def __init__(self, backend: SparqlBackend):
         self.backend = backend
         self._ontology_triples: list[ox.Triple] | None = None
+        # a model's graph and what is derived from it (inferences, assembly) are read, derived and
+        # written under this lock, so a load and an update of the same model cannot interleave
+        self._model_lock = threading.RLock()
 
     @classmethod
     def embedded(cls, path: Path | None = None) -> GraphStore:
@@ -508,7 +513,8 @@ class GraphStore:
         """
         if not _NAME.fullmatch(name or ""):
             raise ValueError(
-                f"model name {name!r}: use letters, digits, '_', '-', '.', '+' (starting with a letter or digit)"
+                f"model name {name!r}: use letters, digits, '_', '-', '.', '+' (starting with a letter or digit), "
+                "128 characters at most"
             )
         return name
 
@@ -529,8 +535,11 @@ class GraphStore:
         return [self.model_graph(name), self.inferred_graph(name), ONTOLOGY_GRAPH]
 
     def models(self) -> list[str]:
+        """The names of the models in the store (a graph a SPARQL update made under the models' prefix
+        with a name no model can have is not one)."""
         prefix = graph_iri("model", "x").value[:-1]
-        return sorted(g.value[len(prefix):] for g in self.backend.graphs() if g.value.startswith(prefix))
+        return sorted(name for g in self.backend.graphs() if g.value.startswith(prefix)
+                      and _NAME.fullmatch(name := g.value[len(prefix):]))
 
     def has_model(self, name: str) -> bool:
         return self.model_graph(name) in self.backend.graphs()
@@ -607,14 +616,16 @@ class GraphStore:
             raise ModelLoadError(source_name, "the model is empty: no triples")
         triples = skolemize(triples, f"{GTR}model/{name}/genid/")
         self.ensure_ontologies()
-        if self._holds_model(name, triples):
-            return ModelLoad(len(triples), changed=False)
-        self.write_graphs({
-            self.model_graph(name): triples,
-            self.inferred_graph(name): inferred_ntriples(triples, self._ontology_triples),
-            self.assembly_graph(name): [],
-        })
-        return ModelLoad(len(triples), changed=True)
+        with self._model_lock:
+            if self._holds_model(name, triples):
+                return ModelLoad(len(triples), changed=False, replaced=True)
+            replaced = self.has_model(name)
+            self.write_graphs({
+                self.model_graph(name): triples,
+                self.inferred_graph(name): inferred_ntriples(triples, self._ontology_triples),
+                self.assembly_graph(name): [],
+            })
+        return ModelLoad(len(triples), changed=True, replaced=replaced)
 
     def _holds_model(self, name: str, triples: list[ox.Triple]) -> bool:
         """Whether model ``name``'s graph holds exactly ``triples`` (compared as N-Triples lines, which
@@ -630,14 +641,43 @@ class GraphStore:
         """Derive model ``name``'s inferences again (after the ontologies or the rules changed);
         returns the number of inferred triples."""
         self.ensure_ontologies()
-        inferred = inferred_triples(self.graph_triples(self.model_graph(name)), self._ontology_triples)
-        self.write_graph(self.inferred_graph(name), inferred)
+        with self._model_lock:
+            inferred = inferred_triples(self.graph_triples(self.model_graph(name)), self._ontology_triples)
+            self.write_graph(self.inferred_graph(name), inferred)
         return len(inferred)
 
     def drop_model(self, name: str) -> None:
         """Remove model ``name``, its inferences and its assembly (one transaction); runs stay."""
         graphs = (self.model_graph(name), self.inferred_graph(name), self.assembly_graph(name))
-        self.backend.update(" ;\n".join(f"DROP SILENT GRAPH {g}" for g in graphs))
+        with self._model_lock:
+            self.backend.update(" ;\n".join(f"DROP SILENT GRAPH {g}" for g in graphs))
+
+    def update_models(self, sparql: str, written: Collection[str] | None) -> list[str]:
+        """Run a SPARQL update, then bring what is derived from each model it changed in step with it:
+        a model whose graph it can have written (``written``: graph IRIs, None for any;
+        :func:`service.sparql_writes.written_graphs`) gets its inferences derived again and loses its
+        assembly (which described the model before), as a load does; a model whose graph it removed
+        leaves neither behind. The update and those writes hold the model lock: a load of the same
+        model waits. Returns the names of the models brought in step.
+
+        :raises SyntaxError, ValueError, RuntimeError, OSError: the backend's refusal of the update
+            (nothing was changed).
+        """
+        self.ensure_ontologies()
+        with self._model_lock:
+            before = self.models()
+            self.backend.update(sparql)
+            after = self.models()
+            changed = [name for name in after if written is None or self.model_graph(name).value in written]
+            for name in changed:
+                self.write_graphs({
+                    self.inferred_graph(name): inferred_triples(self.graph_triples(self.model_graph(name)),
+                                                                self._ontology_triples),
+                    self.assembly_graph(name): [],
+                })
+            for name in sorted(set(before) - set(after)):
+                self.write_graphs({self.inferred_graph(name): [], self.assembly_graph(name): []})
+        return changed + sorted(set(before) - set(after))
 
     # ------------------------------------------------------------------ queries
     def query(self, sparql: str, *, substitutions: Mapping[str, object] | None = None,

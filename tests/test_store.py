@@ -102,12 +102,12 @@ def test_a_model_loaded_again_unchanged_is_left_as_it_is(case_store):
     case_store.backend.replace_graphs = lambda graphs: (writes.append(list(graphs)), replace_graphs(graphs))
     reordered = b"\n".join(reversed(case_store.backend.dump(case_store.model_graph("case"), ox.RdfFormat.N_TRIPLES).splitlines()))
     held = case_store.backend.triple_count(case_store.model_graph("case"))
-    assert case_store.load_model("case", reordered, "nt") == (held, False)
+    assert case_store.load_model("case", reordered, "nt") == (held, False, True)
     assert writes == []
     assert case_store.graph_triples(case_store.assembly_graph("case")) == assembly
     assert set(case_store.graph_triples(case_store.inferred_graph("case"))) == inferred
     edited = reordered + b"\n<https://example.org/a> <https://example.org/b> <https://example.org/c> ."
-    assert case_store.load_model("case", edited, "nt") == (held + 1, True)
+    assert case_store.load_model("case", edited, "nt") == (held + 1, True, True)
     assert writes == [[case_store.model_graph("case"), case_store.inferred_graph("case"), case_store.assembly_graph("case")]]
     assert case_store.assembly_graph("case") not in case_store.backend.graphs()
 
@@ -180,7 +180,8 @@ def test_two_loads_of_a_new_model_at_once_leave_one_of_them_whole():
     for writer in writers:
         writer.join()
     subjects = {t.subject.value.split("/")[3] for t in store.graph_triples(store.model_graph("x"))}
-    assert loaded == [(50, True), (50, True)] and len(subjects) == 1 and store.backend.triple_count(store.model_graph("x")) == 50
+    # one created it, the other replaced it (both said "created" before: each looked before the other wrote)
+    assert sorted(loaded) == [(50, True, False), (50, True, True)] and len(subjects) == 1 and store.backend.triple_count(store.model_graph("x")) == 50
 
 
 def test_a_store_another_process_holds_is_refused_with_a_clear_error(tmp_path):
@@ -323,3 +324,37 @@ def test_query_argument_errors_name_the_problem(case_store):
     has_a_fan = "ASK { ?s a <https://saref.etsi.org/saref4bldg/Fan> }"
     assert case_store.query(has_a_fan, model="case") is True
     assert case_store.query(has_a_fan, model="nothing-loaded") is False
+
+
+def test_a_load_waits_for_an_update_deriving_the_same_models_inferences(monkeypatch):
+    """An update to a model graph derives the model's inferences again; a load of another model under
+    that name landing in between would be followed by the update's inferences of the old model (a
+    Brick model left with the case study's inferred graph, and an unchanged upload never mends it)."""
+    import service.store as store_module
+    from service.alignment import inferred_triples
+
+    store = GraphStore.embedded(None)
+    store.load_model("x", CASE_STUDY)
+    deriving, go_on = threading.Event(), threading.Event()
+
+    def slow_derivation(triples, ontology):
+        deriving.set()
+        go_on.wait(5)
+        return inferred_triples(triples, ontology)
+
+    monkeypatch.setattr(store_module, "inferred_triples", slow_derivation)
+    insert = f'INSERT DATA {{ GRAPH {store.model_graph("x")} {{ <{EX}a> <{EX}b> "c" }} }}'
+    updating = threading.Thread(target=store.update_models, args=(insert, None))
+    updating.start()
+    assert deriving.wait(5)
+    other = b'<https://example.org/other> <http://www.w3.org/1999/02/22-rdf-syntax-ns#type> <https://saref.etsi.org/core/Sensor> .\n'
+    loading = threading.Thread(target=store.load_model, args=("x", other, "nt"))
+    loading.start()
+    loading.join(0.5)
+    assert loading.is_alive()  # waiting for the update's derivation
+    go_on.set()
+    updating.join(5)
+    loading.join(5)
+    model = store.graph_triples(store.model_graph("x"))
+    assert {t.subject.value for t in model} == {"https://example.org/other"}
+    assert set(store.graph_triples(store.inferred_graph("x"))) == set(inferred_triples(model, store._ontology_triples))

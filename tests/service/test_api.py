@@ -281,6 +281,20 @@ def test_bad_sparql_requests_get_their_status_and_change_nothing(client, auth, s
     assert snapshot(store) == before
 
 
+def test_accept_q0_refuses_a_type_a_wildcard_admits_and_a_version_prologue_is_read(client):
+    """RFC 9110: ``q=0`` means not acceptable, also beside ``*/*``; SPARQL 1.2's ``VERSION`` is prologue."""
+    ask = client.get("/sparql", params={"query": "ASK {}"}, headers={"Accept": "application/sparql-results+json;q=0, */*"})
+    assert ask.status_code == 200 and ask.headers["content-type"].startswith("application/sparql-results+xml")
+    construct = "CONSTRUCT { <https://example.org/a> <https://example.org/b> <https://example.org/c> } WHERE {}"
+    answer = client.get("/sparql", params={"query": construct}, headers={"Accept": "text/turtle;q=0, */*;q=0.1"})
+    assert answer.status_code == 200 and not answer.headers["content-type"].startswith("text/turtle")
+    assert client.get("/sparql", params={"query": "ASK {}"}, headers={
+        "Accept": "application/sparql-results+json;q=0, application/*;q=0"}).status_code == 406
+    versioned = client.get("/sparql", params={"query": 'VERSION "1.2" ' + construct})
+    assert versioned.status_code == 200 and "https://example.org/c" in versioned.text
+    assert client.get("/sparql", params={"query": "VERSION '1.2' ASK {}"}).json()["boolean"] is True
+
+
 def test_sparql_update_with_the_token_writes(client, auth):
     update = "INSERT DATA { GRAPH <https://example.org/g> { <https://example.org/a> <https://example.org/b> 1 } }"
     response = client.post("/sparql/update", data={"update": update}, headers=auth)
@@ -290,21 +304,45 @@ def test_sparql_update_with_the_token_writes(client, auth):
 
 
 def test_an_update_to_a_model_graph_derives_its_inferences_again(client, auth, store):
-    """A sensor added with the SAREF v3 spelling is matched only through what the alignment derives."""
+    """A sensor added with the SAREF v3 spelling is matched only through what the alignment derives;
+    the assembly, which described the model before, goes as it does on a new upload."""
     sensor, fan_flow = "https://example.org/added_sensor", f"<{EX}supply_air_flow>"
     update = (f"INSERT DATA {{ GRAPH {store.model_graph('case')} {{ <{sensor}> "
               f"<https://saref.etsi.org/core/measuresProperty> {fan_flow} }} }}")
     other = "INSERT DATA { GRAPH <https://example.org/g> { <https://example.org/a> <https://example.org/b> 1 } }"
-    realigned = []
-    realign = store.realign
-    store.realign = lambda name: (realigned.append(name), realign(name))[1]
+    store.write_graph(store.assembly_graph("case"), [ox.Triple(ox.NamedNode(EX + "c"), ox.NamedNode(EX + "p"), ox.Literal("x"))])
+    written = []
+    write_graphs = store.write_graphs
+    store.write_graphs = lambda graphs: (written.extend(graphs), write_graphs(graphs))[1]
     assert client.post("/sparql/update", data={"update": other}, headers=auth).status_code == 204
-    assert realigned == []  # no model graph named
+    assert written == []  # no model graph named
     assert client.post("/sparql/update", data={"update": update}, headers=auth).status_code == 204
-    assert realigned == ["case"]
+    assert written == [store.inferred_graph("case"), store.assembly_graph("case")]
     ask = (f"ASK {{ GRAPH {store.inferred_graph('case')} {{ <{sensor}> <https://saref.etsi.org/core/observes> "
            f"{fan_flow} }} }}")
     assert client.get("/sparql", params={"query": ask}).json()["boolean"] is True
+    assert store.assembly_graph("case") not in store.backend.graphs()
+    assert not client.get("/models/case").json()["assembled"]
+
+
+def test_a_model_graph_dropped_by_an_update_takes_its_inferences_and_a_graph_no_model_can_name_is_none(client, auth, store):
+    assert client.put("/models/gone", content=CASE_STUDY.read_bytes(), headers=auth).status_code == 201
+    assert store.inferred_graph("gone") in store.backend.graphs()
+    assert client.post("/sparql/update", data={"update": f"DROP GRAPH {store.model_graph('gone')}"}, headers=auth).status_code == 204
+    assert store.inferred_graph("gone") not in store.backend.graphs() and "gone" not in store.models()
+    odd = "https://w3id.org/graphtwin/resource/graph/model/a/b"  # under the models' prefix, no model's name
+    insert = f"INSERT DATA {{ GRAPH <{odd}> {{ <https://example.org/a> <https://example.org/b> 1 }} }}"
+    assert client.post("/sparql/update", data={"update": insert}, headers=auth).status_code == 204
+    listed = client.get("/models")
+    assert listed.status_code == 200 and [m["name"] for m in listed.json()["data"]] == ["case"]
+    again = "INSERT DATA { GRAPH <https://example.org/g> { <https://example.org/a> <https://example.org/b> 2 } }"
+    assert client.post("/sparql/update", data={"update": again}, headers=auth).status_code == 204  # was a 500 after it
+
+
+def test_a_model_name_longer_than_a_file_name_can_be_is_refused(client, auth):
+    response = client.put("/models/" + "m" * 129, content=CASE_STUDY.read_bytes(), headers=auth)
+    assert response.status_code == 422 and "128 characters at most" in response.json()["detail"]
+    assert client.put("/models/" + "m" * 128, content=CASE_STUDY.read_bytes(), headers=auth).status_code == 201
 
 
 def test_a_query_over_the_time_limit_gets_503(tmp_path, store, monkeypatch):

@@ -236,3 +236,26 @@ def test_an_unreachable_scheduler_is_named(tmp_path):
         DaskJobExecutor("tcp://127.0.0.1:9", connect_timeout_s=0.5)
     with pytest.raises(ValueError, match="threads, processes or dask://HOST:PORT"):
         Settings(data_dir=tmp_path, executor="dask://127.0.0.1")
+
+
+def test_a_shipped_job_reads_the_model_it_starts_from_and_the_version_it_would_write(case_store, case_csv):
+    """A pool process sees only what is shipped to it: the model ``start_from`` names with its runs
+    (before: "no such model in the store") and an add-effect job's version already in the store (before:
+    the job found none and overwrote it). ``run_shipped_job`` is what the pool process runs."""
+    from case_study import case_study_with_effect
+
+    from service.calibration_run import calibrate, parse_window
+    from service.calibration_triples import run_iri
+    from service.resources import signatures_dir
+    from service.signature import load_signature_library
+
+    first = calibrate(case_store, "case", case_csv, train=parse_window("/2026-01-12T15:50"), seed=0)
+    case_store.load_model("case_again", CASE_STUDY)
+    params = {"model": "case_again", "measurements": "day", "train": "/2026-01-12T15:50", "start_from": "case"}
+    outcome, *_ = run_shipped_job(calibrate_job, ship_job(case_store, "j1", params, {"day": case_csv}.__getitem__))
+    assert outcome.result["settings"]["start_from"] == {"model": "case", "runs": [run_iri(first.record.run_id).value]}
+    library = load_signature_library(signatures_dir())
+    case_store.load_model("v", case_study_with_effect(library["ValveLeakage"], EX + "heating_valve"))
+    with pytest.raises(FileExistsError, match="model v exists with ValveLeakage at .*heating_valve: it is not overwritten"):
+        run_shipped_job(add_effect_job, ship_job(case_store, "j2", {
+            "model": "case", "effect": "FanMotorHeat", "target": EX + "supply_fan", "version": "v"}, None))

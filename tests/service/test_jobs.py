@@ -354,3 +354,12 @@ def test_a_job_error_names_the_upload_not_the_servers_file_path(records, runners
     runner = runners(GraphStore.embedded(None), records, {"work": work})
     done = _wait(runner, runner.submit("work", {"measurements": upload}).id)
     assert done.error == f"window 2030-01-01 – 2030-02-01 lies outside the data upload {upload} (2026-01-12 – 2026-01-13)"
+
+
+def test_result_links_quote_a_model_name_with_a_plus():
+    """``model+Effect`` (what add-effect names a version) in a query string: '+' would read as a space."""
+    from service.jobs import _result_links
+
+    links = _result_links(GraphStore.embedded(None), "case+FanMotorHeat", "r1")
+    assert links["calibrated_parameters"] == "/queries/calibrated-parameters?model=case%2BFanMotorHeat"
+    assert links["sensor_metrics"] == "/queries/sensor-metrics?model=case%2BFanMotorHeat"
