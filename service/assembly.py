@@ -93,7 +93,8 @@ def assemble(
 ) -> AssembledModel:
     """Assemble the simulation model of building model ``model_name`` loaded in ``store``.
 
-    :raises AssemblyError: a signature names a class no loaded ontology declares.
+    :raises AssemblyError: a signature names a class no loaded ontology declares, or no signature
+        matches anything in the model.
     :raises IncompleteModelError: an input has no source (unless ``allow_incomplete``; the
         problems are then listed in ``notes`` and the input left unconnected).
     """
@@ -134,6 +135,10 @@ def assemble(
         chosen.append((signature, match))
         for node in nodes:
             claimed[node] = (signature, nodes[0])
+    if not chosen:
+        raise AssemblyError(f"no signature of the library matches anything in model {model_name}: it holds no device "
+                            "typed with a class the signatures know (SAREF4BLDG, FSO, graphtwin's own, or Brick through "
+                            "the alignment; graphtwin brick-report lists what a Brick model lacks)")
     anchors = defaultdict(list)
     for signature, match in chosen:
         anchors[signature.id].append(_modeled(signature, match)[0])

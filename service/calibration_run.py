@@ -251,6 +251,11 @@ def calibrate(
             window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
                                 "partly on data the calibration fitted")
     unscored_s = md.unscored_start_s(train_slice)
+    train_s = (train_slice.stop - train_slice.start) * data.step_s
+    if train_s <= unscored_s:
+        raise ValueError(f"the training window {train[0] or ''}/{train[1] or ''} holds {train_s / 3600:.3g} h of data, and "
+                         f"its first {unscored_s / 3600:g} h are simulated, not scored (the model's start state "
+                         f"settles): give a window longer than {unscored_s / 3600:g} h, or one starting later in the data")
     if unscored_s > SETTLING_S:
         window_notes.append(f"the training window's first {unscored_s / 3600:g} h are simulated, not scored: before the "
                             "data's first step the model's start state is a guess, and its slowest loop carries it that "

@@ -11,8 +11,12 @@ edge in both directions: a coil's water outlet sensor has the air side's upstrea
    property it observes (a valve position sensor sits at its valve, a power meter at its fan;
    ``queries/observed-node.rq``);
 2. walking upstream from ``p``, the walk stops at the first sensor on every branch; those are the
-   nearest upstream sensors. If one of them fails too, the failure came from further up and ``f``
-   only inherits it: ``f`` is not reported (an off-path sensor is still reported at its component);
+   nearest upstream sensors. If one of them fails too and ``f``'s failure is what it carries down,
+   ``f`` only inherits it and is not reported (an off-path sensor is still reported at its
+   component). Whether it is: ``carries(u, f)``, given by the caller (the diagnosis: ``f``'s residual
+   minus ``u``'s is within the noise, for sensors of one unit); where no failing upstream sensor
+   carries it, the error grows between them, and they bound the suspects as a matching sensor does
+   (on real data a mixed-air sensor 0.7 K off must not hide a supply-air sensor 14 K off);
 3. the suspects are the nodes ``n`` with a walk ``u → n → p`` from a matching upstream sensor ``u``
    that passes no other sensor: forward-reachable from ``u`` and backward-reachable from ``p``, each
    search stopping at sensors. On a loop this is still exact, because searches stop at sensors
@@ -22,7 +26,7 @@ edge in both directions: a coil's water outlet sensor has the air side's upstrea
 from __future__ import annotations
 
 from collections import defaultdict, deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
 from .namespaces import local_name
@@ -38,18 +42,25 @@ class FailureLocation:
     failing_sensor: str
     matching_sensor: str | None
     components: tuple[str, ...]
+    upstream_fails: bool = False  # ``matching_sensor`` fails too, by less than the error that reaches ``failing_sensor``
 
     def describe(self) -> str:
         where = " or ".join(local_name(c) for c in self.components) or "no modelled component"
         if self.matching_sensor is None:
             return f"The model fails at {local_name(self.failing_sensor)} with no matching sensor upstream: look at {where}."
+        if self.upstream_fails:
+            return (
+                f"The error grows from {local_name(self.matching_sensor)}, which fails too, to "
+                f"{local_name(self.failing_sensor)}: a missing effect sits in {where} between them."
+            )
         return (
             f"The model matches {local_name(self.matching_sensor)} but not {local_name(self.failing_sensor)}: "
             f"the missing effect sits in {where} between them."
         )
 
     def to_dict(self) -> dict:
-        return {"between": [self.matching_sensor, self.failing_sensor], "components": list(self.components)}
+        return {"between": [self.matching_sensor, self.failing_sensor], "components": list(self.components),
+                "upstream_fails": self.upstream_fails}
 
 
 class FlowTopology:
@@ -122,7 +133,8 @@ class FlowTopology:
 
 
 def localize_failures(
-    topology: FlowTopology, matches: Mapping[str, bool], sensors: Iterable[str]
+    topology: FlowTopology, matches: Mapping[str, bool], sensors: Iterable[str],
+    carries: Callable[[str, str], bool] | None = None,
 ) -> list[FailureLocation]:
     """Locate every first failure.
 
@@ -130,8 +142,11 @@ def localize_failures(
         they are the measurements themselves); only sensors in this mapping are judged.
     :param sensors: every measuring device of the model (targets and boundary inputs); the upstream
         walks stop at all of them.
+    :param carries: ``carries(u, f)``: whether the failure at sensor ``f`` is what the failing sensor
+        ``u`` upstream of it carries down (None: always).
     :returns: one :class:`FailureLocation` per failing sensor that does not merely inherit a failure
-        from a failing sensor upstream, sorted by sensor IRI.
+        from a failing sensor upstream (per nearest upstream sensor bounding its suspects), sorted by
+        sensor IRI.
     """
     sensor_set = set(sensors)
     locations = []
@@ -139,13 +154,16 @@ def localize_failures(
         place = topology.place(sensor)
         upstream = topology.nearest_upstream_sensors(place, sensor_set - {sensor})
         good = sorted(u for u in upstream if matches.get(u, True))
-        inherits = any(not matches.get(u, True) for u in upstream)
-        if inherits and place == sensor:
-            continue
-        if not good:
+        failing = sorted(u for u in upstream if not matches.get(u, True))
+        grows_from = []
+        if failing and place == sensor:
+            if carries is None or any(carries(u, sensor) for u in failing):
+                continue
+            grows_from = failing
+        if not good and not grows_from:
             locations.append(FailureLocation(sensor, None, (place,) if place != sensor else ()))
             continue
-        for matching in good:
-            between = topology.nodes_between(matching, place, sensor_set)
-            locations.append(FailureLocation(sensor, matching, tuple(sorted(between))))
+        for reference in good + grows_from:
+            between = topology.nodes_between(reference, place, sensor_set)
+            locations.append(FailureLocation(sensor, reference, tuple(sorted(between)), upstream_fails=reference in grows_from))
     return locations

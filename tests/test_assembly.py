@@ -251,3 +251,10 @@ def test_a_misspelt_class_and_a_command_nothing_reads_are_notes():
     store.load_model("right", text.encode())
     right = assemble(store, "right")
     assert not any("declared by no loaded ontology" in n or "heating_coil_valve_command" in n for n in right.notes), right.notes
+
+
+def test_a_model_nothing_matches_is_an_error_not_an_empty_assembly():
+    store = GraphStore.embedded(None)
+    store.load_model("bare", b"<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
+    with pytest.raises(AssemblyError, match="no signature of the library matches anything in model bare"):
+        assemble(store, "bare")

@@ -94,6 +94,11 @@ def test_bad_windows_and_targets_write_nothing(synthetic, tmp_path):
     assert set(store.backend.graphs()) == graphs_before
     with pytest.raises(ValueError, match="START/END"):
         parse_window("2026-01-12")
+    # shorter than the start it leaves unscored: said so (it read "a target has no measurements" before)
+    with pytest.raises(ValueError, match=r"the training window 2026-01-12/2026-01-12T02:00 holds 2.17 h of data, and its "
+                                         r"first 6 h are simulated, not scored"):
+        calibrate(store, "case", path, train=("2026-01-12", "2026-01-12T02:00"))
+    assert set(store.backend.graphs()) == graphs_before
 
 
 def test_a_too_short_test_window_is_refused_before_anything_is_written_and_an_overlap_is_noted(synthetic):

@@ -38,6 +38,22 @@ def test_a_failure_inherited_from_upstream_is_not_reported_twice():
     assert {loc.matching_sensor: loc.components for loc in locations} == {"oat": ("mix",), "rat": ("mix",)}
 
 
+def test_an_error_that_grows_past_a_failing_sensor_is_located_there_too():
+    """On the FLEXLAB leak day the mixed air was 0.7 K off and the supply air 14 K: the supply air's
+    failure is not the mixed air's carried down. Where the caller says the upstream failure does not
+    carry it, the sensor is located between them (and still between the matching sensors and it)."""
+    topology = FlowTopology(LOOP)
+    matches = {"oat": True, "mat": False, "sat": False, "rat": True, "swt": True}
+    locations = localize_failures(topology, matches, SENSORS, carries=lambda upstream, failing: failing != "sat")
+    grown = [loc for loc in locations if loc.failing_sensor == "sat"]
+    assert {(loc.matching_sensor, loc.upstream_fails, loc.components) for loc in grown} == {
+        ("mat", True, ("coil", "fan")), ("swt", False, ("coil", "coil_water", "hw_valve"))}
+    assert "The error grows from mat, which fails too, to sat" in next(loc for loc in grown if loc.upstream_fails).describe()
+    assert {loc.failing_sensor for loc in locations} == {"mat", "sat"}
+    carried = localize_failures(topology, matches, SENSORS, carries=lambda upstream, failing: True)
+    assert {loc.failing_sensor for loc in carried} == {"mat"}
+
+
 def test_off_path_sensor_is_placed_at_the_node_it_observes():
     topology = FlowTopology(LOOP, {"valve_pos": "hw_valve"})
     matches = {"swt": True, "valve_pos": False}
@@ -62,3 +78,23 @@ def test_a_coils_water_outlet_has_the_air_side_upstream_among_its_suspects():
     air_fails = {s: s != "coil_outlet_air" for s in sensors}  # the water side is still a suspect of the air outlet
     located = {loc.matching_sensor: set(loc.components) for loc in localize_failures(topology, air_fails, sensors)}
     assert located == {"fan_inlet": {"fan", "coil_air", "coil_water"}, "coil_inlet_water": {"coil_water", "coil_air"}}
+
+
+def test_the_diagnosis_carries_a_failure_down_only_where_the_residuals_say_so():
+    import numpy as np
+
+    from service.diagnosis import _carried_down
+
+    rng = np.random.default_rng(0)
+    offset = np.where(np.arange(200) < 100, 0.0, 0.7)  # the mixed air 0.7 K off in the second half
+    mixed = offset + rng.normal(0, 0.1, 200)
+    degc = "http://qudt.org/vocab/unit/DEG_C"
+    residuals = {"mat": mixed, "sat_same": offset + rng.normal(0, 0.1, 200),
+                 "sat_grown": offset + np.where(np.arange(200) % 50 < 25, 14.0, 0.0) + rng.normal(0, 0.1, 200),
+                 "power": offset * 100}
+    residuals["mat"][:3] = np.nan  # steps without a measurement are left out of the comparison
+    units = {"mat": degc, "sat_same": degc, "sat_grown": degc, "power": "http://qudt.org/vocab/unit/W"}
+    noise = {"mat": 0.1, "sat_same": 0.1, "sat_grown": 0.1, "power": 5.0}
+    carries = _carried_down(residuals, units, noise, failure_ratio=2.0)
+    assert carries("mat", "sat_same") and not carries("mat", "sat_grown")
+    assert carries("mat", "power")  # other units: cannot be told apart, carried

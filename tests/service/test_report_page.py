@@ -202,7 +202,7 @@ def test_the_localisation_is_drawn_on_the_topology_with_the_suspects_highlighted
     assert {n for n, classes in drawn.items() if "suspect" in classes} == suspects
     assert {n for n, classes in drawn.items() if "failing" in classes} == {_short(loc["between"][1]) for loc in locations}
     assert {n for n, classes in drawn.items() if "matching" in classes} == {
-        _short(loc["between"][0]) for loc in locations if loc["between"][0]}
+        _short(loc["between"][0]) for loc in locations if loc["between"][0] and not loc["upstream_fails"]}
     # the whole flow topology is drawn, components and sensors apart
     assert {"supply_fan", "pump", "heating_coil_air_side", "supply_water_temperature_sensor"} <= set(drawn)
     assert "component" in drawn["pump"] and "sensor" in drawn["supply_water_temperature_sensor"]
