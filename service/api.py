@@ -229,7 +229,7 @@ class MeasurementUploads:
             with os.fdopen(handle, "wb") as out:
                 out.write(data)
             try:
-                measured = read_model_data(model, temporary, strict=True)
+                measured = read_model_data(model, temporary)
             except MeasurementError as exc:
                 raise MeasurementError("the uploaded CSV", list(exc.problems)) from None
             if not allow_gaps:

@@ -108,9 +108,9 @@ def warmup_period_steps(n_steps: int, step_s: float) -> int:
     return period if n_steps >= period else 1
 
 
-def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5, strict: bool = False) -> MeasuredData:
+def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5) -> MeasuredData:
     """Read the CSV at ``path`` for ``model`` (:func:`service.measurements.read_measurements`)."""
-    return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps, strict=strict)
+    return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps)
 
 
 @dataclass

@@ -67,9 +67,13 @@ StartFromOption = Annotated[str | None, typer.Option(help=(
 USER_ERRORS = (ModelLoadError, AssemblyError, SignatureError, MeasurementError, FileNotFoundError, ValueError, KeyError)
 
 
-def open_store(store: Path, memory: bool) -> GraphStore:
+def open_store(store: Path, memory: bool, *, reading: bool = False) -> GraphStore:
     """The embedded store with the ontology subsets and the signature library loaded; a store another
-    process holds, or a signature file with a mistake, is a one-line error (exit code 2)."""
+    process holds, or a signature file with a mistake, is a one-line error (exit code 2). ``reading``:
+    the command only reads results, so a folder that holds no store is an error (a mistyped
+    ``--store`` would otherwise be a new, empty store)."""
+    if reading and not memory and not store.is_dir():
+        raise fail(f"no store at {store}: give --store the folder a calibration or diagnosis wrote")
     try:
         graph_store = GraphStore.embedded(None if memory else store)
         graph_store.ensure_ontologies()
@@ -107,6 +111,11 @@ def fail(problem: str | BaseException) -> typer.Exit:
 
 def _load(store: GraphStore, model: Path, name: str | None) -> str:
     model_name = model_name_for(model, name)
+    if name is None:
+        try:
+            GraphStore.check_name(model_name)
+        except ValueError as exc:
+            raise ValueError(f"{exc}; the name comes from {model}: give one with --name") from None
     store.load_model(model_name, model)
     return model_name
 
@@ -571,7 +580,7 @@ def query_command(
     output_format = output_format or ("table" if console.is_terminal else "csv")
     if output_format not in ("table", "csv", "json"):
         raise fail(f"--format {output_format!r}: give table, csv or json")
-    graph_store = open_store(store, False)
+    graph_store = open_store(store, False, reading=True)
     if model is not None and model not in graph_store.models():
         raise fail(f"no model {model!r} in the store {store}; it holds {', '.join(graph_store.models()) or 'none'}")
     try:
@@ -616,7 +625,7 @@ def history_command(
     base+effect, …)."""
     from .error_history import error_history
 
-    graph_store = open_store(store, False)
+    graph_store = open_store(store, False, reading=True)
     history = error_history(graph_store, model)
     if not history.versions:
         raise fail(f"no calibration with a test window for model {model!r} or its versions")
@@ -667,7 +676,7 @@ def report_command(
 
     if data is not None and not data.is_file():
         raise fail(f"{data}: no such file")
-    graph_store = open_store(store, False)
+    graph_store = open_store(store, False, reading=True)
     locate, missing = data_file_locator(data), []
 
     def locate_noting(source: str) -> Path:

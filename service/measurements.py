@@ -14,7 +14,7 @@ consumes them (:mod:`service.units`).
 **Checks**, all reported at once in one :class:`MeasurementError` naming the column and the line:
 non-numeric cells, unparseable, duplicate or unsorted time stamps, rows with more or fewer fields
 than the header (a cell added or lost would shift the others into the wrong columns), columns missing
-for a boundary input or a target, two columns naming one device. Columns no device claims are listed in ``warnings`` (an error with ``strict``),
+for a boundary input or a target, two columns naming one device. Columns no device claims are listed in ``warnings`` (a BMS export has many),
 and so are frozen points: a sensor whose value holds exactly for 12 hours or more
 (:func:`frozen_spans`; not for devices whose signature says ``holds_values``, schedules and commands).
 A position, command or speed (a fraction 0–1 in the model) above 1.5 after conversion is an error
@@ -230,7 +230,6 @@ def read_measurements(
     specs: Mapping[str, SeriesSpec],
     *,
     max_gap_steps: int = 5,
-    strict: bool = False,
     frozen_after_s: float = 12 * 3600.0,
 ) -> MeasuredData:
     """Read and check a measurement CSV (see the module docstring).
@@ -275,7 +274,7 @@ def read_measurements(
     unknown = sorted(set(range(1, len(header))) - set(claimed.values()))
     if unknown:
         message = f"columns no device of the model claims: {', '.join(header[i] for i in unknown)}"
-        (problems if strict else warnings).append(message)
+        warnings.append(message)
 
     times: list[datetime] = []
     first_with_offset: dict[bool, tuple[int, str]] = {}

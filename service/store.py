@@ -450,7 +450,8 @@ def _open_store(path: Path) -> ox.Store:
         return ox.Store(str(path))
     except OSError as exc:
         if "While lock file" in str(exc):
-            raise StoreInUseError(f"store {path} is in use by another process (a running graphtwin serve?)") from exc
+            raise StoreInUseError(f"store {path} is in use by another process (another graphtwin command, or a running "
+                                  "graphtwin serve; a store has one user at a time)") from exc
         if "lock hold by current process" in str(exc):
             raise StoreInUseError(f"store {path} is open already in this process") from exc
         raise

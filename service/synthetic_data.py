@@ -116,8 +116,12 @@ def generate_synthetic_data(
         matched without their model name, so a run of the same model under another name applies);
         the others are drawn as the module docstring says.
     :raises ValueError: an unknown effect, or one that does not apply to the model; a truth key that
-        is no estimated parameter of the model (with the effect).
+        is no estimated parameter of the model (with the effect); synthetic operation of fewer than two
+        steps.
     """
+    if operation is None and n_days * 86400.0 < 2 * step_s:
+        raise ValueError(f"{n_days:g} days of data: give at least two steps of {step_s / 60:g} min "
+                         f"({2 * step_s / 86400.0:.3g} days); a calibration needs more than its first six hours")
     effect = None
     requests = []
     if hidden_effect is not None:

@@ -196,7 +196,7 @@ def test_a_store_another_process_holds_is_a_one_line_error(tmp_path):
     with held_by_another_process(path):
         result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--store", str(path)])
     assert result.exit_code == 2 and "Traceback" not in result.output
-    assert f"error: store {path} is in use by another process (a running graphtwin serve?)" in result.output
+    assert f"error: store {path} is in use by another process (another graphtwin command, or a running graphtwin serve" in result.output
 
 
 def test_add_effect_with_a_local_name_suggests_the_full_iri(tmp_path):
@@ -281,3 +281,23 @@ def test_the_command_line_starts_without_the_calibration_libraries():
              "'service.calibration_run') if m in sys.modules))")
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
     assert loaded == "[]"
+
+
+def test_a_mistyped_store_and_a_file_name_that_is_no_model_name_are_said_as_such(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for command in (["history", "model"], ["query", "calibrated-parameters"], ["report", "run-1", "-o", "r.html"]):
+        result = runner.invoke(app, [*command, "--store", "nowhere"])
+        assert result.exit_code == 2 and "no store at nowhere" in result.output, (command, result.output)
+    assert not (tmp_path / "nowhere").exists()  # not created empty
+    spaced = tmp_path / "my flexlab (v2).ttl"
+    spaced.write_bytes(CASE_STUDY.read_bytes())
+    result = runner.invoke(app, ["assemble", str(spaced), "--memory"])
+    assert result.exit_code == 2 and "model name 'my flexlab (v2)'" in result.output and "--name" in result.output
+    assert runner.invoke(app, ["assemble", str(spaced), "--memory", "--name", "flexlab"]).exit_code == 0
+
+
+def test_example_generate_refuses_data_of_fewer_than_two_steps(tmp_path):
+    for days in ("0.01", "-1"):
+        result = runner.invoke(app, ["example", "generate", "ventilation_case_study", f"--days={days}", "-o", str(tmp_path / "x.csv")])
+        assert result.exit_code == 2 and f"{float(days):g} days of data: give at least two steps of 10 min" in result.output
+        assert not (tmp_path / "x.csv").exists()

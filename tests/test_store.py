@@ -187,7 +187,7 @@ def test_two_loads_of_a_new_model_at_once_leave_one_of_them_whole():
 def test_a_store_another_process_holds_is_refused_with_a_clear_error(tmp_path):
     path = tmp_path / "data"
     with held_by_another_process(path):
-        with pytest.raises(StoreInUseError, match=r"in use by another process \(a running graphtwin serve\?\)") as info:
+        with pytest.raises(StoreInUseError, match=r"in use by another process \(another graphtwin command, or a running graphtwin serve") as info:
             GraphStore.embedded(path)
         assert isinstance(info.value, OSError) and str(path) in str(info.value)
     held_here = EmbeddedBackend(path)

@@ -161,6 +161,8 @@ def _bad_csv(case_csv, problem: str) -> str:
     rows = _csv_rows(case_csv)
     if problem == "unknown column":
         rows = [row + [value] for row, value in zip(rows, ["mystery_sensor"] + ["1.0"] * (len(rows) - 1))]
+    elif problem == "extra field":
+        rows[3].append("1.0")
     elif problem == "NaN":
         rows[1][3] = "NaN"
     elif problem == "unsorted":
@@ -173,7 +175,7 @@ def _bad_csv(case_csv, problem: str) -> str:
 
 
 @pytest.mark.parametrize("problem, expected", [
-    ("unknown column", "mystery_sensor"), ("NaN", "without a value"), ("unsorted", "before the previous one"),
+    ("extra field", "line 4: "), ("NaN", "without a value"), ("unsorted", "before the previous one"),
     ("duplicate", "duplicate time stamp"), ("not a number", "'warm' is not a number"),
 ])
 def test_bad_measurements_are_refused_with_every_problem_and_change_nothing(client, auth, case_csv, store, snapshot,
@@ -183,6 +185,13 @@ def test_bad_measurements_are_refused_with_every_problem_and_change_nothing(clie
     assert response.status_code == 422
     assert any(expected in p for p in response.json()["problems"]), response.json()
     assert snapshot(store) == before and not list(settings.measurements_dir.rglob("*.csv"))
+
+
+def test_columns_no_device_claims_are_a_warning_as_in_the_cli(client, auth, case_csv):
+    """A BMS export has more columns than the model reads (both real files in ../shared do)."""
+    response = _upload_csv(client, auth, _bad_csv(case_csv, "unknown column"))
+    assert response.status_code == 201, response.text
+    assert "columns no device of the model claims: mystery_sensor" in response.json()["warnings"]
 
 
 def test_a_long_gap_is_accepted_when_asked(client, auth, case_csv):
