@@ -54,6 +54,7 @@ from .effect_ranking import (
 from .failure_episodes import find_episodes
 from .flow_path_localization import FlowTopology, localize_failures
 from .namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
+from .orphaned_workers import exit_with_parent
 from .point_calibration import PointCalibrator
 from .residual_dependence import residual_dependence
 from .signature import Signature, load_signature_library
@@ -555,7 +556,7 @@ def _rank_catalog(store, model_name, library, base, *, seed, refit_max_nfev, wor
     ]
     workers = workers if workers is not None else min(len(jobs), usable_cpu_count())
     if workers > 1 and len(jobs) > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent) as pool:
             evidence = list(pool.map(_evaluate_candidate, jobs))
     else:
         evidence = [_evaluate_candidate(job) for job in jobs]

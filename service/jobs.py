@@ -71,6 +71,7 @@ from .calibration_run import calibrate, model_version, parse_window
 from .effect_recording import applied_effect_triples
 from .namespaces import GT
 from .ntriples import triple_list
+from .orphaned_workers import exit_with_parent
 from .resources import signatures_dir
 from .settings import check_executor
 from .signature import load_signature_library
@@ -431,7 +432,7 @@ class ProcessJobExecutor:
 
     @staticmethod
     def _new_pool() -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn"))
+        return ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn"), initializer=exit_with_parent)
 
     def submit(self, function, *args) -> Future:
         with self._lock:
