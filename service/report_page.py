@@ -267,6 +267,8 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
     :raises ValueError: the model graph changed since the run, an estimate is missing, or the data
         do not cover the run's windows (each message says which).
     """
+    if not store.has_model(run.model):
+        raise ValueError(f"model {run.model} is no longer in the store: the run's series cannot be simulated again")
     current = model_version(store, run.model)
     if current != run.version:
         raise ValueError(f"model {run.model} is now version {current}, the run calibrated version {run.version}: "

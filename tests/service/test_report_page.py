@@ -186,6 +186,8 @@ def test_a_changed_model_or_missing_data_leave_the_figures_out_and_say_why(case,
     run = read_run(case.store, case.report.run_id)
     with pytest.raises(ValueError, match=r"is now version .* the run calibrated version 000000000000"):
         recompute_series(case.store, replace(run, version="000000000000"), case.data)
+    with pytest.raises(ValueError, match=r"model gone is no longer in the store"):  # not "now version e3b0c442…" (nothing)
+        recompute_series(case.store, replace(run, model="gone"), case.data)
     page = report_html(case.store, case.report.run_id, locate_data=data_file_locator(folder=tmp_path))
     parsed = PageParser(page)
     assert not [i for i in parsed.images if i["class"] == "series"]
