@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from .calibration_data import DEFAULT_GP_INPUTS
 from .calibration_run import parse_window
@@ -126,6 +126,8 @@ class NamedQueryList(BaseModel):
 
 
 class _ModelRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")  # a misspelt field ("start-from") is an error, not ignored
+
     model: str = Field(description="model name in the store")
 
     @field_validator("model")

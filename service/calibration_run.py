@@ -336,7 +336,8 @@ def calibrate(
         regimes = regime_breakdown(md, test_slice, observed_test, median, seed=seed)
     finished = datetime.now(timezone.utc)
     times = data.timestamps
-    as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime)  # noqa: E731
+    as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime).replace(  # noqa: E731
+        tzinfo=timezone.utc if data.utc else None)  # the data's clock: UTC, or local (no offset) as the file gives it
     record = CalibrationRecord(
         run_id=f"{model_name}-{method}-{uuid.uuid4().hex[:8]}", model_name=model_name,
         model_version=version, method=method, seed=seed,

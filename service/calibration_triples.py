@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import json
 import math
-from datetime import datetime, timezone
+from datetime import datetime
 
 import pyoxigraph as ox
 
@@ -55,8 +55,8 @@ def _double(value: float) -> ox.Literal:
 
 
 def _time(value: datetime) -> ox.Literal:
-    if value.tzinfo is None:
-        value = value.replace(tzinfo=timezone.utc)
+    """``xsd:dateTime`` as the data's clock gives it: with its offset, or none for local time (a BMS
+    export's naive stamps are not UTC, and saying so would shift them)."""
     return ox.Literal(value.isoformat(), datatype=XSD.dateTime)
 
 

@@ -92,6 +92,7 @@ class MeasuredData:
     columns: dict[str, str] = field(default_factory=dict)  # node → CSV column
     warnings: tuple[str, ...] = ()
     source_units: dict[str, str] = field(default_factory=dict)  # node → the QUDT unit of its column
+    utc: bool = False  # the file gave its stamps with a UTC offset: ``timestamps`` are UTC
 
     @property
     def n_steps(self) -> int:
@@ -114,22 +115,41 @@ class MeasuredData:
             day is not cut silently).
         """
         first, last = self.timestamps[0], self.timestamps[-1]
-        lo = first if start is None else np.datetime64(parse_timestamp(str(start)), "s")
-        hi = last if end is None else np.datetime64(parse_timestamp(str(end)), "s")
+        lo = first if start is None else self._bound(start, "start")
+        hi = last if end is None else self._bound(end, "end")
+        window, data = f"window {self.shown(lo)} – {self.shown(hi)}", f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
         if hi < lo:
-            raise ValueError(f"window {lo} – {hi}: the end is before the start")
+            raise ValueError(f"{window}: the end is before the start")
         if lo > last or hi < first:
-            raise ValueError(f"window {lo} – {hi} lies outside the data {self.source} ({first} – {last})")
+            raise ValueError(f"{window} lies outside {data}")
         step = np.timedelta64(int(round(self.step_s)), "s")
         if lo < first - step or hi > last + step:
             side = "starts before" if lo < first - step else "ends after"
-            raise ValueError(f"window {lo} – {hi} {side} the data {self.source} ({first} – {last}): "
-                             "give a window inside the data")
+            raise ValueError(f"{window} {side} {data}: give a window inside the data")
         i = int(np.searchsorted(self.timestamps, lo, side="left"))
         j = int(np.searchsorted(self.timestamps, hi, side="right"))
         if j - i < 2:
-            raise ValueError(f"window {lo} – {hi} holds fewer than 2 steps of {self.source}")
+            raise ValueError(f"{window} holds fewer than 2 steps of {self.source}")
         return slice(i, j)
+
+    def _bound(self, value: datetime | str, which: str) -> np.datetime64:
+        """A window bound on the data's clock: with a UTC offset where the file gives its stamps with
+        one (they are read as UTC), without one where the file's are local (an offset would shift
+        the window by it, silently).
+
+        :raises ValueError: a bound on the other clock."""
+        text = value.isoformat() if isinstance(value, datetime) else str(value)
+        stamp, with_offset = _parsed_timestamp(text)
+        if with_offset != self.utc:
+            stamps = "with a UTC offset (read as UTC)" if self.utc else "without a UTC offset (local time)"
+            wanted = "with an offset too (…T06:00-07:00, or …T13:00Z)" if self.utc else "without an offset"
+            raise ValueError(f"the window's {which} {text!r}: the data {self.source} give their time stamps {stamps}; "
+                             f"give it {wanted}")
+        return np.datetime64(stamp, "s")
+
+    def shown(self, stamp: np.datetime64) -> str:
+        """A time stamp of the data as text, ``… UTC`` where the file's carried offsets."""
+        return f"{stamp} UTC" if self.utc else str(stamp)
 
     def select(self, start: datetime | str | None, end: datetime | str | None) -> MeasuredData:
         """The data with ``start ≤ t ≤ end`` (errors as :meth:`window`)."""
@@ -387,7 +407,7 @@ def read_measurements(
         timestamps=stamps, step_s=step_s, series=converted,
         units={n: specs[n].port_unit for n in converted}, source=source,
         columns={n: header[c] for n, c in claimed.items()}, warnings=tuple(warnings),
-        source_units={n: specs[n].unit for n in converted},
+        source_units={n: specs[n].unit for n in converted}, utc=True in first_with_offset,
     )
 
 

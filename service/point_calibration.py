@@ -237,7 +237,8 @@ class PointCalibrator(BaseEstimator):
         clipped = np.maximum(singular, floor)
         width = problem.upper - problem.lower
         meat = u.T @ (u * noise_variance[target_of][:, None])
-        unit_covariance = (vt.T / clipped) @ meat @ (vt / clipped[:, None])
+        with np.errstate(over="ignore", invalid="ignore"):  # a direction the data do not see: an infinite variance
+            unit_covariance = (vt.T / clipped) @ meat @ (vt / clipped[:, None])
         self.covariance_ = unit_covariance * np.outer(width, width)
         self.standard_errors_ = np.sqrt(np.diag(self.covariance_))
         self.correlation_ = _correlation(self.covariance_, self.standard_errors_)

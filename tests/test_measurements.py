@@ -256,3 +256,23 @@ def test_two_columns_naming_one_device_are_refused(tmp_path):
     path = _write(tmp_path, "time,SAT,valve,sat\n2025-01-01 00:00,20,10,25\n2025-01-01 00:10,21,10,26\n")  # by series id and local name
     with pytest.raises(MeasurementError, match=r"columns 2 \('SAT'\), 4 \('sat'\) all name device"):
         read_measurements(path, SPECS)
+
+
+def test_a_window_is_given_on_the_datas_clock(tmp_path):
+    """Stamps with an offset are read as UTC: a window without one would be read as UTC too and land
+    hours off without a word; a window with an offset on local stamps the same. Both are refused."""
+    rows = "".join(f"2017-09-20T{h:02d}:00:00-07:00,{60 + h},{h}\n" for h in range(12))
+    data = read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows), SPECS)
+    assert data.utc and str(data.timestamps[0]) == "2017-09-20T07:00:00"
+    assert data.window("2017-09-20T02:00-07:00", "2017-09-20T05:00-07:00") == slice(2, 6)
+    assert data.window("2017-09-20T09:00Z", None) == slice(2, 12)
+    with pytest.raises(ValueError, match=r"the window's start '2017-09-20T02:00': the data .* give their time stamps with a "
+                                         r"UTC offset \(read as UTC\); give it with an offset too"):
+        data.window("2017-09-20T02:00", None)
+    with pytest.raises(ValueError, match=r"window 2017-09-21T07:00:00 UTC – 2017-09-21T08:00:00 UTC lies outside the data "
+                                         r".* \(2017-09-20T07:00:00 UTC – 2017-09-20T18:00:00 UTC\)"):
+        data.window("2017-09-21T00:00-07:00", "2017-09-21T01:00-07:00")
+    local = read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows.replace("-07:00", "")), SPECS)
+    assert not local.utc and local.window("2017-09-20T02:00", "2017-09-20T05:00") == slice(2, 6)
+    with pytest.raises(ValueError, match=r"give their time stamps without a UTC offset \(local time\); give it without an offset"):
+        local.window(None, "2017-09-20T05:00Z")

@@ -424,6 +424,8 @@ def test_job_requests_for_unknown_things_are_refused(client, auth, case_csv):
     effect = client.post("/jobs/add-effect", json={"model": "case", "effect": "Nope", "target": EX + "supply_fan"}, headers=auth)
     assert effect.status_code == 422 and "FanMotorHeat" in effect.json()["detail"]
     assert client.post("/jobs/diagnose", json={"model": "case", "measurements": upload, "train": "/"}, headers=auth).status_code == 422
+    misspelt = client.post("/jobs/calibrate", headers=auth, json={"model": "case", "measurements": upload, "start-from": "v0"})
+    assert misspelt.status_code == 422 and "start-from" in misspelt.json()["detail"]  # not ignored
     condition = client.post("/jobs/calibrate", headers=auth, json={
         "model": "case", "measurements": upload, "only_when": ["fan speed = 1"]})
     assert condition.status_code == 422 and "expected COLUMN OP NUMBER" in condition.json()["detail"]
