@@ -8,6 +8,9 @@ from rich.console import Console
 from rich.table import Table
 
 from .assembled_model import AssembledModel, ParameterRef
+from .assembly import without_model
+from .namespaces import distinct_local_names, local_name
+from .units import unit_label
 
 __all__ = ["assembly_to_dict", "print_assembly"]
 
@@ -52,30 +55,36 @@ def _device_entry(model: AssembledModel, iri: str) -> dict[str, Any]:
 
 
 def print_assembly(model: AssembledModel, console: Console | None = None) -> None:
+    """The assembly as tables for a terminal: building nodes by their local names (hashed where two
+    share one; the namespaces they come from said once), units by their labels. ``--json`` has the IRIs."""
     console = console or Console()
-    components = Table(title="Components", show_lines=False)
+    nodes = [n for c in model.components.values() for n in c.modeled_nodes]
+    name = distinct_local_names(nodes)
+    namespaces = sorted({iri[: len(iri) - len(local_name(iri))] for iri in nodes})
+    components = Table(title="Components", caption=f"nodes in {', '.join(namespaces)}", show_lines=False)
     for column in ("signature", "represents"):
-        components.add_column(column)
+        components.add_column(column, overflow="fold")
     for c in model.components.values():
-        components.add_row(c.signature.id, "\n".join(c.modeled_nodes))
+        components.add_row(c.signature.id, "\n".join(name[n] for n in c.modeled_nodes))
     console.print(components)
 
     devices = Table(title="Measured devices")
     for column in ("role", "device", "column", "unit"):
-        devices.add_column(column)
+        devices.add_column(column, overflow="fold")
     for role, iris in (("boundary input", model.boundary_inputs), ("target", model.targets)):
         for iri in iris:
             link = model.measurement(iri)
-            devices.add_row(role, link.node, link.series_id or "-", link.unit or "-")
+            devices.add_row(role, name.get(link.node, link.node), link.series_id or "-",
+                            unit_label(link.unit) if link.unit else "-")
     console.print(devices)
 
     parameters = Table(title="Parameters")
     for column in ("component", "parameter", "unit", "value / bounds"):
-        parameters.add_column(column)
+        parameters.add_column(column, overflow="fold")
     for ref in model.mapped_parameters:
-        parameters.add_row(model.components[ref.component].node, ref.name, ref.spec.unit, f"mapped {ref.value:g}")
+        parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit, f"mapped {ref.value:g}")
     for ref in model.estimated_parameters:
-        parameters.add_row(model.components[ref.component].node, ref.name, ref.spec.unit,
+        parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
                            f"estimate in [{ref.spec.lower:g}, {ref.spec.upper:g}]")
     console.print(parameters)
     console.print(f"{len(model.connections)} connections, {len(model.boundary_inputs)} boundary inputs, "

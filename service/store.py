@@ -630,10 +630,13 @@ class GraphStore:
 
     def _holds_model(self, name: str, triples: list[ox.Triple]) -> bool:
         """Whether model ``name``'s graph holds exactly ``triples`` (compared as N-Triples lines, which
-        pyoxigraph writes one way). Its inferred graph then holds what the current rules derive from
-        them: :meth:`ensure_ontologies` derives them again when the rules or ontologies change."""
+        pyoxigraph writes one way) and its inferred graph is there. That graph then holds what the
+        current rules derive from them: :meth:`ensure_ontologies` derives them again when the rules or
+        ontologies change, :meth:`update_models` when an update changes the model; an inferred graph
+        an update emptied is derived again here (a model with nothing to infer is then rewritten on
+        every load: a small one)."""
         graph = self.model_graph(name)
-        if graph not in self.backend.graphs():
+        if graph not in self.backend.graphs() or not self.query(f"ASK {{ GRAPH {self.inferred_graph(name)} {{ ?s ?p ?o }} }}"):
             return False
         held = self.backend.dump(graph, ox.RdfFormat.N_TRIPLES)
         return set(held.splitlines()) == set(b"".join(ntriples_chunks(triples)).splitlines())

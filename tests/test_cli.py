@@ -31,6 +31,17 @@ def test_assemble_prints_the_model_as_json():
     assert len(data["parameters"]["estimated"]) == 14
 
 
+def test_assemble_prints_tables_a_terminal_of_80_columns_can_read(monkeypatch):
+    """Local names (the namespace said once) and unit labels: full IRIs were cut to "https://example.o…"."""
+    monkeypatch.setenv("COLUMNS", "80")
+    result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--memory"])
+    assert result.exit_code == 0, result.output
+    assert f"nodes in {EX}" in result.output and "https://example.o…" not in result.output
+    assert "coil_outlet_air_temperature_se" in result.output and "°C" in result.output  # names fold, not cut
+    assert "HotWaterLoop/heating_" in result.output and "Fan/supply_fan" in result.output  # signature/node
+    assert "…" not in result.output
+
+
 def test_a_broken_model_fails_with_line_and_column(tmp_path):
     broken = tmp_path / "broken.ttl"
     broken.write_text("@prefix ex: <https://example.org/x#> .\nex:a ex:b ex:c .\nex:d zz:e ex:f .\n")

@@ -358,3 +358,12 @@ def test_a_load_waits_for_an_update_deriving_the_same_models_inferences(monkeypa
     model = store.graph_triples(store.model_graph("x"))
     assert {t.subject.value for t in model} == {"https://example.org/other"}
     assert set(store.graph_triples(store.inferred_graph("x"))) == set(inferred_triples(model, store._ontology_triples))
+
+
+def test_an_unchanged_model_whose_inferred_graph_an_update_emptied_gets_it_again(case_store):
+    inferred = set(case_store.graph_triples(case_store.inferred_graph("case")))
+    case_store.update_models(f"CLEAR GRAPH {case_store.inferred_graph('case')}", {case_store.inferred_graph("case").value})
+    assert case_store.graph_triples(case_store.inferred_graph("case")) == []
+    model = case_store.backend.dump(case_store.model_graph("case"), ox.RdfFormat.N_TRIPLES)
+    assert case_store.load_model("case", model, "nt").changed
+    assert set(case_store.graph_triples(case_store.inferred_graph("case"))) == inferred

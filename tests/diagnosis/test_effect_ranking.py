@@ -52,8 +52,23 @@ def test_score_test_is_quiet_without_the_effect():
         problem = _problem(true_b=0.0, lower_b=-2.0, seed=seed)
         result = score_test(problem, np.array([_base_estimate(problem), 0.0]), [1], sample_fraction=1.0)
         p_values.append(result.p_value)
-    # a two-sided null in the interior: ½·P(χ²₁ > S) is at most 0.5 and rarely tiny
+    # a null in the interior: P(χ²₁ > S), as often below 0.01 as chance has it
     assert np.mean(np.array(p_values) < 0.01) <= 0.1
+
+
+def test_an_effect_whose_step_overshoots_its_far_bound_counts_at_the_bound():
+    """The demo's fan motor heat: the Gauss–Newton step from f = 0 went to 1.10 of at most 1. Held at
+    its null for leaving its bounds, it scored 0 (p = 1) beside a ΔBIC of −7,835; at the bound it
+    explains what a step of 2 there explains."""
+    problem = _problem(true_b=3.0)  # b at most 2
+    theta_null = np.array([_base_estimate(problem), 0.0])
+    result = score_test(problem, theta_null, [1], sample_fraction=1.0)
+    y = problem.observed["y"] / 0.05
+    rss0 = np.sum((y - X / 0.05 * theta_null[0]) ** 2)
+    a_at_b2 = np.dot(X, y - 2.0 * Z / 0.05) / np.dot(X, X) * 0.05  # the base refitted with b at its bound
+    rss_bound = np.sum((y - (a_at_b2 * X + 2.0 * Z) / 0.05) ** 2)
+    assert result.statistic == pytest.approx((rss0 - rss_bound) / (rss0 / (T.size - 1)), rel=1e-3)
+    assert result.active_parameters == ("b",) and result.p_value < 1e-10
 
 
 def test_an_effect_the_bounds_forbid_scores_zero():
