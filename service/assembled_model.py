@@ -11,6 +11,7 @@ parameters to estimate are all parameters minus those mapped from the graph (Eq.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from .component import ComponentModel, Parameter
@@ -18,7 +19,7 @@ from .signature import Signature, check_model_names, import_model_class
 
 __all__ = [
     "MeasurementLink", "ComponentInstance", "Connection", "ParameterRef", "AssembledModel",
-    "load_model_class",
+    "load_model_class", "mapped_values_outside_bounds",
 ]
 
 
@@ -103,6 +104,15 @@ class AssembledModel:
         if link is None:
             raise KeyError(f"{component_iri} is not a measuring device")
         return link
+
+
+def mapped_values_outside_bounds(mapped: Iterable[ParameterRef], components: Mapping[str, ComponentInstance]) -> list[str]:
+    """One sentence per parameter the graph maps to a value outside its physical bounds, or to no
+    number (a nominal power of 80 kW for a fan whose signature allows 50 W – 50 kW is a typo or a
+    wrong unit), in the parameter's unit."""
+    return [f"{ref.spec.name} of {components[ref.component].node} is mapped from the graph to {ref.value:g} "
+            f"{ref.spec.unit}, outside its bounds [{ref.spec.lower:g}, {ref.spec.upper:g}] {ref.spec.unit}"
+            for ref in mapped if ref.value is not None and not ref.spec.lower <= ref.value <= ref.spec.upper]
 
 
 _MODEL_CACHE: dict[str, type[ComponentModel]] = {}

@@ -34,10 +34,11 @@ import pyoxigraph as ox
 
 from .assembled_model import (
     AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef, load_model_class,
+    mapped_values_outside_bounds,
 )
 from .cyclic_gc import cyclic_gc_paused
 from .measuring_device import MeasuringDevice
-from .namespaces import GTR, OWL, RDF, RDFS, distinct_local_names, local_name
+from .namespaces import BRICK, GTR, OWL, RDF, RDFS, distinct_local_names, local_name
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
 from .signature_matcher import MatchSession, match_signature, missing_class_report
@@ -171,6 +172,8 @@ def assemble(
               f"in the model)" for i in boundary if i not in read]
     targets = tuple(sorted(i for i in devices if i in fed))
     mapped, estimated = _parameters(instances)
+    notes += [f"{problem}: a calibration refuses it; fix the value (or its unit) in the model graph"
+              for problem in mapped_values_outside_bounds(mapped, instances)]
     return AssembledModel(
         components=dict(sorted(instances.items())), connections=tuple(sorted(connections, key=dataclasses.astuple)),
         boundary_inputs=boundary, targets=targets, mapped_parameters=mapped,
@@ -316,16 +319,25 @@ def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
     undeclared = [(row["class"].value, int(row["nodes"].value), row["first_node"].value) for row in rows]
     if not undeclared:
         return []
-    declared = sorted({t.subject.value for t in store.graph_triples(ONTOLOGY_GRAPH)
-                       if t.predicate == RDF.type and t.object in (OWL.Class, RDFS.Class) and isinstance(t.subject, ox.NamedNode)})
+    declared = defaultdict(list)  # namespace → the local names of the classes the ontologies declare in it
+    for t in store.graph_triples(ONTOLOGY_GRAPH):
+        if t.predicate == RDF.type and t.object in (OWL.Class, RDFS.Class) and isinstance(t.subject, ox.NamedNode):
+            declared[_namespace(t.subject.value)].append(local_name(t.subject.value))
     notes = []
     for cls, count, first in undeclared:
-        close = difflib.get_close_matches(cls, declared, n=1, cutoff=0.9)
         nodes = first if count == 1 else f"{count} nodes, e.g. {first}"
+        if _namespace(cls) == BRICK:  # official Brick classes outside graphtwin's subset are no misspelling
+            hint = " (graphtwin brick-report says what the Brick alignment needs)"
+        else:
+            close = difflib.get_close_matches(local_name(cls), declared[_namespace(cls)], n=1, cutoff=0.85)
+            hint = f" (did you mean {_namespace(cls)}{close[0]}?)" if close else ""
         notes.append(f"{_short(first)}: its class {cls} ({nodes}) is declared by no loaded ontology, and the node has "
-                     f"no other type a signature matches: no component models it"
-                     + (f" (did you mean {close[0]}?)" if close else ""))
+                     f"no other type a signature matches: no component models it{hint}")
     return notes
+
+
+def _namespace(iri: str) -> str:
+    return iri[: len(iri) - len(local_name(iri))]
 
 
 def _optional_block(signature: Signature, node: str, *, through: str, without: str) -> list[PatternTriple]:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .assembled_model import AssembledModel
+from .assembled_model import AssembledModel, mapped_values_outside_bounds
 from .calibration_problem import CalibrationProblem
 from .measurements import MeasuredData, SeriesSpec, read_measurements
 from .namespaces import local_name
@@ -74,15 +74,7 @@ def check_mapped_parameters(model: AssembledModel) -> None:
     :raises ValueError: naming every such parameter, its node, the value and the bounds, in the
         parameter's unit.
     """
-    problems = []
-    for ref in model.mapped_parameters:
-        spec = ref.spec
-        if ref.value is not None and not spec.lower <= ref.value <= spec.upper:
-            node = model.components[ref.component].node
-            problems.append(
-                f"{spec.name} of {node} is mapped from the graph to {ref.value:g} {spec.unit}, outside its "
-                f"bounds [{spec.lower:g}, {spec.upper:g}] {spec.unit}"
-            )
+    problems = mapped_values_outside_bounds(model.mapped_parameters, model.components)
     if problems:
         raise ValueError("; ".join(problems) + ": fix the value (or its unit) in the model graph")
 

@@ -32,7 +32,7 @@ from .namespaces import local_name
 from .resources import examples_dir, signatures_dir
 from .signature import SignatureError, load_signature_library
 from .sparql_compiler import compile_signature
-from .store import GraphStore, ModelLoadError, StoreInUseError
+from .store import ONTOLOGY_GRAPH, GraphStore, ModelLoadError, StoreInUseError
 from .units import unit_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules are imported by the commands that run them
@@ -576,7 +576,10 @@ def query_command(
         "--format", help="table, csv or json (full IRIs); default: a table on a terminal, CSV when piped.")] = None,
     store: StoreOption = Path("graphtwin-data"),
 ) -> None:
-    """Run a named SPARQL query over the store (e.g. calibrated-parameters --model NAME)."""
+    """Run a named SPARQL query over the store (e.g. calibrated-parameters --model NAME). A query that
+    names no graph (flow-edges, observed-node, measurement-link, applied-effects) reads a building
+    model: it runs over the model's graphs (model, inferences, ontologies); one about results binds
+    ?model to the name, and ?model_graph, ?inferred_graph, ?ontology_graph where it reads them."""
     output_format = output_format or ("table" if console.is_terminal else "csv")
     if output_format not in ("table", "csv", "json"):
         raise fail(f"--format {output_format!r}: give table, csv or json")
@@ -584,10 +587,16 @@ def query_command(
     if model is not None and model not in graph_store.models():
         raise fail(f"no model {model!r} in the store {store}; it holds {', '.join(graph_store.models()) or 'none'}")
     try:
+        text = graph_store.named_query_text(name)
+        reads_a_model = not re.search(r"^[^#]*\bGRAPH\b", text, re.IGNORECASE | re.MULTILINE)  # outside comments
+        if reads_a_model and model is None:
+            raise fail(f"query {name} reads a building model's graphs: give --model")
         bindings = dict(_binding(p) for p in (param or []))
-        if model is not None:
-            bindings["model"] = model
-        rows = graph_store.run_named_query(name, **bindings)
+        if model is not None and not reads_a_model:
+            graphs = {"model_graph": graph_store.model_graph(model), "inferred_graph": graph_store.inferred_graph(model),
+                      "ontology_graph": ONTOLOGY_GRAPH}
+            bindings |= {"model": model} | {var: iri for var, iri in graphs.items() if f"?{var}" in text}
+        rows = graph_store.run_named_query(name, dataset=model if reads_a_model else None, **bindings)
     except USER_ERRORS as exc:
         raise fail(exc) from None
     columns = list(dict.fromkeys(k for row in rows for k in row))

@@ -258,3 +258,30 @@ def test_a_model_nothing_matches_is_an_error_not_an_empty_assembly():
     store.load_model("bare", b"<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
     with pytest.raises(AssemblyError, match="no signature of the library matches anything in model bare"):
         assemble(store, "bare")
+
+
+def test_a_room_in_twin4builds_spelling_stops_a_traverse_like_a_building_space():
+    """``s4bldg:Space`` (no SAREF4BLDG version has it; Twin4Build writes it for BuildingSpace): the
+    supply air sensor before the room is no inlet of the fan after it (it was wired through the room)."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    assert "ex:test_cell a s4bldg:BuildingSpace" in text
+    store = GraphStore.embedded(None)
+    store.load_model("t4b", text.replace("ex:test_cell a s4bldg:BuildingSpace", "ex:test_cell a s4bldg:Space").encode())
+    store.load_model("saref", text.encode())
+    wiring = {name: {(c.source, c.source_port, c.target, c.target_port) for c in assemble(store, name).connections}
+              for name in ("t4b", "saref")}
+    assert {(s.rsplit("/", 1)[-1], sp, t.rsplit("/", 1)[-1], tp) for s, sp, t, tp in wiring["t4b"]} == {
+        (s.rsplit("/", 1)[-1], sp, t.rsplit("/", 1)[-1], tp) for s, sp, t, tp in wiring["saref"]}
+
+
+@pytest.mark.parametrize("value", ["-1.5", "NaN"])
+def test_a_mapped_value_outside_its_bounds_is_a_note_at_assembly(value):
+    """Said where the graph is read, not only when a calibration refuses it."""
+    text = CASE_STUDY.read_text().replace('saref:hasValue "1.5"^^xsd:double', f'saref:hasValue "{value}"^^xsd:double')
+    store = GraphStore.embedded(None)
+    store.load_model("odd", text.encode())
+    model = assemble(store, "odd")
+    assert any(n.startswith(f"nominal_air_flow of {EX}supply_fan is mapped from the graph to {float(value):g} m3/s, "
+                            "outside its bounds") and "a calibration refuses it" in n for n in model.notes), model.notes

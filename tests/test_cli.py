@@ -250,6 +250,15 @@ def test_query_prints_csv_or_json_with_full_iris_and_refuses_an_unknown_model(tm
     assert code == 2 and "no model 'modle' in the store" in output and "ventilation_case_study" in output
     code, output = _run(["query", "calibrated-paramters", *store])
     assert code == 2 and "error: no query 'calibrated-paramters'" in output
+    # a query about a building graph runs over the model's graphs (it printed no rows before)
+    code, output = _run(["query", "flow-edges", "--model", "ventilation_case_study", *store])
+    edges = {(r["from"].removeprefix(EX), r["to"].removeprefix(EX), r["kind"]) for r in csv.DictReader(io.StringIO(output))}
+    assert code == 0 and ("heating_coil_water_side", "heating_coil_air_side", "heat") in edges and len(edges) > 10
+    code, output = _run(["query", "measurement-link", "--model", "ventilation_case_study", "--param",
+                         f"device={EX}fan_power_meter", *store])
+    assert code == 0 and "supply_fan_power,http://qudt.org/vocab/unit/W" in output
+    code, output = _run(["query", "flow-edges", *store])
+    assert code == 2 and "query flow-edges reads a building model's graphs: give --model" in output
 
 
 def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(tmp_path):
