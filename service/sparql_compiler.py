@@ -304,8 +304,13 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
     owns = [{n for t in b for n in (t.subject, t.object) if n not in required_nodes} for b in blocks]
 
     ordered_required = [anchor] + [n for n in order if n in required_nodes and n != anchor]
-    text = writer.select(order, writer.group(required, ordered_required, required_nodes, blocks, owns),
-                         f"signature {signature.id}: {signature.label}")
+    title = f"signature {signature.id}: {signature.label}"
+    if any(t.rule is Rule.TRAVERSE for t in signature.triples):
+        title += ("\n# Its traverses' property paths reach every node along their predicate; graphtwin keeps the\n"
+                  "# nearest only (no instance of the far end's classes between, never through a building space,\n"
+                  "# boiler, chiller or cooling tower, nor past a stop_at class): run alone, this query returns\n"
+                  "# those matches and more (service/signature_matcher.py).")
+    text = writer.select(order, writer.group(required, ordered_required, required_nodes, blocks, owns), title)
 
     # the parts: required components over the exact triples; a block without traverse goes into the
     # query of the one component it hangs on, any other block is joined by the matcher
