@@ -268,6 +268,17 @@ class MeasurementUploads:
         return [json.loads(p.read_text(encoding="utf-8")) for p in sorted(folder.glob("*.json"))
                 if (folder / f"{p.stem}.csv").is_file()]
 
+    def delete(self, model_name: str, upload_id: str) -> None:
+        """Remove upload ``upload_id`` of model ``model_name``.
+
+        :raises KeyError: no such upload of that model.
+        """
+        folder = self.root / GraphStore.check_name(model_name)
+        if not _UPLOAD_ID.match(upload_id or "") or not (folder / f"{upload_id}.csv").is_file():
+            raise KeyError(f"no measurement upload {upload_id!r} of model {model_name}")
+        (folder / f"{upload_id}.json").unlink(missing_ok=True)  # the description first: list() then skips it
+        (folder / f"{upload_id}.csv").unlink()
+
     def locate(self, upload_id: str) -> Path:
         """The CSV of upload ``upload_id`` (under whichever model it was validated against).
 
@@ -536,6 +547,17 @@ def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | N
             "changed": loaded.changed}
 
 
+@router.delete("/models/{name}", status_code=204, tags=["models"], dependencies=[WriteAccess],
+               responses=_errors(401, 403, 404))
+def delete_model(name: str, service: ServiceDep) -> Response:
+    """Remove model ``name`` with its inferences and its assembly (one transaction). Its calibration
+    runs and measurement uploads stay: they describe what was done, and a model loaded again under
+    the name can use the uploads."""
+    _require_model(service.store, name)
+    service.store.drop_model(name)
+    return Response(status_code=204)
+
+
 @router.get("/models/{name}/brick-report", response_model=BrickReportPublic, tags=["models"],
             dependencies=[ReadAccess], responses=_errors(401, 403, 404))
 def get_brick_report(name: str, service: ServiceDep) -> dict:
@@ -587,6 +609,17 @@ def list_measurements(name: str, service: ServiceDep) -> dict:
     _require_model(service.store, name)
     infos = service.uploads.list(name)
     return {"data": infos, "count": len(infos)}
+
+
+@router.delete("/models/{name}/measurements/{upload_id}", status_code=204, tags=["models"],
+               dependencies=[WriteAccess], responses=_errors(401, 403, 404))
+def delete_measurements(name: str, upload_id: str, service: ServiceDep) -> Response:
+    """Remove a measurement upload of model ``name`` (runs made with it keep what they recorded)."""
+    try:
+        service.uploads.delete(name, upload_id)
+    except (KeyError, ValueError) as exc:  # no such upload, or no name a model can have
+        raise ApiError(404, str(exc.args[0])) from None
+    return Response(status_code=204)
 
 
 # ====================================================================== routes: SPARQL

@@ -187,6 +187,23 @@ def test_bad_measurements_are_refused_with_every_problem_and_change_nothing(clie
     assert snapshot(store) == before and not list(settings.measurements_dir.rglob("*.csv"))
 
 
+def test_a_model_and_an_upload_are_deleted_and_runs_stay(client, auth, case_csv, store, settings):
+    upload = _upload_csv(client, auth, case_csv.read_text()).json()["id"]
+    store.write_graph(store.run_graph("case-point-00000000"), [ox.Triple(ox.NamedNode(EX + "r"), ox.NamedNode(EX + "p"), ox.Literal("run"))])
+    assert client.delete(f"/models/case/measurements/{upload}").status_code == 401  # writes need the token
+    assert client.delete(f"/models/case/measurements/{upload}", headers=auth).status_code == 204
+    assert client.get("/models/case/measurements").json()["count"] == 0
+    assert not list(settings.measurements_dir.rglob(f"{upload}.*"))
+    assert client.delete(f"/models/case/measurements/{upload}", headers=auth).status_code == 404
+    assert client.delete("/models/../measurements/0123456789abcdef", headers=auth).status_code == 404
+    store.write_graph(store.assembly_graph("case"), [ox.Triple(ox.NamedNode(EX + "c"), ox.NamedNode(EX + "p"), ox.Literal("x"))])
+    assert client.delete("/models/case", headers=auth).status_code == 204
+    graphs = store.backend.graphs()
+    assert not {store.model_graph("case"), store.inferred_graph("case"), store.assembly_graph("case")} & set(graphs)
+    assert store.run_graph("case-point-00000000") in graphs
+    assert client.get("/models/case").status_code == 404 and client.delete("/models/case", headers=auth).status_code == 404
+
+
 def test_columns_no_device_claims_are_a_warning_as_in_the_cli(client, auth, case_csv):
     """A BMS export has more columns than the model reads (both real files in ../shared do)."""
     response = _upload_csv(client, auth, _bad_csv(case_csv, "unknown column"))
