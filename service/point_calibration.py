@@ -309,6 +309,7 @@ def _correlation(covariance: np.ndarray, standard_errors: np.ndarray) -> np.ndar
     """Correlation matrix of ``covariance``; a parameter with a zero standard error (residuals that
     are exactly zero) correlates with nothing: 0 off the diagonal, 1 on it."""
     scale = np.outer(standard_errors, standard_errors)
-    correlation = np.divide(covariance, scale, out=np.zeros_like(covariance), where=scale > 0)
+    with np.errstate(invalid="ignore"):  # an unobserved direction's infinite variance: no correlation to tell (NaN)
+        correlation = np.divide(covariance, scale, out=np.zeros_like(covariance), where=scale > 0)
     np.fill_diagonal(correlation, 1.0)
     return correlation

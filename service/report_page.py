@@ -416,6 +416,8 @@ def topology_svg(
     parts = []
     for source in flow_nodes:
         for target in sorted(topology.downstream.get(source, ())):
+            if (target, source) in heat_edges:  # the localisation's reverse of a heat coupling: drawn once, as stated
+                continue
             kind = "heat" if (source, target) in heat_edges else "fluid"
             if (source, target) in back or layer[target] <= layer[source]:
                 (x1, y1), (x2, y2) = anchor(source, "bottom"), anchor(target, "bottom")
@@ -569,6 +571,10 @@ def _regimes_section(run: StoredRun) -> str:
 def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
     if diagnosis is None:
         return "<h2>Which effect is missing</h2><p class=\"note\">No diagnosis is based on this run.</p>"
+    if not diagnosis.effects:
+        return ("<h2>Which effect is missing</h2><p class=\"note\">The effect catalog was not tested on this run "
+                "(<code>graphtwin compare</code> locates the failures only; <code>graphtwin diagnose</code> tests the "
+                "catalog).</p>")
     effects = _table(
         ["rank", "effect", "at", "significant", "test error removed", "ΔBIC", "score", "p", "evidence"],
         [[str(e["rank"]), f'<span class="effect">{html.escape(e["effect"])}</span><br>'

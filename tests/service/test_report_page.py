@@ -387,3 +387,25 @@ def test_a_run_with_an_operating_filter_says_so_and_reproduces_its_metrics(case)
     series = recompute_series(case.store, read_run(case.store, run.record.run_id), case.data)
     for sensor, metrics in run.record.metrics["test"].items():  # the filtered steps are left out again
         assert series.rmse[sensor] == pytest.approx(metrics.rmse, rel=1e-6), sensor
+
+
+def test_a_heat_coupling_is_drawn_once_dashed_and_not_as_a_fluid_edge_back():
+    """The localisation walks a heat coupling both ways; the drawing shows it as the graph states it."""
+    import xml.etree.ElementTree as ET
+
+    from service.flow_path_localization import FlowTopology
+
+    x = "https://example.org/coil#"
+    fluid = [(x + "fan", x + "coil_air"), (x + "coil_air", x + "air_out"), (x + "pump", x + "coil_water"),
+             (x + "coil_water", x + "water_out")]
+    heat = {(x + "coil_water", x + "coil_air")}
+    svg = topology_svg(FlowTopology(fluid, heat_couplings=heat), {x + "air_out", x + "water_out"}, heat_edges=heat)
+    paths = ET.fromstring(svg).findall("svg:path", {"svg": "http://www.w3.org/2000/svg"})
+    assert sum("heat" in p.get("class") for p in paths) == 1 and sum("fluid" in p.get("class") for p in paths) == len(fluid)
+
+
+def test_a_compare_runs_report_says_the_catalog_was_not_tested():
+    from service.report_page import StoredDiagnosis, _diagnosis_sections
+
+    section = _diagnosis_sections(StoredDiagnosis(iri="urn:d", summary="", effects=[], locations=[]))
+    assert "The effect catalog was not tested on this run" in section and "<table" not in section
