@@ -171,8 +171,7 @@ def plot_calibration(outcome: CalibrationOutcome, folder: Path | str, truth: np.
         folder / f"{record.run_id}-fit.png", md.data.timestamps[window], md.observed(window),
         {"model" if record.method == "point" else "posterior median": outcome.predictions[window_name]},
         md.units, intervals or None,
-        title=f"{record.model_name} ({record.method}): {window_name} window"
-              + (f", {100 * FIT_INTERVAL_LEVEL:.0f} % interval" if intervals else ""),
+        title=f"{record.model_name} ({record.method}): {window_name} window", interval_level=FIT_INTERVAL_LEVEL,
     )]
     calibrator = outcome.calibrator
     if record.method == "bayes" and calibrator is not None:

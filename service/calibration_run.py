@@ -40,12 +40,14 @@ from .calibration_data import DEFAULT_GP_INPUTS, SETTLING_S, ModelData, read_mod
 from .calibration_record import CalibrationRecord, ParameterEstimate
 from .calibration_triples import calibration_triples
 from .measurements import parse_timestamp
+from .namespaces import local_name
 from .metrics import target_metrics
 from .operating_filter import operating_mask
 from .point_calibration import NonFiniteSimulationError, PointCalibrator
 from .regime_breakdown import RegimeBreakdown, regime_breakdown
 from .simulator import loop_substeps
 from .store import GraphStore
+from .units import unit_label
 
 __all__ = ["Window", "parse_window", "CalibrationOutcome", "calibrate", "calibrated_start", "model_version",
            "fit_point", "continuation", "predict_test", "store_run"]
@@ -82,6 +84,37 @@ def model_version(store: GraphStore, model_name: str) -> str:
     data = store.backend.dump(store.model_graph(model_name), ox.RdfFormat.N_TRIPLES)
     lines = sorted(line for line in data.decode("utf-8").splitlines() if line.strip())
     return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()[:12]
+
+
+#: A test-window input counts as beyond the training's when it leaves the training's range by more
+#: than this share of that range.
+BEYOND_TRAINING_SHARE = 0.05
+
+
+def inputs_beyond_training(md: ModelData, train: slice, test: slice) -> list[str]:
+    """One sentence per boundary input the test window drives beyond the range the training window
+    saw (by more than :data:`BEYOND_TRAINING_SHARE` of that range): there the prediction rests on
+    what the training could not show (a valve's dead band fitted just above the highest command the
+    training day reached, a coil's capacity never exercised), so a test error there says little
+    about the model and a fault-free day can look failed."""
+    notes = []
+    for component in md.model.boundary_inputs:
+        node = md.node_of[component]
+        seen, tested = md.data.series[node][train], md.data.series[node][test]
+        seen, tested = seen[np.isfinite(seen)], tested[np.isfinite(tested)]
+        if not seen.size or not tested.size:
+            continue
+        low, high = float(seen.min()), float(seen.max())
+        margin = BEYOND_TRAINING_SHARE * max(high - low, 1e-9)
+        above, below = tested > high + margin, tested < low - margin
+        if above.any() or below.any():
+            unit = unit_label(md.data.units[node])
+            reach = (f"up to {tested.max():.3g} {unit} where training reached {high:.3g}" if above.any()
+                     else f"down to {tested.min():.3g} {unit} where training reached {low:.3g}")
+            notes.append(f"the test window drives {local_name(node)} beyond what the training window saw "
+                         f"({int(above.sum() + below.sum())} steps, {reach}): predictions there rest on what "
+                         "the training could not show")
+    return notes
 
 
 def continuation(train: slice, test: slice) -> slice | None:
@@ -250,6 +283,7 @@ def calibrate(
         if overlap > 0:
             window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
                                 "partly on data the calibration fitted")
+        window_notes += inputs_beyond_training(md, train_slice, test_slice)
     unscored_s = md.unscored_start_s(train_slice)
     train_s = (train_slice.stop - train_slice.start) * data.step_s
     if train_s <= unscored_s:

@@ -199,12 +199,20 @@ def signature_explain(name: Annotated[str, typer.Argument(help="Signature id, e.
 
 
 def _print_metrics(title: str, metrics: dict) -> None:
+    """Per sensor: RMSE, MAE, R², CV(RMSE), NMBE and, for a Bayesian run's prediction intervals, the
+    ACE and mean width of the 90 % one (every level: ``--json``)."""
+    intervals = any(m.coverage for m in metrics.values())
     table = Table(title=title)
-    for column in ("sensor", "RMSE", "MAE", "R²", "CV(RMSE) %", "NMBE %", "unit"):
+    for column in ("sensor", "RMSE", "MAE", "R²", "CV(RMSE) %", "NMBE %", *(("ACE 90 %", "90 % width") if intervals else ()),
+                   "unit"):
         table.add_column(column)
     for node, m in metrics.items():
+        interval_cells = []
+        if intervals:
+            at_90 = min(m.coverage, key=lambda c: abs(c.level - 0.9), default=None)
+            interval_cells = [f"{100 * at_90.ace:+.1f}", f"{at_90.mean_width:.3g}"] if at_90 else ["–", "–"]
         table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.mae:.3g}", f"{m.r2:.3f}", f"{m.cv_rmse_percent:.1f}",
-                      f"{m.nmbe_percent:+.1f}", unit_label(m.unit))
+                      f"{m.nmbe_percent:+.1f}", *interval_cells, unit_label(m.unit))
     console.print(table)
 
 
@@ -255,6 +263,11 @@ def calibrate_command(
     console.print(table)
     if "start" in record.diagnostics:
         console.print(record.diagnostics["start"], markup=False, highlight=False)
+    if "converged" in record.diagnostics:
+        found = record.diagnostics
+        console.print(f"PT-MCMC: {'converged' if found['converged'] else 'NOT converged'} after {found['n_steps']} steps "
+                      f"(20 × IAT: IAT {max(found['iat']):.0f} steps; acceptance {float(np.mean(found['acceptance'])):.2f})",
+                      markup=False, highlight=False)
     for window, metrics in record.metrics.items():
         _print_metrics(f"Metrics, {window} window", metrics)
     _print_regimes(record)
@@ -644,7 +657,11 @@ def history_command(
         table.add_column(version)
     for sensor, values in history.rmse.items():
         table.add_row(local_name(sensor), *[_with_unit(v, history.units[sensor]) for v in values])
+    table.add_row("tested on", *history.tested_on, style="dim")
     console.print(table)
+    if not history.comparable:
+        error_console.print("[yellow]warning:[/yellow] the versions were tested on different data or windows: their "
+                            "errors differ by that as much as by the model; calibrate them on the same test window")
     if history.regime_rmse:
         table = Table(title="Test RMSE per operating regime (share of the test window)")
         for column in ("regime", "rule", "sensor", *history.versions):

@@ -23,6 +23,13 @@ class ErrorHistory:
     units: dict[str, str]
     regime_rmse: dict[str, dict[str, list[float]]]
     regime_share: dict[str, list[float]]
+    tested_on: list[str]  # per version: the data file and test window of its run
+
+    @property
+    def comparable(self) -> bool:
+        """Whether every version was tested on the same data and window (else their errors differ
+        by what they were tested on as much as by the model)."""
+        return len(set(self.tested_on)) <= 1
 
 
 def error_history(store: GraphStore, model: str) -> ErrorHistory:
@@ -35,6 +42,7 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
     units: dict[str, str] = {}
     regime_rmse: dict[str, dict[str, dict[str, float]]] = {}
     regime_share: dict[str, dict[str, float]] = {}
+    tested_on: list[str] = []
     for name in [m for m in store.models() if m == base or m.startswith(base + "+")]:
         newest_run, found = None, False
         for row in store.run_named_query("sensor-metrics", model=name):
@@ -54,6 +62,8 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
                 found = True
         if found:
             versions.append(name)
+            [run] = store.query(_TESTED_ON, substitutions={"run": newest_run})
+            tested_on.append(f"{run['source'].value}, {run['start'].value} – {run['end'].value}")
 
     def per_version(values: dict[str, float]) -> list[float]:
         return [values.get(v, float("nan")) for v in versions]
@@ -61,5 +71,9 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
     return ErrorHistory(
         versions, {s: per_version(v) for s, v in rmse.items()}, units,
         {rule: {s: per_version(v) for s, v in sensors.items()} for rule, sensors in regime_rmse.items()},
-        {rule: per_version(v) for rule, v in regime_share.items()},
+        {rule: per_version(v) for rule, v in regime_share.items()}, tested_on,
     )
+
+
+_TESTED_ON = """PREFIX gt: <https://w3id.org/graphtwin/ontology#>
+SELECT ?source ?start ?end WHERE { GRAPH ?g { ?run gt:dataSource ?source ; gt:testStart ?start ; gt:testEnd ?end } }"""

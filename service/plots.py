@@ -23,10 +23,11 @@ __all__ = ["plot_measured_vs_model", "plot_residuals", "plot_error_history"]
 
 
 def _save_time_panels(fig, axes, path: Path, title: str, legend_columns: int) -> Path:
-    """Legend and title on the first of the stacked time-series panels, dates slanted, saved as PNG."""
+    """Legend on the first of the stacked time-series panels, the title above them all, dates slanted,
+    saved as PNG."""
     axes[0, 0].legend(loc="upper right", fontsize=8, ncol=legend_columns)
     if title:
-        axes[0, 0].set_title(title)
+        fig.suptitle(title, fontsize=10)
     fig.autofmt_xdate()
     fig.tight_layout()
     return _save(fig, path)
@@ -48,19 +49,22 @@ def plot_measured_vs_model(
     units: Mapping[str, str],
     intervals: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
     title: str = "",
+    interval_level: float = 0.9,
 ) -> Path:
     """One panel per sensor: the measurement and each named model prediction (e.g. ``before`` and
-    ``after``), with a shaded prediction interval where given."""
+    ``after``), with the shaded ``interval_level`` prediction interval where given."""
     sensors = list(observed)
     fig, axes = plt.subplots(len(sensors), 1, figsize=(11, 2.2 * len(sensors)), sharex=True, squeeze=False)
     for ax, sensor in zip(axes[:, 0], sensors):
         if intervals and sensor in intervals:
             low, high = intervals[sensor]
-            ax.fill_between(timestamps, low, high, color="tab:blue", alpha=0.2, label="prediction interval")
+            ax.fill_between(timestamps, low, high, color="tab:blue", alpha=0.2,
+                            label=f"{100 * interval_level:.0f} % prediction interval")
         ax.plot(timestamps, observed[sensor], color="black", lw=0.8, label="measured")
         for (name, prediction), color in zip(models.items(), ("tab:red", "tab:green", "tab:blue")):
             ax.plot(timestamps, prediction[sensor], color=color, lw=1.0, label=name)
-        ax.set_ylabel(f"{local_name(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.set_title(local_name(sensor), fontsize=8, loc="left")  # a long name as a y label ran into the next panel's
+        ax.set_ylabel(f"[{unit_label(units.get(sensor, ''))}]", fontsize=8)
         ax.grid(alpha=0.3)
     return _save_time_panels(fig, axes, path, title, legend_columns=4)
 
@@ -86,7 +90,8 @@ def plot_residuals(
         ax.axhspan(-band, band, color="tab:green", alpha=0.15, lw=0, label="matching band")
         ax.axhline(0.0, color="grey", lw=0.6)
         ax.plot(timestamps, residuals[sensor], color="black", lw=0.8, label="measured − model")
-        ax.set_ylabel(f"{local_name(sensor)}\n[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.set_title(local_name(sensor), fontsize=8, loc="left")  # a long name as a y label ran into the next panel's
+        ax.set_ylabel(f"[{unit_label(units.get(sensor, ''))}]", fontsize=8)
         ax.grid(alpha=0.3)
     return _save_time_panels(fig, axes, path, title, legend_columns=2)
 
@@ -114,9 +119,12 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
                 values = [history.regime_rmse[rule].get(sensor, [np.nan] * len(versions))[i] for rule in rules]
                 ax.bar(np.arange(len(rules)) + (i - (len(versions) - 1) / 2) * width, values, width,
                        color=colours(i), label=version)
-            ax.set_xticks(range(len(rules)), [f"regime {j}" for j in range(len(rules))], fontsize=7)
+            ax.set_xticks(range(len(rules)), [str(j) for j in range(len(rules))], fontsize=7)
+            ax.set_xlabel("regime", fontsize=7)
             ax.set_ylabel(f"RMSE per regime [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
         handles, labels = axes[1][0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)
+    if not history.comparable:
+        fig.suptitle("versions tested on different data or windows: not comparable as they stand", fontsize=9, color="#b23b3b")
     fig.tight_layout(rect=(0, 0.05 if rules else 0, 1, 1))
     return _save(fig, path)

@@ -518,7 +518,7 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
         picture = _png(lambda path, s=sensor: plot_measured_vs_model(
             path, series.timestamps, {s: series.observed[s]}, {"model": {s: series.predicted[s]}}, series.units,
             {s: series.band[s]}, title=f"{local_name(s)}: {series.window} window, RMSE {series.rmse[s]:.3g} "
-                                       f"{unit_label(series.units[s])}"))
+                                       f"{unit_label(series.units[s])}", interval_level=INTERVAL_LEVEL))
         out.append(f'<figure>{_img(picture, "image/png", f"measured vs model: {local_name(sensor)}", "series")}</figure>')
     return "".join(out)
 
@@ -599,7 +599,13 @@ def _history_section(store: GraphStore, run: StoredRun) -> str:
     def cells(values: list[float], sensor: str) -> list[str]:
         return [f"{_number(v)} {html.escape(unit_label(units.get(sensor, '')))}" if v == v else "–" for v in values]
 
+    out.append('<p class="note">Each version\'s latest calibration with a test window (this run\'s numbers are in the '
+               'tables above where it is that calibration).</p>')
+    if not history.comparable:
+        out.append('<p class="note bad">The versions were tested on different data or windows: their errors differ by '
+                   'that as much as by the model.</p>')
     rows = [[html.escape(local_name(s))] + cells(values, s) for s, values in history.rmse.items()]
+    rows.append(["tested on"] + [html.escape(t) for t in history.tested_on])
     out.append(_table(["sensor"] + versions, rows, "history"))
     if history.regime_rmse:
         rows = [[str(number), html.escape(rule), html.escape(local_name(s))] + cells(values, s)

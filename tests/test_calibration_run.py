@@ -408,3 +408,23 @@ def test_a_start_from_nothing_to_start_from_is_refused_and_writes_nothing(synthe
     with pytest.raises(ValueError, match="'never_calibrated': the model has no calibration run"):
         calibrate(store, "case", path, train=TRAIN, start_from="never_calibrated")
     assert set(store.backend.graphs()) == graphs_before
+
+
+def test_test_inputs_beyond_what_the_training_saw_are_a_note(synthetic):
+    """The FLEXLAB heating valve's dead band was fitted just above the training day's highest command;
+    the next day's commands above it made a fault-free day look failed, without a word."""
+    from service.assembly import assemble
+    from service.calibration_data import ModelData, read_model_data
+    from service.calibration_run import inputs_beyond_training
+
+    store, path, _ = synthetic
+    md = ModelData(assemble(store, "case"), read_model_data(assemble(store, "case"), path))
+    train, test = md.data.window(*TRAIN), md.data.window(*TEST)
+    before = inputs_beyond_training(md, train, test)
+    assert not any("supply_air_flow_meter" in n for n in before), before  # the test day's setpoints go higher: said
+    flow = md.data.series[EX + "supply_air_flow_meter"]
+    seen = float(np.nanmax(flow[train]))
+    flow[test.start + 10: test.start + 13] = 1.5 * seen
+    [note] = [n for n in inputs_beyond_training(md, train, test) if n not in before]
+    assert note.startswith(f"the test window drives supply_air_flow_meter beyond what the training window saw (3 steps, "
+                           f"up to {1.5 * seen:.3g} m³/s where training reached {seen:.3g})"), note

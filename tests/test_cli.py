@@ -321,3 +321,25 @@ def test_example_generate_refuses_data_of_fewer_than_two_steps(tmp_path):
         result = runner.invoke(app, ["example", "generate", "ventilation_case_study", f"--days={days}", "-o", str(tmp_path / "x.csv")])
         assert result.exit_code == 2 and f"{float(days):g} days of data: give at least two steps of 10 min" in result.output
         assert not (tmp_path / "x.csv").exists()
+
+
+def test_a_bayesian_runs_metrics_show_the_90_percent_intervals_ace_and_width(monkeypatch):
+    from types import SimpleNamespace
+
+    from rich.console import Console
+
+    import service.cli as cli
+    from service.metrics import IntervalCoverage
+
+    printed = Console(record=True, width=200)
+    monkeypatch.setattr(cli, "console", printed)
+    common = dict(rmse=0.1, mae=0.08, r2=0.9, cv_rmse_percent=1.0, nmbe_percent=0.2, unit="degC")
+    cli._print_metrics("Metrics, test window", {
+        EX + "a_sensor": SimpleNamespace(**common, coverage=(IntervalCoverage(0.5, 0.52, 0.02, 0.1),
+                                                             IntervalCoverage(0.9, 0.87, -0.03, 0.33))),
+        EX + "b_sensor": SimpleNamespace(**common, coverage=())})
+    text = printed.export_text()
+    assert "ACE 90 %" in text and "90 % width" in text
+    assert any("a_sensor" in line and "-3.0" in line and "0.33" in line for line in text.splitlines())
+    cli._print_metrics("Metrics, train window", {EX + "a_sensor": SimpleNamespace(**common, coverage=())})
+    assert "ACE" not in printed.export_text()  # a point fit has no intervals

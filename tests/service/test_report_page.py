@@ -26,6 +26,7 @@ from typer.testing import CliRunner
 from service.api import create_app
 from service.calibration_record import CalibrationRecord
 from service.calibration_run import calibrate
+from service.calibration_triples import run_iri
 from service.cli import app as cli
 from service.diagnosis import DiagnosisReport, diagnose
 from service.effect_recording import applied_effect_triples, record_effect_in_file
@@ -243,8 +244,12 @@ def test_the_error_history_compares_the_model_versions(case, page):
     assert all(share == share for shares in history.regime_share.values() for share in shares)
     worst = next(r for r in case.report.regimes if r["worst"])
     assert history.regime_rmse[worst["rule"]][air][1] < history.regime_rmse[worst["rule"]][air][0]
+    # both versions were tested on the same data and window, and the page says on what
+    assert history.comparable and len(history.tested_on) == 2 and history.tested_on[0].startswith(case.data.name)
     parsed = PageParser(page)
     assert parsed.tables["history"][0] == ["sensor", *versions]
+    assert parsed.tables["history"][-1] == ["tested on", *history.tested_on]
+    assert "tested on different data or windows" not in page
     assert parsed.tables["history-regimes"][0] == ["regime", "rule", "sensor", *versions]
     assert [row[1] for row in parsed.tables["regimes"][1:]] == [r["rule"] for r in case.report.regimes]
     history = next(i for i in parsed.images if i["class"] == "history")
@@ -375,6 +380,18 @@ def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_version
     assert imread(plot).shape[0] > imread(plot).shape[1] / len(history.rmse)  # two rows of panels
     missing = CliRunner().invoke(cli, ["history", "nothing", "--store", str(folder)])
     assert missing.exit_code == 2 and "no calibration with a test window" in missing.output
+    assert "tested on different data or windows" not in result.output
+    # a version tested on another window (the FLEXLAB history compared 21 September with 12 September)
+    run = f"<{run_iri(case.version.run_id).value}>"
+    test_start = "<https://w3id.org/graphtwin/ontology#testStart>"
+    disk = GraphStore.embedded(folder)
+    disk.backend.update(f'DELETE {{ GRAPH ?g {{ {run} {test_start} ?s }} }} INSERT {{ GRAPH ?g {{ {run} {test_start} '
+                        f'"2026-01-01T00:00:00"^^<http://www.w3.org/2001/XMLSchema#dateTime> }} }} '
+                        f'WHERE {{ GRAPH ?g {{ {run} {test_start} ?s }} }}')
+    assert not error_history(disk, "case").comparable
+    del disk
+    mixed = CliRunner(env={"COLUMNS": "400"}).invoke(cli, ["history", "case", "--store", str(folder)])
+    assert mixed.exit_code == 0 and "the versions were tested on different data or windows" in mixed.output
 
 
 def test_a_run_with_an_operating_filter_says_so_and_reproduces_its_metrics(case):
