@@ -548,6 +548,9 @@ def example_generate(
     truth_from: Annotated[Path | None, typer.Option(help=(
         "JSON of a calibration (`graphtwin calibrate --json`): its medians are the truth's parameters "
         "(the others drawn as without it)."))] = None,
+    truth_json: Annotated[Path | None, typer.Option(help=(
+        "Write the truth here (JSON: the hidden effect, where, and every parameter as `calibrate --json` "
+        "gives it, so --truth-from reads it back): what a calibration of the data should find."))] = None,
 ) -> None:
     """Synthetic measurements for a model from a known truth, optionally with a hidden effect."""
     from .synthetic_data import generate_synthetic_data
@@ -565,6 +568,10 @@ def example_generate(
             node=node, seed=seed, n_days=days, operation=operation, truth=truth)
     except USER_ERRORS as exc:
         raise fail(exc) from None
+    if truth_json is not None:
+        truth_json.write_text(json.dumps({
+            "hidden_effect": generated.effect, "node": generated.node,
+            "parameters": {key: {"median": value} for key, value in generated.theta.items()}}, indent=1) + "\n")
     where = f" at {generated.node}" if generated.node else ""
     driven = f"the operation of {operation}" if operation is not None else f"{days:g} days of synthetic operation"
     given = f", {len(truth)} parameters from {truth_from}" if truth else ""

@@ -101,9 +101,17 @@ def test_add_effect_refuses_an_effect_that_does_not_apply(tmp_path):
 
 def test_example_generate_writes_the_columns_the_model_needs(tmp_path):
     output = tmp_path / "data.csv"
+    truth = tmp_path / "truth.json"
     result = runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "SensorOffset",
-                                 "--days", "1", "-o", str(output)])
+                                 "--days", "1", "-o", str(output), "--truth-json", str(truth)])
     assert result.exit_code == 0, result.output
+    written = json.loads(truth.read_text())
+    assert written["hidden_effect"] == "SensorOffset" and written["node"].startswith(EX)
+    assert any(key.endswith("#offset") for key in written["parameters"]) and len(written["parameters"]) > 14
+    again = tmp_path / "again.json"  # read back, it is the truth again (the noise is drawn anew)
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "SensorOffset", "--days",
+                               "1", "-o", str(tmp_path / "again.csv"), "--truth-from", str(truth), "--truth-json", str(again)]).exit_code == 0
+    assert json.loads(again.read_text()) == written
     header = output.read_text().splitlines()[0].split(",")
     assert header[0] == "time" and "coil_outlet_air_temperature" in header and len(header) == 10
     assert len(output.read_text().splitlines()) == 1 + 144
