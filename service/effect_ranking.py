@@ -24,8 +24,9 @@ that effect and asks three questions, cheapest first:
 3. **Out of sample**: the test-window RMSE per target before and after (data not used to fit it),
    and the share of the test-window weighted squared error the effect removes.
    The refit moves the base parameters too; "before" (RSS₀, and the test-window prediction) is the
-   better of the base refit and the refit's own base parameters with the effect at its null, so an
-   effect is never credited with what moving the base parameters alone gains.
+   better of the base refit and the refit's own base parameters with the effect at its null (and,
+   for the test-window prediction, the base as trained), so an effect is never credited with what
+   moving the base parameters alone gains, nor with mending a base refit a fault bent.
 
 A candidate is *significant* when ΔBIC < ``bic_threshold`` and it removes at least
 ``min_test_improvement`` of the test-window error. Candidates are ranked by the test-window share

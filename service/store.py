@@ -101,8 +101,8 @@ class ModelLoad(NamedTuple):
 
 
 class StoreInUseError(OSError):
-    """The on-disk store is open already: in another process (a running ``graphtwin serve``?) or,
-    not closed yet, in this one."""
+    """The on-disk store is open already: in another process (another graphtwin command, a running
+    ``graphtwin serve``) or, not closed yet, in this one."""
 
 
 _SUFFIXES = {
@@ -596,7 +596,8 @@ class GraphStore:
         :param source: a file path, or the RDF as bytes.
         :param format: ``ttl``, ``nt``, ``rdf``, ``jsonld`` or a media type; from the suffix when None
             (Turtle for bytes).
-        :returns: the number of triples the source holds, and whether the store changed.
+        :returns: the number of triples the source holds, whether the store changed, and whether
+            a model of that name was there.
         :raises ModelLoadError: the source does not parse or is empty; the store is unchanged.
         :raises FileNotFoundError: no file at ``source``.
         """

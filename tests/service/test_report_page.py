@@ -7,6 +7,7 @@ sensor's metrics and figure, the suspects drawn on the topology, the regimes' ru
 effects, the error history; and the series recomputed from the stored estimates reproduce the run.
 """
 
+import gc
 import base64
 import functools
 import html
@@ -384,6 +385,8 @@ def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_version
     # a version tested on another window (the FLEXLAB history compared 21 September with 12 September)
     run = f"<{run_iri(case.version.run_id).value}>"
     test_start = "<https://w3id.org/graphtwin/ontology#testStart>"
+    del result, missing  # their tracebacks hold the commands' stores (and the folder's lock)
+    gc.collect()
     disk = GraphStore.embedded(folder)
     disk.backend.update(f'DELETE {{ GRAPH ?g {{ {run} {test_start} ?s }} }} INSERT {{ GRAPH ?g {{ {run} {test_start} '
                         f'"2026-01-01T00:00:00"^^<http://www.w3.org/2001/XMLSchema#dateTime> }} }} '
