@@ -93,6 +93,9 @@ class MeasuredData:
     warnings: tuple[str, ...] = ()
     source_units: dict[str, str] = field(default_factory=dict)  # node → the QUDT unit of its column
     utc: bool = False  # the file gave its stamps with a UTC offset: ``timestamps`` are UTC
+    #: header → the numbers of a column no device claims (a fan status), in the file's own unit, on the
+    #: same grid (NaN where a cell is empty or no number): what an operating filter may read
+    other_columns: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n_steps(self) -> int:
@@ -154,8 +157,8 @@ class MeasuredData:
     def select(self, start: datetime | str | None, end: datetime | str | None) -> MeasuredData:
         """The data with ``start ≤ t ≤ end`` (errors as :meth:`window`)."""
         window = self.window(start, end)
-        return replace(self, timestamps=self.timestamps[window],
-                       series={k: v[window] for k, v in self.series.items()})
+        return replace(self, timestamps=self.timestamps[window], series={k: v[window] for k, v in self.series.items()},
+                       other_columns={k: v[window] for k, v in self.other_columns.items()})
 
 
 def _decoded(raw: bytes, source: str, warnings: list[str]) -> str:
@@ -293,8 +296,10 @@ def read_measurements(
             )
     unknown = sorted(set(range(1, len(header))) - set(claimed.values()))
     if unknown:
-        message = f"columns no device of the model claims: {', '.join(header[i] for i in unknown)}"
-        warnings.append(message)
+        warnings.append(f"columns no device of the model claims: {', '.join(header[i] for i in unknown)} "
+                        "(an operating filter may read them)")
+    other_index = {header[i]: i for i in unknown if header[i] and header.count(header[i]) == 1}
+    others = {name: np.full(len(rows), np.nan) for name in other_index}
 
     times: list[datetime] = []
     first_with_offset: dict[bool, tuple[int, str]] = {}
@@ -330,6 +335,11 @@ def read_measurements(
                 values[node][line - 2] = value
             else:
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a finite number")
+        for name, column in other_index.items():
+            try:
+                others[name][line - 2] = float(row[column].replace(",", ".") if delimiter == ";" else row[column])
+            except (IndexError, ValueError):
+                pass  # not the model's: a word or an empty cell there is no number, and no error
     problems += misshapen[:10] + ([f"… and {len(misshapen) - 10} more lines whose fields do not match the header"]
                                   if len(misshapen) > 10 else [])
     if len(times) < 2:
@@ -382,7 +392,8 @@ def read_measurements(
         # series' own values at most max_gap_steps + 1 steps apart (a run of empty cells is as much
         # a gap as a run of missing rows); a grid point on a row keeps the row's value
         limit_s = (max_gap_steps + 1) * step_s
-        for node, series in converted.items():
+
+        def on_grid(series: np.ndarray) -> np.ndarray:
             finite = np.isfinite(series)
             t_known, y_known = t_old[finite], series[finite]
             resampled = np.full(grid.size, np.nan)
@@ -394,7 +405,10 @@ def read_measurements(
                 close = between & (t_known[np.clip(after, 0, t_known.size - 1)] - t_known[before] <= limit_s)
                 resampled[close] = np.interp(t_new[close], t_known, y_known)
                 resampled[on_row] = y_known[before[on_row]]
-            converted[node] = resampled
+            return resampled
+
+        converted = {node: on_grid(series) for node, series in converted.items()}
+        others = {name: on_grid(series) for name, series in others.items()}
         stamps = grid
     for node in list(converted):
         converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps)
@@ -407,7 +421,7 @@ def read_measurements(
         timestamps=stamps, step_s=step_s, series=converted,
         units={n: specs[n].port_unit for n in converted}, source=source,
         columns={n: header[c] for n, c in claimed.items()}, warnings=tuple(warnings),
-        source_units={n: specs[n].unit for n in converted}, utc=True in first_with_offset,
+        source_units={n: specs[n].unit for n in converted}, utc=True in first_with_offset, other_columns=others,
     )
 
 

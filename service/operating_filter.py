@@ -8,10 +8,11 @@ the comparison: the model is still simulated through them (its boundary inputs a
 but the targets' measurements there enter neither the calibration nor the metrics, regimes and
 episodes.
 
-A condition is ``COLUMN OP VALUE``: a column of the data file that the model reads (a boundary input
-or a target; its header, or the device's local name), one of ``>``, ``>=``, ``<``, ``<=``, and a
-number in that column's own unit (``"SF Spd Cmd (%) > 5"``: percent, as in the file). Several
-conditions must all hold. A step where the column is not measured does not satisfy the condition.
+A condition is ``COLUMN OP VALUE``: a column of the data file (one the model reads, a boundary input
+or a target, by its header or the device's local name; or any other numeric column, a fan status
+the model does not read), one of ``>``, ``>=``, ``<``, ``<=``, and a number in that column's own
+unit (``"SF Spd Cmd (%) > 5"``: percent, as in the file). Several conditions must all hold. A step
+where the column is not measured (or holds no number) does not satisfy the condition.
 """
 
 from __future__ import annotations
@@ -56,28 +57,32 @@ def parse_condition(text: str) -> OperatingCondition:
     return OperatingCondition(match["column"], match["op"], float(match["value"]))
 
 
-def _node_of(data: MeasuredData, column: str) -> str:
+def _column_values(data: MeasuredData, condition: OperatingCondition) -> tuple[np.ndarray, float]:
+    """The values ``condition``'s column holds and its threshold, in one unit: a column the model reads
+    in its port unit (the threshold converted from the file's), another as the file gives it."""
+    column = condition.column
     for node, header in data.columns.items():
         if header.strip() == column or node.replace("#", "/").rsplit("/", 1)[-1] == column:
-            return node
-    known = ", ".join(sorted(h.strip() for h in data.columns.values()))
-    raise ValueError(f"operating condition on {column!r}: no column of {data.source} that the model reads has "
-                     f"that name (known: {known})")
+            source_unit = data.source_units.get(node, data.units[node])
+            threshold = float(convert([condition.value], source_unit, data.units[node],
+                                      where=f"operating condition {condition}")[0])
+            return data.series[node], threshold
+    if column in data.other_columns:
+        return data.other_columns[column], condition.value
+    known = ", ".join(sorted({h.strip() for h in data.columns.values()} | set(data.other_columns)))
+    raise ValueError(f"operating condition on {column!r}: {data.source} has no numeric column of that name "
+                     f"(known: {known})")
 
 
 def operating_mask(data: MeasuredData, conditions: Sequence[OperatingCondition | str]) -> np.ndarray:
     """``ndarray[n_steps]`` of bool: the steps where every condition holds (all steps for none).
 
-    :raises ValueError: a malformed condition or a column the model does not read.
+    :raises ValueError: a malformed condition or a column the file does not have (or holds no number in).
     """
     mask = np.ones(data.n_steps, dtype=bool)
     for condition in conditions:
         condition = parse_condition(condition) if isinstance(condition, str) else condition
-        node = _node_of(data, condition.column)
-        source_unit = data.source_units.get(node, data.units[node])
-        threshold = float(convert([condition.value], source_unit, data.units[node],
-                                  where=f"operating condition {condition}")[0])
-        values = data.series[node]
+        values, threshold = _column_values(data, condition)
         with np.errstate(invalid="ignore"):
             mask &= np.isfinite(values) & _OPERATORS[condition.op](values, threshold)
     if not mask.any():

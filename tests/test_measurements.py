@@ -106,7 +106,8 @@ def test_unit_problems_and_spreadsheet_errors_are_reported_by_column(tmp_path):
     with pytest.raises(MeasurementError, match=r"column 'SAT': device https://example.org/x#sat declares no unit"):
         read_measurements(_write(tmp_path, text), no_unit)
     extra = read_measurements(_write(tmp_path, "time,SAT,valve,extra\n2025-01-01 00:00,1,2,3\n2025-01-01 00:10,1,2,3\n"), SPECS)
-    assert "columns no device of the model claims: extra" in extra.warnings
+    assert "columns no device of the model claims: extra (an operating filter may read them)" in extra.warnings
+    assert extra.other_columns["extra"] == pytest.approx([3.0, 3.0])
 
 
 def test_comparison_csv_writes_the_files_units_and_reads_back(tmp_path):

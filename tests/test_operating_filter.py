@@ -37,3 +37,22 @@ def test_bad_conditions_are_named(tmp_path):
     with pytest.raises(ValueError, match="no step .* satisfies fan > 50"):
         operating_mask(data, ["fan > 50"])
     assert np.all(operating_mask(data, ["fan > -1"]))
+
+
+def test_a_column_the_model_does_not_read_filters_in_its_own_numbers(tmp_path):
+    """A fan status column, say: the BMS export has it, the model does not read it."""
+    path = tmp_path / "data.csv"
+    path.write_text("time,SAT (°F),fan,Fan Status,Comment\n" + "".join(
+        f"2026-01-01 00:{m:02d},{60 + m},50,{status},{word}\n"
+        for m, (status, word) in enumerate([(0, "off"), (1, "on"), (1, ""), ("", "x"), (0, "off")])))
+    data = read_measurements(path, SPECS, max_gap_steps=0)
+    assert operating_mask(data, ["Fan Status > 0.5"]).tolist() == [False, True, True, False, False]
+    assert operating_mask(data, ["Fan Status > 0.5", "SAT (°F) < 62"]).tolist() == [False, True, False, False, False]
+    with pytest.raises(ValueError, match="no step .* satisfies Comment > 0"):  # words are no numbers
+        operating_mask(data, ["Comment > 0"])
+    irregular = tmp_path / "irregular.csv"  # resampled on the grid with the model's columns
+    irregular.write_text("time,SAT (°F),fan,Fan Status\n2026-01-01 00:00,60,50,0\n2026-01-01 00:10,61,50,1\n"
+                         "2026-01-01 00:15,62,50,1\n2026-01-01 00:20,63,50,1\n2026-01-01 00:30,64,50,1\n")
+    data = read_measurements(irregular, SPECS)
+    assert data.n_steps == 5 and data.other_columns["Fan Status"] == pytest.approx([0.0, 0.75, 1.0, 1.0, 1.0])  # 7.5 min grid
+    assert data.select("2026-01-01 00:15", None).other_columns["Fan Status"].tolist() == [1.0] * 3
