@@ -568,6 +568,16 @@ def _regimes_section(run: StoredRun) -> str:
             + _table(header, rows, "regimes"))
 
 
+def _estimates_section(run: StoredRun) -> str:
+    """The run's parameter estimates: median and 16–84 % interval (the point fit's ±1 standard error,
+    the posterior's quantiles), unit, and whether the data identified the parameter."""
+    rows = [[html.escape(local_name(e["node"])), html.escape(e["name"]), _number(e["median"], 4),
+             f"{_number(e['quantile16'], 4)} – {_number(e['quantile84'], 4)}", html.escape(e["unit"]),
+             "yes" if e["identified"] else '<span class="bad">no</span>'] for e in run.estimates.values()]
+    return ("<h2>Parameter estimates</h2>"
+            + _table(["node", "parameter", "estimate", "16–84 %", "unit", "identified"], rows, "estimates"))
+
+
 def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
     if diagnosis is None:
         return "<h2>Which effect is missing</h2><p class=\"note\">No diagnosis is based on this run.</p>"
@@ -668,7 +678,8 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{html.escape(title)}</title>"
         f"<style>{_STYLE}</style></head><body>"
         f"<h1>{html.escape(title)}</h1><dl class=\"facts\">{facts}</dl>{summary}"
-        f"{_sensor_section(run, diagnosis, series, series_note)}{_topology_section(store, run, diagnosis)}"
+        f"{_sensor_section(run, diagnosis, series, series_note)}{_estimates_section(run)}"
+        f"{_topology_section(store, run, diagnosis)}"
         f"{_regimes_section(run)}{_diagnosis_sections(diagnosis)}{_history_section(store, run)}"
         f"<p class=\"note\">Generated {generated} by graphtwin from the store's graphs ({html.escape(str(GTR))}…); "
         "measured-vs-model series are recomputed from the stored estimates and the run's data file.</p>"

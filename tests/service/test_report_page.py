@@ -429,3 +429,13 @@ def test_a_compare_runs_report_says_the_catalog_was_not_tested():
 
     section = _diagnosis_sections(StoredDiagnosis(iri="urn:d", summary="", effects=[], locations=[]))
     assert "The effect catalog was not tested on this run" in section and "<table" not in section
+
+
+def test_the_page_lists_the_runs_parameter_estimates(case, page):
+    run = read_run(case.store, case.report.run_id)
+    table = PageParser(page).tables["estimates"]
+    assert table[0] == ["node", "parameter", "estimate", "16–84 %", "unit", "identified"]
+    assert len(table) == 1 + len(run.estimates) and len(run.estimates) >= 14
+    leak = next(row for row in table[1:] if row[1] == "valve_flow_coefficient" or row[1] == "loop_pressure_difference")
+    estimate = next(e for e in run.estimates.values() if e["name"] == leak[1])
+    assert leak[2] == f"{estimate['median']:.4g}" and leak[5] in ("yes", "no")
