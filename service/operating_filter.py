@@ -68,6 +68,8 @@ def _column_values(data: MeasuredData, condition: OperatingCondition) -> tuple[n
                                       where=f"operating condition {condition}")[0])
             return data.series[node], threshold
     if column in data.other_columns:
+        if not np.isfinite(data.other_columns[column]).any():
+            raise ValueError(f"operating condition on {column!r}: that column of {data.source} holds no number")
         return data.other_columns[column], condition.value
     known = ", ".join(sorted({h.strip() for h in data.columns.values()} | set(data.other_columns)))
     raise ValueError(f"operating condition on {column!r}: {data.source} has no numeric column of that name "

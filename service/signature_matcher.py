@@ -51,6 +51,7 @@ __all__ = ["Match", "MatchSession", "match_signature", "missing_class_report"]
 
 _RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"
 _SUBCLASS = "http://www.w3.org/2000/01/rdf-schema#subClassOf"
+_EQUIVALENT = "http://www.w3.org/2002/07/owl#equivalentClass"
 _ROW = "\0row"  # column of the input row index while an optional block is joined
 _UNBOUND = ""  # a row's term for a node its optional part left unbound
 _COUNT_CAP = 10_000  # instance counts stop there (counting 40k sensors costs 20 ms at 1M triples)
@@ -222,12 +223,15 @@ class MatchSession:
         return self._edges[key]
 
     def subclasses(self, classes) -> dict[str, tuple[str, ...]]:
-        """Class IRI → the IRIs of its subclasses (direct or not) in the session's graphs."""
+        """Class IRI → the IRIs of its subclasses (direct or not) in the session's graphs, equivalent
+        classes (``owl:equivalentClass``, either way) counted as subclasses: a model's
+        ``ex:Office owl:equivalentClass s4bldg:BuildingSpace`` makes its offices building spaces."""
         for cls in classes:
             if cls not in self._subclasses:
-                query = f"SELECT DISTINCT ?sub WHERE {{ ?sub <{_SUBCLASS}>+ {ox.NamedNode(cls)} }}"
-                self._subclasses[cls] = tuple(sorted(
-                    sub[1:-1] for (sub,) in self.select(query, ("sub",), ((_SUBCLASS, None),)) if sub.startswith("<")))
+                path = f"(<{_SUBCLASS}>|<{_EQUIVALENT}>|^<{_EQUIVALENT}>)+"
+                query = f"SELECT DISTINCT ?sub WHERE {{ ?sub {path} {ox.NamedNode(cls)} }}"
+                found = self.select(query, ("sub",), ((_SUBCLASS, None), (_EQUIVALENT, None)))
+                self._subclasses[cls] = tuple(sorted(sub[1:-1] for (sub,) in found if sub.startswith("<") and sub[1:-1] != cls))
         return {cls: self._subclasses[cls] for cls in classes}
 
     def compiled(self, signature: Signature) -> CompiledQuery:

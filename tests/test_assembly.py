@@ -285,3 +285,21 @@ def test_a_mapped_value_outside_its_bounds_is_a_note_at_assembly(value):
     model = assemble(store, "odd")
     assert any(n.startswith(f"nominal_air_flow of {EX}supply_fan is mapped from the graph to {float(value):g} m3/s, "
                             "outside its bounds") and "a calibration refuses it" in n for n in model.notes), model.notes
+
+
+def test_a_room_whose_class_the_model_makes_equivalent_to_a_building_space_stops_a_traverse():
+    """``ex:Office owl:equivalentClass s4bldg:BuildingSpace`` in the model: an office is a building
+    space (it was wired through, and its class called undeclared)."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    office = text.replace("ex:test_cell a s4bldg:BuildingSpace", "ex:test_cell a ex:Office") + (
+        "\nex:Office <http://www.w3.org/2002/07/owl#equivalentClass> s4bldg:BuildingSpace .\n")
+    store = GraphStore.embedded(None)
+    store.load_model("office", office.encode())
+    store.load_model("saref", text.encode())
+    models = {name: assemble(store, name) for name in ("office", "saref")}
+    wiring = {name: {(c.source.rsplit("/", 1)[-1], c.source_port, c.target.rsplit("/", 1)[-1], c.target_port)
+                     for c in model.connections} for name, model in models.items()}
+    assert wiring["office"] == wiring["saref"]
+    assert not any("declared by no loaded ontology" in n for n in models["office"].notes), models["office"].notes

@@ -48,7 +48,7 @@ def test_a_column_the_model_does_not_read_filters_in_its_own_numbers(tmp_path):
     data = read_measurements(path, SPECS, max_gap_steps=0)
     assert operating_mask(data, ["Fan Status > 0.5"]).tolist() == [False, True, True, False, False]
     assert operating_mask(data, ["Fan Status > 0.5", "SAT (°F) < 62"]).tolist() == [False, True, False, False, False]
-    with pytest.raises(ValueError, match="no step .* satisfies Comment > 0"):  # words are no numbers
+    with pytest.raises(ValueError, match="operating condition on 'Comment': that column of .* holds no number"):
         operating_mask(data, ["Comment > 0"])
     irregular = tmp_path / "irregular.csv"  # resampled on the grid with the model's columns
     irregular.write_text("time,SAT (°F),fan,Fan Status\n2026-01-01 00:00,60,50,0\n2026-01-01 00:10,61,50,1\n"
