@@ -314,8 +314,7 @@ def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
     """One sentence per class that no loaded ontology declares and that is all a signature could see
     of the nodes it types (``queries/undeclared-classes.rq``), with the declared class its name is
     closest to when one is close (a misspelling): those nodes are in no component."""
-    rows = store.run_named_query("undeclared-classes", model_graph=store.model_graph(model_name),
-                                 inferred_graph=store.inferred_graph(model_name), ontology_graph=ONTOLOGY_GRAPH)
+    rows = store.run_named_query("undeclared-classes", **store.graph_variables(model_name))
     undeclared = [(row["class"].value, int(row["nodes"].value), row["first_node"].value) for row in rows]
     if not undeclared:
         return []

@@ -32,7 +32,7 @@ from .namespaces import local_name
 from .resources import examples_dir, signatures_dir
 from .signature import SignatureError, load_signature_library
 from .sparql_compiler import compile_signature
-from .store import ONTOLOGY_GRAPH, GraphStore, ModelLoadError, StoreInUseError
+from .store import GraphStore, ModelLoadError, StoreInUseError
 from .units import unit_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules are imported by the commands that run them
@@ -590,7 +590,8 @@ def _medians(calibration_json: Path) -> dict[str, float]:
 @app.command("query")
 def query_command(
     name: Annotated[str, typer.Argument(help="A query in queries/ (file name without .rq).")],
-    model: Annotated[str | None, typer.Option(help="Bind ?model to this model name.")] = None,
+    model: Annotated[str | None, typer.Option(help=(
+        "The model: bound to ?model in a query about results; the graphs a query about a building graph runs over."))] = None,
     param: Annotated[list[str] | None, typer.Option(help="More bindings, VAR=VALUE.")] = None,
     output_format: Annotated[str | None, typer.Option(
         "--format", help="table, csv or json (full IRIs); default: a table on a terminal, CSV when piped.")] = None,
@@ -613,9 +614,8 @@ def query_command(
             raise fail(f"query {name} reads a building model's graphs: give --model")
         bindings = dict(_binding(p) for p in (param or []))
         if model is not None and not reads_a_model:
-            graphs = {"model_graph": graph_store.model_graph(model), "inferred_graph": graph_store.inferred_graph(model),
-                      "ontology_graph": ONTOLOGY_GRAPH}
-            bindings |= {"model": model} | {var: iri for var, iri in graphs.items() if f"?{var}" in text}
+            bindings |= {"model": model} | {var: iri for var, iri in graph_store.graph_variables(model).items()
+                                            if f"?{var}" in text}
         rows = graph_store.run_named_query(name, dataset=model if reads_a_model else None, **bindings)
     except USER_ERRORS as exc:
         raise fail(exc) from None

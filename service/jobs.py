@@ -400,10 +400,8 @@ def ship_job(store: GraphStore, job_id: str, params: dict,
     if start_from and store.has_model(start_from):
         graphs += [*store.matching_dataset(start_from), store.assembly_graph(start_from)]
         graphs += [row["g"] for row in store.run_named_query("calibration-run-graphs", model=start_from)]
-    if "effect" in params and "model" in params:
-        version = params.get("version") or f"{params['model']}+{params['effect']}"
-        if store.has_model(version):
-            graphs += store.matching_dataset(version)
+    if "effect" in params and "model" in params and store.has_model(version := effect_version_name(params)):
+        graphs += store.matching_dataset(version)
     quads = [ox.Quad(t.subject, t.predicate, t.object, graph)
              for graph in dict.fromkeys(graphs) for t in store.graph_triples(graph)]
     files = {}
@@ -786,15 +784,19 @@ def _graph_triples(store: GraphStore, graph: ox.NamedNode) -> list[ox.Triple]:
     return parse_rdf(data, ox.RdfFormat.N_TRIPLES, str(graph)) if data else []
 
 
+def effect_version_name(params: Mapping) -> str:
+    """The model version an add-effect job names: ``params["version"]``, by default ``<model>+<effect>``."""
+    return params.get("version") or f"{params['model']}+{params['effect']}"
+
+
 def effect_version(store: GraphStore, params: dict) -> str:
-    """The name of the model version an add-effect job writes: ``params["version"]``, by default
-    ``<model>+<effect>``.
+    """The name of the model version an add-effect job writes (:func:`effect_version_name`), checked.
 
     :raises FileExistsError: that version exists with other effects (the same effect at another
         node, say): it is not overwritten — give ``version`` to keep both.
     """
     model, effect, target = params["model"], params["effect"], params["target"]
-    version = store.check_name(params.get("version") or f"{model}+{effect}")
+    version = store.check_name(effect_version_name(params))
     if store.has_model(version):
         library = load_signature_library(signatures_dir())
         existing = recorded_effects(store, version, library)

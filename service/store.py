@@ -531,6 +531,12 @@ class GraphStore:
     def run_graph(self, run_id: str) -> ox.NamedNode:
         return graph_iri("run", self.check_name(run_id))
 
+    def graph_variables(self, name: str) -> dict[str, ox.NamedNode]:
+        """Model ``name``'s graphs by the variables the queries in ``queries/`` bind them to
+        (``?model_graph``, ``?inferred_graph``, ``?ontology_graph``)."""
+        return {"model_graph": self.model_graph(name), "inferred_graph": self.inferred_graph(name),
+                "ontology_graph": ONTOLOGY_GRAPH}
+
     def matching_dataset(self, name: str) -> list[ox.NamedNode]:
         """Default graph for signature queries: the model, what alignment inferred, the ontologies."""
         return [self.model_graph(name), self.inferred_graph(name), ONTOLOGY_GRAPH]
