@@ -75,7 +75,7 @@ from .alignment_workers import AlignmentWorkers
 from .blank_nodes import skolemize
 from .cpu_count import usable_cpu_count
 from .cyclic_gc import cyclic_gc_paused
-from .namespaces import GT, GTR, RDF, RDFS
+from .namespaces import GT, GTR, RDF, RDFS, namespace_of
 from .ntriples import triple_list
 from .resources import queries_dir
 from .sparql_reads import QueryReads, query_reads
@@ -420,18 +420,13 @@ def _vocabulary(ontology: list[ox.Triple]) -> tuple[bytes, ...]:
     """N-Triples prefixes of the namespaces of the classes and properties the ``ontology`` declares,
     and QUDT's (see :func:`independent_parts`)."""
     declared = {t.subject.value for t in ontology if t.predicate == _RDF_TYPE and t.object in _DECLARATIONS}
-    return tuple(sorted({f"<{_namespace(iri)}".encode() for iri in declared | {_QUDT_NAMESPACE}}))
+    return tuple(sorted({f"<{namespace_of(iri)}".encode() for iri in declared | {_QUDT_NAMESPACE}}))
 
 
 def _has_blank_node(text: bytes) -> bool:
     """Whether N-Triples ``text`` has a blank node (``_:`` opening a line or after a space; inside a
     literal it may be a false alarm, which only costs the caller a skolemisation)."""
     return b"_:" in text and (text.startswith(b"_:") or b" _:" in text or b"\n_:" in text)
-
-
-def _namespace(iri: str) -> str:
-    """The IRI up to and including its last ``#`` or ``/``."""
-    return iri[: max(iri.rfind("#"), iri.rfind("/")) + 1]
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ from .assembled_model import (
 )
 from .cyclic_gc import cyclic_gc_paused
 from .measuring_device import MeasuringDevice
-from .namespaces import BRICK, GTR, OWL, RDF, RDFS, distinct_local_names, local_name
+from .namespaces import BRICK, GTR, OWL, RDF, RDFS, distinct_local_names, local_name, namespace_of
 from .resources import signatures_dir
 from .signature import PatternTriple, Rule, Signature, load_signature_library
 from .signature_matcher import MatchSession, match_signature, missing_class_report
@@ -321,22 +321,18 @@ def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
     declared = defaultdict(list)  # namespace → the local names of the classes the ontologies declare in it
     for t in store.graph_triples(ONTOLOGY_GRAPH):
         if t.predicate == RDF.type and t.object in (OWL.Class, RDFS.Class) and isinstance(t.subject, ox.NamedNode):
-            declared[_namespace(t.subject.value)].append(local_name(t.subject.value))
+            declared[namespace_of(t.subject.value)].append(local_name(t.subject.value))
     notes = []
     for cls, count, first in undeclared:
         nodes = first if count == 1 else f"{count} nodes, e.g. {first}"
-        if _namespace(cls) == BRICK:  # official Brick classes outside graphtwin's subset are no misspelling
+        if namespace_of(cls) == BRICK:  # official Brick classes outside graphtwin's subset are no misspelling
             hint = " (graphtwin brick-report says what the Brick alignment needs)"
         else:
-            close = difflib.get_close_matches(local_name(cls), declared[_namespace(cls)], n=1, cutoff=0.85)
-            hint = f" (did you mean {_namespace(cls)}{close[0]}?)" if close else ""
+            close = difflib.get_close_matches(local_name(cls), declared[namespace_of(cls)], n=1, cutoff=0.85)
+            hint = f" (did you mean {namespace_of(cls)}{close[0]}?)" if close else ""
         notes.append(f"{_short(first)}: its class {cls} ({nodes}) is declared by no loaded ontology, and the node has "
                      f"no other type a signature matches: no component models it{hint}")
     return notes
-
-
-def _namespace(iri: str) -> str:
-    return iri[: len(iri) - len(local_name(iri))]
 
 
 def _optional_block(signature: Signature, node: str, *, through: str, without: str) -> list[PatternTriple]:

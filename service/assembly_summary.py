@@ -9,7 +9,7 @@ from rich.table import Table
 
 from .assembled_model import AssembledModel, ParameterRef
 from .assembly import without_model
-from .namespaces import distinct_local_names, local_name
+from .namespaces import distinct_local_names, namespace_of
 from .units import unit_label
 
 __all__ = ["assembly_to_dict", "print_assembly"]
@@ -60,7 +60,7 @@ def print_assembly(model: AssembledModel, console: Console | None = None) -> Non
     console = console or Console()
     nodes = [n for c in model.components.values() for n in c.modeled_nodes]
     name = distinct_local_names(nodes)
-    namespaces = sorted({iri[: len(iri) - len(local_name(iri))] for iri in nodes})
+    namespaces = sorted({namespace_of(iri) for iri in nodes})
     components = Table(title="Components", caption=f"nodes in {', '.join(namespaces)}", show_lines=False)
     for column in ("signature", "represents"):
         components.add_column(column, overflow="fold")

@@ -273,6 +273,11 @@ def read_measurements(
     first_line = text.split("\n", 1)[0]
     delimiter = ";" if ";" in first_line and "," not in first_line else ","
     reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
+
+    def as_number(cell: str) -> float:
+        """A cell's number (a semicolon file may write decimal commas); :raises ValueError: none."""
+        return float(cell.replace(",", ".") if delimiter == ";" else cell)
+
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
@@ -327,7 +332,7 @@ def read_measurements(
                 error_cells[header[column]] = error_cells.get(header[column], 0) + 1
                 continue
             try:
-                value = float(cell.replace(",", ".") if delimiter == ";" else cell)
+                value = as_number(cell)
             except ValueError:
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a number")
                 continue
@@ -337,7 +342,7 @@ def read_measurements(
                 problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a finite number")
         for name, column in other_index.items():
             try:
-                others[name][line - 2] = float(row[column].replace(",", ".") if delimiter == ";" else row[column])
+                others[name][line - 2] = as_number(row[column])
             except (IndexError, ValueError):
                 pass  # not the model's: a word or an empty cell there is no number, and no error
     problems += misshapen[:10] + ([f"… and {len(misshapen) - 10} more lines whose fields do not match the header"]

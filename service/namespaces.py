@@ -11,7 +11,7 @@ import pyoxigraph as ox
 __all__ = [
     "SAREF", "S4BLDG", "S4SYST", "FSO", "BRICK", "REF", "GT", "GTR", "QUDT", "UNIT", "QK",
     "RDF", "RDFS", "OWL", "XSD", "PROV", "DCTERMS", "PREFIXES", "Namespace", "expand_curie",
-    "graph_iri", "local_name", "distinct_local_names",
+    "graph_iri", "local_name", "namespace_of", "distinct_local_names",
 ]
 
 
@@ -88,6 +88,11 @@ def local_name(iri: str, *, hashed: bool = False) -> str:
     then name two things)."""
     local = iri.replace("#", "/").rstrip("/").rsplit("/", 1)[-1]
     return f"{local}-{hashlib.sha256(iri.encode()).hexdigest()[:8]}" if hashed else local
+
+
+def namespace_of(iri: str) -> str:
+    """The IRI up to and including its last ``#`` or ``/``."""
+    return iri[: max(iri.rfind("#"), iri.rfind("/")) + 1]
 
 
 def distinct_local_names(iris: Iterable[str]) -> dict[str, str]:

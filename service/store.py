@@ -539,7 +539,7 @@ class GraphStore:
 
     def matching_dataset(self, name: str) -> list[ox.NamedNode]:
         """Default graph for signature queries: the model, what alignment inferred, the ontologies."""
-        return [self.model_graph(name), self.inferred_graph(name), ONTOLOGY_GRAPH]
+        return list(self.graph_variables(name).values())
 
     def models(self) -> list[str]:
         """The names of the models in the store (a graph a SPARQL update made under the models' prefix
@@ -653,9 +653,13 @@ class GraphStore:
         returns the number of inferred triples."""
         self.ensure_ontologies()
         with self._model_lock:
-            inferred = inferred_triples(self.graph_triples(self.model_graph(name)), self._ontology_triples)
+            inferred = self._inferences(name)
             self.write_graph(self.inferred_graph(name), inferred)
         return len(inferred)
+
+    def _inferences(self, name: str) -> list[ox.Triple]:
+        """What the alignment rules derive from model ``name``'s graph as the store holds it."""
+        return inferred_triples(self.graph_triples(self.model_graph(name)), self._ontology_triples)
 
     def drop_model(self, name: str) -> None:
         """Remove model ``name``, its inferences and its assembly (one transaction); runs stay."""
@@ -680,15 +684,12 @@ class GraphStore:
             self.backend.update(sparql)
             after = self.models()
             changed = [name for name in after if written is None or self.model_graph(name).value in written]
+            dropped = sorted(set(before) - set(after))
             for name in changed:
-                self.write_graphs({
-                    self.inferred_graph(name): inferred_triples(self.graph_triples(self.model_graph(name)),
-                                                                self._ontology_triples),
-                    self.assembly_graph(name): [],
-                })
-            for name in sorted(set(before) - set(after)):
+                self.write_graphs({self.inferred_graph(name): self._inferences(name), self.assembly_graph(name): []})
+            for name in dropped:
                 self.write_graphs({self.inferred_graph(name): [], self.assembly_graph(name): []})
-        return changed + sorted(set(before) - set(after))
+        return changed + dropped
 
     # ------------------------------------------------------------------ queries
     def query(self, sparql: str, *, substitutions: Mapping[str, object] | None = None,
