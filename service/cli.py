@@ -22,21 +22,21 @@ from rich.syntax import Syntax
 from rich.table import Table
 from rich.text import Text
 
-from .assembly import AssemblyError, EffectRequest, assemble
-from .assembly_summary import assembly_to_dict, print_assembly
-from .assembly_triples import assembly_triples
-from .calibration_data import DEFAULT_GP_INPUTS
-from .effect_recording import applied_effect_triples, record_effect_in_file
-from .measurements import MeasurementError
-from .namespaces import local_name
-from .resources import examples_dir, signatures_dir
-from .signature import SignatureError, load_signature_library
-from .sparql_compiler import compile_signature
-from .store import GraphStore, ModelLoadError, StoreInUseError
-from .units import unit_label
+from service.model.assembly import AssemblyError, EffectRequest, assemble
+from service.model.summary import assembly_to_dict, print_assembly
+from service.model.assembly_triples import assembly_triples
+from service.calibration.model_data import DEFAULT_GP_INPUTS
+from service.model.effect_recording import applied_effect_triples, record_effect_in_file
+from service.data.measurements import MeasurementError
+from service.graph.namespaces import local_name
+from service.resources import examples_dir, signatures_dir
+from service.matching.signature import SignatureError, load_signature_library
+from service.matching.compiler import compile_signature
+from service.graph.store import GraphStore, ModelLoadError, StoreInUseError
+from service.graph.units import unit_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules are imported by the commands that run them
-    from .diagnosis import DiagnosisReport  # (SciPy, scikit-learn: a second of `graphtwin --help`)
+    from service.diagnosis.loop import DiagnosisReport  # (SciPy, scikit-learn: a second of `graphtwin --help`)
 
 __all__ = ["app"]
 
@@ -130,7 +130,7 @@ def assemble_command(
     memory: MemoryOption = False,
 ) -> None:
     """Load MODEL into the store, assemble its simulation model and write it back as triples."""
-    from .brick_report import brick_report
+    from service.report.brick import brick_report
 
     graph_store = open_store(store, memory)
     try:
@@ -163,7 +163,7 @@ def brick_report_command(
 ) -> None:
     """What the Brick alignment could not use in MODEL: unaligned classes, unread relations, the
     assumptions it made and the triples that would remove them, points without a column or unit."""
-    from .brick_report import brick_report, official_brick_classes, print_brick_report
+    from service.report.brick import brick_report, official_brick_classes, print_brick_report
 
     graph_store = open_store(store, memory)
     try:
@@ -236,7 +236,7 @@ def calibrate_command(
     memory: MemoryOption = False,
 ) -> None:
     """Calibrate MODEL against DATA; estimates, metrics and provenance are written to the store."""
-    from .calibration_run import calibrate, parse_window
+    from service.calibration.run import calibrate, parse_window
 
     graph_store = open_store(store, memory)
     try:
@@ -297,7 +297,7 @@ def _print_data_warnings(warnings: list[str]) -> None:
 
 
 def _plot_run(outcome, path: Path) -> Path:
-    from .plots import plot_measured_vs_model
+    from service.report.plots import plot_measured_vs_model
 
     window = outcome.test if outcome.test is not None else outcome.train
     key = "test" if outcome.test is not None else "train"
@@ -360,9 +360,9 @@ def simulate_command(
     memory: MemoryOption = False,
 ) -> None:
     """Simulate MODEL over DATA and write each target's simulation beside its measurement."""
-    from .calibration_data import ModelData, read_model_data
-    from .measurements import write_comparison_csv
-    from .simulator import loop_substeps, target_series
+    from service.calibration.model_data import ModelData, read_model_data
+    from service.data.measurements import write_comparison_csv
+    from service.model.simulator import loop_substeps, target_series
 
     graph_store = open_store(store, memory)
     try:
@@ -398,7 +398,7 @@ def simulate_command(
 def _save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
     """The test window measured against the base model, and the residuals with the matching band
     and the failure episodes, as PNGs in ``folder``."""
-    from .plots import plot_measured_vs_model, plot_residuals
+    from service.report.plots import plot_measured_vs_model, plot_residuals
 
     folder.mkdir(parents=True, exist_ok=True)
     units = {n: s["unit"] for n, s in report.sensors.items()}
@@ -416,8 +416,8 @@ def _save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
 
 def _diagnose_cli(model, data, train, test, name, seed, as_json, plots, store, memory, rank_effects,
                   only_when, start_from) -> None:
-    from .calibration_run import parse_window
-    from .diagnosis import diagnose
+    from service.calibration.run import parse_window
+    from service.diagnosis.loop import diagnose
 
     graph_store = open_store(store, memory)
     try:
@@ -484,8 +484,8 @@ def compare_strategies_command(
     """Joint against successive (regime by regime, Morris-planned) point calibration on TRAIN: RMSE
     and R² per operating regime and a blocked cross-validation, so you see which converges better.
     Nothing is written to the store."""
-    from .calibration_run import parse_window
-    from .successive_calibration import compare_calibration_strategies
+    from service.calibration.run import parse_window
+    from service.calibration.successive import compare_calibration_strategies
 
     graph_store = open_store(store, memory)
     try:
@@ -553,7 +553,7 @@ def example_generate(
         "gives it, so --truth-from reads it back): what a calibration of the data should find."))] = None,
 ) -> None:
     """Synthetic measurements for a model from a known truth, optionally with a hidden effect."""
-    from .synthetic_data import generate_synthetic_data
+    from service.data.synthetic import generate_synthetic_data
 
     is_file = Path(name).is_file()
     path = Path(name) if is_file else examples_dir() / name / "model.ttl"
@@ -652,7 +652,7 @@ def history_command(
 ) -> None:
     """Test-window error per sensor and operating regime across the versions of a model (base,
     base+effect, …)."""
-    from .error_history import error_history
+    from service.diagnosis.error_history import error_history
 
     graph_store = open_store(store, False, reading=True)
     history = error_history(graph_store, model)
@@ -682,7 +682,7 @@ def history_command(
             table.add_section()
         console.print(table)
     if plot is not None:
-        from .plots import plot_error_history
+        from service.report.plots import plot_error_history
 
         console.print(f"plot: {plot_error_history(plot, history)}")
 
@@ -705,7 +705,7 @@ def report_command(
 ) -> None:
     """One self-contained HTML page for RUN: measured vs model per sensor, where it fails on the flow
     topology, the operating regimes, the missing effects with their evidence, the error across versions."""
-    from .report_page import UnknownRunError, data_file_locator, report_html
+    from service.report.page import UnknownRunError, data_file_locator, report_html
 
     if data is not None and not data.is_file():
         raise fail(f"{data}: no such file")
@@ -737,11 +737,11 @@ def demo_command(
     store: StoreOption = Path("graphtwin-data"),
 ) -> None:
     """The whole loop on the case study with a hidden effect: before, where it fails, what is missing, after."""
-    from .calibration_run import calibrate
-    from .diagnosis import diagnose
-    from .error_history import error_history
-    from .plots import plot_error_history, plot_measured_vs_model
-    from .synthetic_data import generate_synthetic_data
+    from service.calibration.run import calibrate
+    from service.diagnosis.loop import diagnose
+    from service.diagnosis.error_history import error_history
+    from service.report.plots import plot_error_history, plot_measured_vs_model
+    from service.data.synthetic import generate_synthetic_data
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     output.mkdir(parents=True, exist_ok=True)
@@ -810,8 +810,8 @@ def serve_command(
     import uvicorn
     from pydantic import ValidationError
 
-    from .api import create_app
-    from .settings import Settings
+    from service.http.app import create_app
+    from service.settings import Settings
 
     if store is not None and sparql_endpoint is not None:
         raise fail("give --store or --sparql-endpoint, not both")

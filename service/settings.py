@@ -15,7 +15,7 @@
 ``GRAPHTWIN_MAX_RESULT_ROWS``   most rows (or triples) a query may return (422 above)
 ``GRAPHTWIN_EXECUTOR``          where job work runs: ``processes`` (default: a local process pool),
                                 ``threads`` (inside the server process) or ``dask://HOST:PORT``
-                                (the workers of that Dask scheduler); see :mod:`service.jobs`
+                                (the workers of that Dask scheduler); see :mod:`service.jobs.runner`
 ``GRAPHTWIN_JOB_WORKERS``       jobs running at once: 1 or 2 with threads or processes (they share
                                 this machine's CPU), up to 64 with a Dask cluster
 ``GRAPHTWIN_BRICK_ONTOLOGY``    the official Brick ontology file (``Brick.ttl``): the Brick report
@@ -55,7 +55,7 @@ def check_executor(spec: str) -> str:
 
 
 class Settings(BaseSettings):
-    """Everything :func:`service.api.create_app` needs; see the module docstring for the variables."""
+    """Everything :func:`service.http.app.create_app` needs; see the module docstring for the variables."""
 
     model_config = SettingsConfigDict(env_prefix="GRAPHTWIN_", extra="forbid", hide_input_in_errors=True)
 

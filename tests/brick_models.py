@@ -1,10 +1,10 @@
 """Models the Brick alignment tests share: the project's ontology subsets and a small generated
-campus, both with blank nodes as IRIs (as :meth:`service.store.GraphStore.load_model` has them)."""
+campus, both with blank nodes as IRIs (as :meth:`service.graph.store.GraphStore.load_model` has them)."""
 
 import pyoxigraph as ox
 
 from service.resources import ontologies_dir
-from service.store import parse_rdf, skolemize
+from service.graph.store import parse_rdf, skolemize
 from tests.bench.brick_campus import campus_turtle
 
 

@@ -1,4 +1,5 @@
-"""Shared fixtures: an in-memory store with the case-study model loaded."""
+"""Shared fixtures: an in-memory store with the case-study model loaded; the HTTP service's fixtures
+(``service_fixtures.py``) for the tests of every floor that reaches the service."""
 
 import os
 
@@ -11,7 +12,9 @@ os.environ.pop("COLUMNS", None)
 
 from case_study import CASE_STUDY  # noqa: E402
 
-from service.store import GraphStore  # noqa: E402
+pytest_plugins = ["service_fixtures"]
+
+from service.graph.store import GraphStore  # noqa: E402
 
 
 @pytest.fixture

@@ -1,6 +1,6 @@
-"""Build the test FMU ``FanLag`` (FMI 2.0 co-simulation) from its C source in ``tests/data/fmu_src``.
+"""Build the test FMU ``FanLag`` (FMI 2.0 co-simulation) from its C source in ``tests/fixtures/fmu_src``.
 
-Used by ``tests/test_fmu_component.py`` and ``tests/bench/bench_simulator.py``; nothing is committed
+Used by ``tests/components/test_fmu_component.py`` and ``tests/bench/bench_simulator.py``; nothing is committed
 as a binary (``*.fmu`` is gitignored): the FMU is compiled into a temporary folder at test time with
 ``gcc`` against the FMI 2.0 headers fmpy ships in ``fmpy/c-code``.
 """
@@ -14,15 +14,15 @@ from pathlib import Path
 
 import fmpy
 
-from service.assembled_model import (
+from service.model.assembled_model import (
     AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef, load_model_class,
 )
-from service.signature import signature_from_dict
+from service.matching.signature import signature_from_dict
 
 __all__ = ["SOURCE", "MODEL_IDENTIFIER", "compile_fan_lag", "package_fmu", "build_fan_lag_fmu", "fan_lag_model",
            "FAN_CURVE"]
 
-SOURCE = Path(__file__).parent / "data" / "fmu_src"
+SOURCE = Path(__file__).parent / "fixtures" / "fmu_src"
 MODEL_IDENTIFIER = "FanLag"
 #: Mapped parameters of :func:`fan_lag_model`: nominal flow (m³/s) and the ASHRAE curve c1..c4.
 FAN_CURVE = {"nominal_air_flow": 1.5, "c1": 0.0013, "c2": 0.147, "c3": 0.9506, "c4": -0.0998}
@@ -69,7 +69,7 @@ def fan_lag_model(fmu: Path, signature_file: Path | None = None) -> AssembledMod
     """flow sensor ``urn:flow`` (boundary) → FMU fan ``urn:fan`` → power meter ``urn:meter`` (target,
     on ``lagged_power``); :data:`FAN_CURVE` mapped, θ = (nominal_power [W], time_constant [s])."""
     device = signature_from_dict({"id": "Device", "modeled_nodes": ["n"], "nodes": {"n": {"classes": ["urn:Device"]}},
-                                  "model": "service.measuring_device:MeasuringDevice"})
+                                  "model": "service.components.measuring_device:MeasuringDevice"})
     fan = signature_from_dict({"id": "FanFMU", "modeled_nodes": ["n"],
                                "nodes": {"n": {"classes": ["urn:Fan"]}, "flow": {"classes": ["urn:Device"]}},
                                "inputs": {"air_volume_flow": {"source": "flow", "quantity": "volume_flow"}},

@@ -5,7 +5,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-from service.store import GraphStore
+from service.graph.store import GraphStore
 
 
 @contextmanager

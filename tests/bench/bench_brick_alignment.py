@@ -1,6 +1,6 @@
 """Brick → SAREF/FSO alignment at scale: a generated Brick campus (tests/bench/brick_campus.py: the
 Brick FLEXLAB unit with VAV zones, every tenth unit described by its points only) aligned by the
-rules in queries/alignment (service.alignment.inferred_ntriples, as GraphStore.load_model runs them:
+rules in queries/alignment (service.graph.alignment.inferred_ntriples, as GraphStore.load_model runs them:
 independent parts side by side in one worker process per CPU), against loading the same triples
 into an in-memory Oxigraph store (the baseline, measured in the same run). In memory: the alignment
 runs in a scratch in-memory store whatever the backend, so disk is not the point.
@@ -22,11 +22,11 @@ import time
 import pyoxigraph as ox
 from brick_campus import campus_turtle, units_for_triples
 
-from service.alignment import alignment_rules, inferred_ntriples
-from service.cpu_count import usable_cpu_count
+from service.graph.alignment import alignment_rules, inferred_ntriples
+from service.runtime import usable_cpu_count
 from service.resources import ontologies_dir
-from service.sparql_reads import query_reads
-from service.store import parse_rdf, skolemize
+from service.graph.sparql_reads import query_reads
+from service.graph.store import parse_rdf, skolemize
 
 GOAL_S = 10.0
 

@@ -2,7 +2,7 @@
 
 The problem is what ``graphtwin calibrate`` builds for the ventilation case study (14 estimated
 parameters, 5 targets, the simulator with its loop sub-steps) on a training day of synthetic data
-(``service.synthetic_data``, seed 3). Figures printed, each with its baseline measured in the same
+(``service.data.synthetic``, seed 3). Figures printed, each with its baseline measured in the same
 run and the ratio:
 
   * Kennedy–O'Hagan log-posterior evaluations per second (θ + 15 GP hyperparameters, GP over time),
@@ -30,17 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
-from service.assembly import assemble
-from service.bayesian_calibration import BayesianCalibrator
-from service.calibration_data import ModelData, read_model_data
-from service.calibration_problem import CalibrationProblem
-from service.koh_likelihood import KennedyOHaganLikelihood
-from service.point_calibration import PointCalibrator
+from service.model.assembly import assemble
+from service.calibration.bayesian import BayesianCalibrator
+from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.problem import CalibrationProblem
+from service.calibration.koh_likelihood import KennedyOHaganLikelihood
+from service.calibration.point import PointCalibrator
 from service.resources import examples_dir, signatures_dir
-from service.signature import load_signature_library
-from service.simulator import loop_substeps
-from service.store import GraphStore
-from service.synthetic_data import generate_synthetic_data
+from service.matching.signature import load_signature_library
+from service.model.simulator import loop_substeps
+from service.graph.store import GraphStore
+from service.data.synthetic import generate_synthetic_data
 
 TRAIN_DAY = ("2026-01-12", "2026-01-12T23:59")
 BATCH_SIZES = (1, 30, 120, 240)

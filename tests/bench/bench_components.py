@@ -11,9 +11,9 @@ import time
 
 import numpy as np
 
-from service.assembled_model import load_model_class
+from service.model.assembled_model import load_model_class
 from service.resources import signatures_dir
-from service.signature import load_signature_library
+from service.matching.signature import load_signature_library
 
 _BY_NAME = {"supply_water_temperature": 65.0, "outdoor_air_temperature": 5.0, "return_air_temperature": 22.0,
             "inlet_air_temperature": 12.0, "setpoint": 21.0, "ambient_temperature": 15.0}

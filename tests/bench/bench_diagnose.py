@@ -15,12 +15,12 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from service.calibration_run import calibrate  # noqa: E402
-from service.diagnosis import diagnose  # noqa: E402
+from service.calibration.run import calibrate  # noqa: E402
+from service.diagnosis.loop import diagnose  # noqa: E402
 from service.resources import examples_dir, signatures_dir  # noqa: E402
-from service.signature import load_signature_library  # noqa: E402
-from service.store import GraphStore  # noqa: E402
-from service.synthetic_data import generate_synthetic_data  # noqa: E402
+from service.matching.signature import load_signature_library  # noqa: E402
+from service.graph.store import GraphStore  # noqa: E402
+from service.data.synthetic import generate_synthetic_data  # noqa: E402
 
 
 def main() -> None:

@@ -20,7 +20,7 @@ import time
 
 from campus_graph import ahus_for_triples, campus_turtle  # run as a script: tests/bench is on the path
 
-from service.store import GraphStore
+from service.graph.store import GraphStore
 
 
 def main() -> None:

@@ -26,12 +26,12 @@ from pathlib import Path
 
 import pyoxigraph as ox
 
-from service.cyclic_gc import cyclic_gc_paused
+from service.runtime import cyclic_gc_paused
 from service.resources import signatures_dir
-from service.signature import load_signature_library
-from service.signature_matcher import MatchSession, match_signature
-from service.sparql_compiler import compile_signature
-from service.store import GraphStore
+from service.matching.signature import load_signature_library
+from service.matching.matcher import MatchSession, match_signature
+from service.matching.compiler import compile_signature
+from service.graph.store import GraphStore
 from campus_graph import ahus_for_triples, campus_turtle  # run as a script: tests/bench is on the path
 
 GOAL_S = 2.0

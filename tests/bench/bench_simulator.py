@@ -1,7 +1,7 @@
 """Simulator throughput: the case study over one week of 10-minute data, vectorised over the ensemble,
 against a plain per-member loop over the same components (the baseline, measured in the same run).
 
-Then the FMU component (``service.fmu_component``; the test FMU ``FanLag`` compiled from
+Then the FMU component (``service.components.fmu``; the test FMU ``FanLag`` compiled from
 ``tests/data/fmu_src`` when ``gcc`` exists): flow sensor → FMU fan → power meter over one day of
 1-minute steps, with one FMU instance per member kept alive through the run (the module's choice)
 against re-running the model member by member (what reset-and-re-run costs: the fresh instance of
@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from service.assembly import assemble
+from service.model.assembly import assemble
 from service.resources import examples_dir
-from service.simulator import Simulator, loop_substeps
-from service.store import GraphStore
-from service.synthetic_operation import case_study_operation
+from service.model.simulator import Simulator, loop_substeps
+from service.graph.store import GraphStore
+from service.data.synthetic_operation import case_study_operation
 
 
 def main() -> None:

@@ -8,9 +8,9 @@ on a loopback port, one client after another and several at once).
     python tests/bench/bench_sparql_queries.py [--buildings 1000] [--baseline 10] [--runs 2] [--queries 400]
 
 The results are synthetic but in exactly the shape a calibration writes: a
-:class:`~service.calibration_record.CalibrationRecord` per run, built from the case study's
+:class:`~service.calibration.record.CalibrationRecord` per run, built from the case study's
 assembly (its estimated parameters, its targets), renamed per building and with random values,
-turned into triples by :func:`service.calibration_triples.calibration_triples` and written to the
+turned into triples by :func:`service.calibration.triples.calibration_triples` and written to the
 run's named graph. Every building has ``--runs`` runs, one hour apart, so "latest" has to choose.
 
 Goal (issue 5): report queries per second, median and p99 latency at 1,000 calibrated buildings.
@@ -34,14 +34,14 @@ import numpy as np
 import pyoxigraph as ox
 import uvicorn
 
-from service.api import create_app
-from service.assembly import assemble
-from service.calibration_record import CalibrationRecord, ParameterEstimate
-from service.calibration_triples import calibration_triples
-from service.metrics import TargetMetrics
+from service.http.app import create_app
+from service.model.assembly import assemble
+from service.calibration.record import CalibrationRecord, ParameterEstimate
+from service.calibration.triples import calibration_triples
+from service.calibration.metrics import TargetMetrics
 from service.resources import examples_dir
 from service.settings import Settings
-from service.store import GraphStore
+from service.graph.store import GraphStore
 
 CASE_STUDY = examples_dir() / "ventilation_case_study" / "model.ttl"
 CASE_PREFIX = "https://example.org/ventilation-case-study#"

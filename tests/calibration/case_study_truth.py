@@ -7,16 +7,16 @@ from __future__ import annotations
 import numpy as np
 from case_study import CASE_STUDY, EX
 
-from service.assembly import assemble
-from service.bayesian_calibration import BayesianCalibrator
-from service.calibration_data import ModelData, read_model_data
-from service.calibration_run import continuation
-from service.metrics import target_metrics
+from service.model.assembly import assemble
+from service.calibration.bayesian import BayesianCalibrator
+from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.run import continuation
+from service.calibration.metrics import target_metrics
 from service.resources import signatures_dir
-from service.signature import load_signature_library
-from service.simulator import loop_substeps
-from service.store import GraphStore
-from service.synthetic_data import generate_synthetic_data
+from service.matching.signature import load_signature_library
+from service.model.simulator import loop_substeps
+from service.graph.store import GraphStore
+from service.data.synthetic import generate_synthetic_data
 
 TRAIN = ("2026-01-12", "2026-01-12T23:59")
 TEST = ("2026-01-13", None)

@@ -26,13 +26,13 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[2]
-sys.path[:0] = [str(ROOT)]  # the package before the namespace tests/service
+sys.path[:0] = [str(ROOT)]  # the package first on the path
 sys.path.append(str(ROOT / "tests"))  # case_study
 
 import numpy as np  # noqa: E402
 from case_study_truth import CaseStudyTruth, ace_at_90, identifiable  # noqa: E402
 
-from service.calibration_run import fit_point  # noqa: E402
+from service.calibration.run import fit_point  # noqa: E402
 
 
 def main() -> None:

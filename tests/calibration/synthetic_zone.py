@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.calibration_problem import CalibrationProblem
+from service.calibration.problem import CalibrationProblem
 
 DAY_S = 86400.0
 NAMES = ("UA_W_per_K", "C_J_per_K", "heater_efficiency", "heater_power_W")

@@ -29,8 +29,8 @@ import pytest
 from case_study import EX
 from case_study_truth import STRUCTURALLY_UNIDENTIFIABLE, CaseStudyTruth, ace_at_90, identifiable
 
-from service.calibration_run import fit_point
-from service.metrics import target_metrics
+from service.calibration.run import fit_point
+from service.calibration.metrics import target_metrics
 
 #: The Bayesian runs go to convergence (20 × IAT) on the real case study: minutes each on one core,
 #: beyond the CI budget; they run when GRAPHTWIN_ACCEPTANCE=1 (the point-calibration checks always run).

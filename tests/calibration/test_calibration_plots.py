@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from matplotlib.collections import QuadMesh
 
-from service.calibration_plots import corner_figure, parameter_label, plot_corner, plot_trace, trace_figure
+from service.report.calibration_plots import corner_figure, parameter_label, plot_corner, plot_trace, trace_figure
 
 NAMES = ("UA [W/K]", "C [J/K]", "P [W]")
 

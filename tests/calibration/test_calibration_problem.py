@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.calibration_problem import CalibrationProblem, default_target_scale
+from service.calibration.problem import CalibrationProblem, default_target_scale
 
 
 def linear_simulate(theta):

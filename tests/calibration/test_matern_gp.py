@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from service.matern_gp import InputDistances, conditional, log_marginal_likelihood, matern32
+from service.calibration.matern_gp import InputDistances, conditional, log_marginal_likelihood, matern32
 
 
 def direct_kernel(x1, x2, amplitude, length_scales):

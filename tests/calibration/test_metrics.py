@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from service.metrics import target_metrics
+from service.calibration.metrics import target_metrics
 
 OBSERVED = np.array([10.0, 12.0, np.nan, 14.0, 16.0])
 PREDICTED = np.array([9.0, 11.0, 0.0, 13.0, 17.0])  # errors y − ŷ at the measured steps: 1, 1, 1, −1

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.parallel_tempering import ParallelTemperingSampler, geometric_betas
+from service.calibration.parallel_tempering import ParallelTemperingSampler, geometric_betas
 
 BOX = 10.0
 MEAN = np.array([1.0, -2.0])

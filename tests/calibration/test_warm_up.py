@@ -14,7 +14,7 @@ import pytest
 from case_study import EX
 from case_study_truth import CaseStudyTruth
 
-from service.calibration_run import calibrate
+from service.calibration.run import calibrate
 
 SIX_HOURS = slice(0, 36)
 AIR, WATER = EX + "coil_outlet_air_temperature_sensor", EX + "coil_outlet_water_temperature_sensor"
@@ -85,11 +85,11 @@ def test_the_warm_up_is_as_long_as_the_model_s_slowest_state_needs():
     """A day with a PI loop; none for static components (the FLEXLAB unit's coils, mixing box and
     fan); five of its slowest time constants for a sensor lag added to them. The start memory (what
     is left unscored after a guessed start) six hours with a PI loop, none without."""
-    from service.assembly import EffectRequest, assemble
-    from service.calibration_data import model_start_memory_s, model_warmup_s
-    from service.hot_water_loop import HotWaterLoop
+    from service.model.assembly import EffectRequest, assemble
+    from service.calibration.model_data import model_start_memory_s, model_warmup_s
+    from service.components.hot_water_loop import HotWaterLoop
     from service.resources import examples_dir
-    from service.store import GraphStore
+    from service.graph.store import GraphStore
 
     store = GraphStore.embedded(None)
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")

@@ -2,7 +2,7 @@
 
 * ``component_class``: a test that takes this argument runs once per model class the signature
   library names (components and effects), so a new model is checked by adding its signature file;
-  ``effect_class`` likewise over the effects (:class:`service.component.SplicedEffect`);
+  ``effect_class`` likewise over the effects (:class:`service.components.component.SplicedEffect`);
 * ``run_model``: the simulator's calling convention (state from the first inputs, then one
   ``step`` per time step) on inputs held constant, returning every step's outputs;
 * ``params_for(cls, n, which, **values)``: every parameter at its default (or lower, upper, null),
@@ -18,10 +18,10 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pytest
 
-from service.assembled_model import load_model_class
-from service.component import ComponentModel, SplicedEffect
+from service.model.assembled_model import load_model_class
+from service.components.component import ComponentModel, SplicedEffect
 from service.resources import signatures_dir
-from service.signature import load_signature_library
+from service.matching.signature import load_signature_library
 
 #: Representative input values by port name, then by unit (simulator units).
 _BY_NAME = {

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from service.assembly import assemble
-from service.simulator import Simulator, loop_substeps
+from service.model.assembly import assemble
+from service.model.simulator import Simulator, loop_substeps
 
 
 def test_the_controller_tracks_a_setpoint_step(case_store):

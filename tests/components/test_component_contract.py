@@ -1,4 +1,4 @@
-"""The contract of ``service.component`` that every model of the library keeps (components and effects)."""
+"""The contract of ``service.components.component`` that every model of the library keeps (components and effects)."""
 
 import importlib
 import itertools
@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from service.component import ComponentModel, Parameter, Port, SplicedEffect
+from service.components.component import ComponentModel, Parameter, Port, SplicedEffect
 
 
 def _read_only(arrays):

@@ -2,10 +2,10 @@
 
 import pytest
 
-from service.assembled_model import load_model_class
-from service.measuring_device import MeasuringDevice
+from service.model.assembled_model import load_model_class
+from service.components.measuring_device import MeasuringDevice
 from service.resources import signatures_dir
-from service.signature import load_signature_library
+from service.matching.signature import load_signature_library
 
 #: Simulator unit of each quantity (signatures/README.md).
 QUANTITY_UNITS = {"temperature": "degC", "mass_flow": "kg/s", "volume_flow": "m3/s", "power": "W",

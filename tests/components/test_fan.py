@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.fan import Fan
+from service.components.fan import Fan
 
 # ASHRAE 90.1 Appendix G defaults: c1..c4 = 0.0013, 0.1470, 0.9506, −0.0998; P_nom 1800 W, V̇_nom 1.5 m³/s.
 

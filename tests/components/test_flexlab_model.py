@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from shared_data import SZVAV
 
-from service.assembly import assemble
-from service.calibration_data import ModelData, read_model_data
+from service.model.assembly import assemble
+from service.calibration.model_data import ModelData, read_model_data
 from service.resources import examples_dir
-from service.store import GraphStore
+from service.graph.store import GraphStore
 
 EX = "https://example.org/flexlab-x3a#"
 UNIT = "http://qudt.org/vocab/unit/"
@@ -99,7 +99,7 @@ def test_default_model_explains_the_mixed_air_of_an_unfaulted_day(flexlab):
 def test_the_coil_valve_dead_band_shuts_small_commands_and_rescales_the_rest(run_model, params_for):
     """The FLEXLAB heating valve's controller sits at 0.1–0.3 on September nights with no heat in the
     supply air: the coil model's dead band u₀ (a 2–10 V actuator on a 0–10 V output has u₀ = 0.2)."""
-    from service.water_coil import HeatingWaterCoil
+    from service.components.water_coil import HeatingWaterCoil
 
     def heat(command, dead_band):
         inputs = {"valve_position": np.array([command]), "inlet_air_temperature": np.array([20.0]),
@@ -119,7 +119,7 @@ def test_a_controller_of_the_cooling_valve_acts_directly_and_holds_the_supply_ai
     the chilled-water valve while the air is too warm, so the supply air settles at 20 °C with the
     valve part open (a reverse acting controller stays shut and leaves it at the 25.7 °C of the mixed
     air; fully open, the coil cools it to 18.6 °C)."""
-    from service.simulator import loop_substeps
+    from service.model.simulator import loop_substeps
 
     text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
     logged = """ex:cooling_coil_valve_command a gt:CommandSignal ;

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.heat_exchanger import coil_heat_rate_w, counterflow_effectiveness, series_film_ua_w_per_k
+from service.components.heat_exchanger import coil_heat_rate_w, counterflow_effectiveness, series_film_ua_w_per_k
 
 
 def test_counterflow_effectiveness_limits_and_a_textbook_value():

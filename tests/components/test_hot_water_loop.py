@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from service.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_SPECIFIC_HEAT_J_PER_KG_K
-from service.hot_water_loop import HotWaterLoop
+from service.components.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_SPECIFIC_HEAT_J_PER_KG_K
+from service.components.hot_water_loop import HotWaterLoop
 
 DT = 60.0
 

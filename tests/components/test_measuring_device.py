@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from service.measuring_device import MeasuringDevice
+from service.components.measuring_device import MeasuringDevice
 from service.resources import signatures_dir
-from service.signature import load_signature
+from service.matching.signature import load_signature
 
 
 def test_passes_any_value_through_unchanged(run_model):
@@ -26,7 +26,7 @@ def test_each_device_kind_carries_the_quantity_it_observes():
     gt = "https://w3id.org/graphtwin/ontology#"
     for name, (device_class, quantity) in kinds.items():
         signature = load_signature(signatures_dir() / f"{name}.toml")
-        assert signature.model == "service.measuring_device:MeasuringDevice", name
+        assert signature.model == "service.components.measuring_device:MeasuringDevice", name
         (device,) = signature.modeled_nodes
         assert signature.nodes[device].classes == (gt + device_class.split(":")[1],), name
         assert [(o.port, o.quantity) for o in signature.outputs] == [("measured_value", quantity)], name

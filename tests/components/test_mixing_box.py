@@ -4,8 +4,8 @@ recirculated flow that does not follow the supply fan."""
 import numpy as np
 import pytest
 
-from service.effects.return_flow_off_fan_speed import ReturnFlowOffFanSpeed
-from service.mixing_box import MixingBox
+from service.components.effects.return_flow_off_fan_speed import ReturnFlowOffFanSpeed
+from service.components.mixing_box import MixingBox
 
 
 def _mix(run_model, params, damper, outdoor=5.0, ret=22.0):

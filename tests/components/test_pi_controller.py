@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.pi_controller import DirectActingPIController, PIController
+from service.components.pi_controller import DirectActingPIController, PIController
 
 PARAMS = {"proportional_gain": np.array([0.02]), "integral_time": np.array([600.0])}
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from service.fan import Fan
-from service.speed_controlled_fan import SpeedControlledFan
+from service.components.fan import Fan
+from service.components.speed_controlled_fan import SpeedControlledFan
 
 
 def _fan(run_model, params, speed, inlet=16.0):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from service.component import AIR_SPECIFIC_HEAT_J_PER_KG_K
-from service.water_coil import CoolingWaterCoil, HeatingWaterCoil, WaterCoil
+from service.components.component import AIR_SPECIFIC_HEAT_J_PER_KG_K
+from service.components.water_coil import CoolingWaterCoil, HeatingWaterCoil, WaterCoil
 
 
 def _coil(run_model, cls, params, valve, air_in, air_flow):

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from case_study import CASE_STUDY, EX, case_study_with_effect
 
-from service.diagnosis import diagnose, noise_level
+from service.diagnosis.loop import diagnose, noise_level
 from service.resources import signatures_dir
-from service.signature import load_signature_library
-from service.store import GraphStore
-from service.synthetic_data import NOISE_STD, generate_synthetic_data
+from service.matching.signature import load_signature_library
+from service.graph.store import GraphStore
+from service.data.synthetic import NOISE_STD, generate_synthetic_data
 
 LIBRARY = load_signature_library(signatures_dir())
 TRAIN = ("2026-01-12", "2026-01-13T23:59")
@@ -29,7 +29,7 @@ HIDDEN = {
 
 
 #: The case study in a plant room with a measured temperature (DuctHeatExchange needs surroundings).
-PLANT_ROOM = Path(__file__).parent.parent / "plant_room.ttl"
+PLANT_ROOM = Path(__file__).parent.parent / "fixtures" / "plant_room.ttl"
 
 
 def _diagnose(tmp_path, effect, node):
@@ -43,7 +43,7 @@ def _diagnose(tmp_path, effect, node):
 
 def test_every_catalog_effect_the_case_study_admits_is_tested_here():
     # CoilThermalMass extends static coils only (the FLEXLAB model's), not the hot-water loop;
-    # ReturnFlowOffFanSpeed needs a mixing box (tested on the school AHU's data, tests/test_brick_school.py)
+    # ReturnFlowOffFanSpeed needs a mixing box (tested on the school AHU's data, tests/model/test_brick_school.py)
     applicable = {s.id for s in LIBRARY.values() if s.kind == "effect"} - {"CoilThermalMass", "ReturnFlowOffFanSpeed"}
     assert applicable == set(HIDDEN)
 
@@ -109,7 +109,7 @@ def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tm
     significant."""
     import numpy as np
 
-    from service.measurements import SeriesSpec, read_measurements
+    from service.data.measurements import SeriesSpec, read_measurements
 
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
@@ -142,7 +142,7 @@ def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():
 
 
 def test_an_effect_the_model_records_is_not_offered_again():
-    from service.diagnosis import effect_candidates
+    from service.diagnosis.loop import effect_candidates
 
     store = GraphStore.embedded(None)
     store.load_model("case", case_study_with_effect(LIBRARY["FanMotorHeat"], EX + "supply_fan"))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.failure_episodes import find_episodes
+from service.diagnosis.episodes import find_episodes
 
 START = np.datetime64("2017-09-12T00:00")
 STEP = np.timedelta64(10, "m")

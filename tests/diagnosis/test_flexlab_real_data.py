@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 from shared_data import SZVAV
 
-from service.diagnosis import diagnose
+from service.diagnosis.loop import diagnose
 from service.resources import examples_dir
-from service.store import GraphStore
+from service.graph.store import GraphStore
 
 EX = "https://example.org/flexlab-x3a#"
 SUPPLY = EX + "supply_air_temperature_sensor"

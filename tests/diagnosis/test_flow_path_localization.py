@@ -1,6 +1,6 @@
 """Localisation along the flow path, including a recirculation loop and off-path sensors."""
 
-from service.flow_path_localization import FlowTopology, localize_failures
+from service.diagnosis.localization import FlowTopology, localize_failures
 
 # outdoor sensor → mixing box → fan → coil → supply sensor → room → return sensor → mixing box (loop)
 LOOP = [
@@ -83,7 +83,7 @@ def test_a_coils_water_outlet_has_the_air_side_upstream_among_its_suspects():
 def test_the_diagnosis_carries_a_failure_down_only_where_the_residuals_say_so():
     import numpy as np
 
-    from service.diagnosis import _carried_down
+    from service.diagnosis.loop import _carried_down
 
     rng = np.random.default_rng(0)
     offset = np.where(np.arange(200) < 100, 0.0, 0.7)  # the mixed air 0.7 K off in the second half

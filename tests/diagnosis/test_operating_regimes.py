@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.operating_regimes import OperatingRegimes, RuleCondition, per_regime_metrics, smoothed_rate, worst_regime
+from service.calibration.regimes import OperatingRegimes, RuleCondition, per_regime_metrics, smoothed_rate, worst_regime
 
 NAMES = ["supply fan speed", "heating valve position", "cooling valve position", "outdoor air temperature"]
 UNITS = ["1", "1", "1", "°C"]

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.regime_sensitivity import morris_by_regime, successive_calibration_plan
+from service.calibration.regime_sensitivity import morris_by_regime, successive_calibration_plan
 
 #: 100 steps: regime 0 (40 steps), 1 (30), 2 (30); x is a known driving signal.
 LABELS = np.repeat([0, 1, 2], [40, 30, 30])
@@ -90,8 +90,8 @@ def test_bad_problem_and_bad_simulation_are_refused():
 
 
 def test_calibration_measure_is_the_weighted_rms_residual_over_the_stacked_targets():
-    from service.calibration_problem import CalibrationProblem
-    from service.regime_sensitivity import calibration_morris_by_regime
+    from service.calibration.problem import CalibrationProblem
+    from service.calibration.regime_sensitivity import calibration_morris_by_regime
 
     model = CountingModel()
     observed = np.where(LABELS == 1, 0.3 * X_SIGNAL, 0.0) + np.where(LABELS == 2, 1.2 * X_SIGNAL, 0.0)

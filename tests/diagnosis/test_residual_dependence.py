@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.residual_dependence import residual_dependence
+from service.diagnosis.residual_dependence import residual_dependence
 
 N = 1500
 

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from case_study import EX
 
-from service.assembly import assemble
-from service.calibration_data import ModelData, read_model_data
-from service.calibration_problem import CalibrationProblem
-from service.regime_sensitivity import calibration_morris_by_regime, dominant_parameters_by_regime
+from service.model.assembly import assemble
+from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.problem import CalibrationProblem
+from service.calibration.regime_sensitivity import calibration_morris_by_regime, dominant_parameters_by_regime
 from service.resources import signatures_dir
-from service.signature import load_signature_library
-from service.simulator import loop_substeps
-from service.successive_calibration import (
+from service.matching.signature import load_signature_library
+from service.model.simulator import loop_substeps
+from service.calibration.successive import (
     SuccessiveCalibrator, boundary_regimes, compare_strategies, contiguous_folds, cross_validate, restricted_problem,
 )
-from service.synthetic_data import generate_synthetic_data
+from service.data.synthetic import generate_synthetic_data
 
 # --- analytic problem: y = a·x in regime 1, b·x + c·w in regime 2, 0.2·x in regime 0; d does nothing.
 LABELS = np.repeat([0, 1, 2, 1, 2], [60, 50, 50, 40, 40])
@@ -121,7 +121,7 @@ COIL_CONDUCTANCES = ("heating_coil_air_side.water_side_conductance", "heating_co
 def case(tmp_path_factory):
     from case_study import CASE_STUDY
 
-    from service.store import GraphStore
+    from service.graph.store import GraphStore
 
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
@@ -261,7 +261,7 @@ def test_successive_calibration_recovers_the_identifiable_parameters_of_the_trut
 
 
 def test_impossible_folds_are_refused_before_any_fit(case_store, tmp_path):
-    from service.successive_calibration import compare_calibration_strategies
+    from service.calibration.successive import compare_calibration_strategies
 
     path = tmp_path / "case.csv"
     generate_synthetic_data(case_store, "case", path, library=load_signature_library(signatures_dir()), seed=1,

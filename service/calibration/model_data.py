@@ -1,0 +1,297 @@
+"""An assembled model bound to its measured data: windows, simulation and calibration problems.
+
+:class:`ModelData` is where the graph world (device IRIs, QUDT units) meets the numeric one: it says
+which series each measuring device needs and in which unit (the quantity of the device's output:
+temperature in °C, volume flow in m³/s, power in W, position in 1), reads them, and turns a time
+window into a :class:`~service.calibration.problem.CalibrationProblem` whose targets are keyed by
+the sensors' building-node IRIs, the names users see in every report.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from service.model.assembled_model import AssembledModel, mapped_values_outside_bounds
+from service.calibration.problem import CalibrationProblem
+from service.data.measurements import MeasuredData, SeriesSpec, read_measurements
+from service.graph.namespaces import local_name
+from service.model.simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
+
+__all__ = ["DEFAULT_GP_INPUTS", "GAP_RECOVERY_S", "SETTLING_S", "WARMUP_PERIOD_S", "model_warmup_s",
+           "model_start_memory_s", "warmup_period_steps",
+           "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+
+#: The discrepancy GP's inputs unless the user names others: time alone (hours since the data's start).
+DEFAULT_GP_INPUTS: tuple[str, ...] = ("time",)
+
+#: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
+#: the model's states come out of the gap off (as at a window's start: ``ModelData.problem``'s settling).
+GAP_RECOVERY_S = 3600.0
+
+#: Unscored start of every window, s: the warm-up settles the model's states to the model's own
+#: trajectory, not to the building's (longer where the warm-up is a guess: ``ModelData.unscored_start_s``).
+SETTLING_S = 3600.0
+
+#: Period repeated before the data's first step in a warm-up, s (the first value held in data
+#: shorter than this).
+WARMUP_PERIOD_S = 86400.0
+
+#: Simulator unit of each quantity a signature output may carry (``signatures/README.md``).
+QUANTITY_UNITS = {
+    "temperature": "degC", "mass_flow": "kg/s", "volume_flow": "m3/s", "power": "W", "position": "1",
+    "heat_rate": "W",
+}
+
+
+def _device_unit(model: AssembledModel, component: str) -> str:
+    instance = model.components[component]
+    quantity = next((o.quantity for o in instance.signature.outputs if o.port == "measured_value"), None)
+    if quantity not in QUANTITY_UNITS:
+        raise ValueError(f"{instance.signature.source_file}: measured_value output has no known quantity ({quantity!r})")
+    return QUANTITY_UNITS[quantity]
+
+
+def series_specs(model: AssembledModel) -> dict[str, SeriesSpec]:
+    """Building-node IRI → what the model needs from its column (boundary inputs are required,
+    targets too: a target without a column cannot be calibrated against)."""
+    specs = {}
+    for component in model.boundary_inputs + model.targets:
+        link = model.measurement(component)
+        specs[link.node] = SeriesSpec(link.node, link.series_id, link.unit, _device_unit(model, component),
+                                      holds_values=model.components[component].signature.holds_values)
+    return specs
+
+
+def check_mapped_parameters(model: AssembledModel) -> None:
+    """Refuse a model whose graph maps a parameter to a value outside that parameter's physical bounds
+    (a nominal power of 80 kW for a fan whose signature allows 50 W – 50 kW is a typo or a wrong unit,
+    and calibrating the other parameters around it would hide the mistake).
+
+    :raises ValueError: naming every such parameter, its node, the value and the bounds, in the
+        parameter's unit.
+    """
+    problems = mapped_values_outside_bounds(model.mapped_parameters, model.components)
+    if problems:
+        raise ValueError("; ".join(problems) + ": fix the value (or its unit) in the model graph")
+
+
+def model_warmup_s(model: AssembledModel) -> float:
+    """Warm-up simulated before every window of ``model`` [s]: its slowest component's settling time
+    (:meth:`~service.components.component.ComponentModel.settling_time_s`: a day with a PI loop, none for static
+    components). Over the measured time before the window (before the data's first step, its first
+    day repeated) controllers' integrals and thermal masses come from their cold start to the state
+    the operation leaves."""
+    return max((c.model_class.settling_time_s() for c in model.components.values()), default=0.0)
+
+
+def model_start_memory_s(model: AssembledModel) -> float:
+    """How long ``model``'s outputs remember a wrong start state [s]: its components' longest
+    :attr:`~service.components.component.ComponentModel.start_memory_s` (six hours with a PI loop)."""
+    return max((c.model_class.start_memory_s for c in model.components.values()), default=0.0)
+
+
+def warmup_period_steps(n_steps: int, step_s: float) -> int:
+    """Steps of :data:`WARMUP_PERIOD_S` when data of ``n_steps`` cover it, else 1 (hold the first value)."""
+    period = int(round(WARMUP_PERIOD_S / step_s))
+    return period if n_steps >= period else 1
+
+
+def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5) -> MeasuredData:
+    """Read the CSV at ``path`` for ``model`` (:func:`service.data.measurements.read_measurements`)."""
+    return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps)
+
+
+@dataclass
+class ModelData:
+    """``model`` with ``data``; ``substeps`` sub-divides the data step for the simulation."""
+
+    model: AssembledModel
+    data: MeasuredData
+    substeps: int = 1
+    #: ``ndarray[n_steps]`` of bool: the steps where targets are compared (an operating filter,
+    #: :mod:`service.data.operating_filter`); None: every step.
+    compared: np.ndarray | None = None
+    #: Warm-up simulated before every window, s; None: :func:`model_warmup_s`.
+    warmup_s: float | None = None
+
+    def __post_init__(self) -> None:
+        check_mapped_parameters(self.model)
+        if self.warmup_s is None:
+            self.warmup_s = model_warmup_s(self.model)
+        nodes = {self.model.measurement(c).node: c for c in self.model.boundary_inputs + self.model.targets}
+        missing = sorted(n for n in nodes if n not in self.data.series)
+        if missing:
+            raise ValueError(f"{self.data.source} has no series for {', '.join(missing)}")
+        self.node_of = {c: self.model.measurement(c).node for c in nodes.values()}
+        self.target_nodes = tuple(self.node_of[c] for c in self.model.targets)
+        self.simulator = Simulator(self.model, self.data.step_s, self.substeps)
+        self.units = {self.node_of[c]: self.data.units[self.node_of[c]] for c in self.model.targets}
+
+    @property
+    def warmup_steps(self) -> int:
+        return int(round(self.warmup_s / self.data.step_s))
+
+    def boundary(self, window: slice) -> dict[str, np.ndarray]:
+        """Component IRI → measured series over ``window`` preceded by its warm-up
+        (:func:`~service.model.simulator.warmup_index`; targets included: they seed delayed inputs)."""
+        index = warmup_index(window, self.warmup_steps, warmup_period_steps(self.data.n_steps, self.data.step_s))
+        return {c: self.data.series[node][index] for c, node in self.node_of.items()}
+
+    def run(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None, *,
+            record: Sequence[tuple[str, str]] | None = None) -> SimulationResult:
+        """Simulate ``window`` for θ ``ndarray[n_ensemble, n_estimated]`` after :attr:`warmup_s` of
+        warm-up: the states at the window's start are those the measured operation before it leaves
+        (a controller's integral, a coil's water), not a cold start."""
+        return self.simulator.run(self.boundary(window), np.atleast_2d(theta), fixed=fixed, record=record,
+                                  warmup_steps=self.warmup_steps)
+
+    def observed(self, window: slice) -> dict[str, np.ndarray]:
+        """Target node → observed series in ``window``: NaN where not measured; NaN where a
+        boundary input is missing (a gap longer than the interpolation limit: the simulator holds
+        the input's last value there, so the model is not compared with the measurement) and for
+        :data:`GAP_RECOVERY_S` after such a gap (the model's states — thermal masses, a controller's
+        integral — come out of it off, and take that long to follow the inputs again); and NaN
+        outside the operating filter (``compared``)."""
+        recovery = int(round(GAP_RECOVERY_S / self.data.step_s))
+        span = warmup_index(window, recovery)  # a gap just before the window reaches into it
+        inputs_missing = np.zeros(span.size, dtype=bool)
+        for component in self.model.boundary_inputs:
+            inputs_missing |= ~np.isfinite(self.data.series[self.node_of[component]][span])
+        after_gap = (np.convolve(inputs_missing, np.ones(recovery + 1, dtype=bool))[: span.size] > 0)[recovery:]
+        compared = (np.ones(self.data.n_steps, dtype=bool) if self.compared is None else self.compared)[window]
+        keep = compared & ~after_gap
+        return {self.node_of[c]: np.where(keep, self.data.series[self.node_of[c]][window], np.nan)
+                for c in self.model.targets}
+
+    def simulate_targets(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+        """Target node → ``ndarray[n_ensemble, n_steps]`` for θ ``ndarray[n_ensemble, n_estimated]``."""
+        result = self.run(window, theta, fixed, record=[(c, "measured_value") for c in self.model.targets])
+        return {self.node_of[c]: result.target(c) for c in self.model.targets}
+
+    def simulate_all(self, window: slice, theta: np.ndarray) -> SimulationResult:
+        """Every output of every component (for plots and the residual-dependence search)."""
+        return self.run(window, theta)
+
+    def non_finite_source(self, window: slice, theta: np.ndarray) -> str | None:
+        """Where the simulation of ``window`` at θ ``ndarray[n_estimated]`` first gives NaN or an
+        infinite value: the component output with the earliest such step (the most upstream one, in
+        simulation order, on a tie), named with its signature and model; None when all is finite."""
+        result = self.simulate_all(window, theta)
+        first = None
+        for order, iri in enumerate(self.simulator.order):
+            for port in self.model.components[iri].model_class.output_names():
+                bad = np.flatnonzero(~np.isfinite(result.outputs[(iri, port)][0]))
+                if bad.size and (first is None or (bad[0], order) < first[:2]):
+                    first = (int(bad[0]), order, iri, port)
+        if first is None:
+            return None
+        step, _, iri, port = first
+        instance = self.model.components[iri]
+        model = instance.signature.fmu.name if instance.signature.fmu is not None else instance.signature.model
+        stamp = self.data.timestamps[window][step]
+        return (f"{instance.node} (component {iri}, signature {instance.signature.id}, model {model}): output {port} is "
+                f"{result.outputs[(iri, port)][0][step]} from step {step} ({stamp}) at the default parameters")
+
+    def gp_input_nodes(self, names: Sequence[str]) -> tuple[str, ...]:
+        """The discrepancy GP's inputs named by the user: ``"time"``, or a boundary input's node IRI,
+        local name or CSV column, each → ``"time"`` or the node IRI.
+
+        :raises ValueError: naming what is not one, with the names that are.
+        """
+        boundary = [self.node_of[c] for c in self.model.boundary_inputs]
+        known = {"time": "time"} | {n: n for n in boundary} | {local_name(n): n for n in boundary} | {
+            self.data.columns[n]: n for n in boundary if n in self.data.columns}
+        unknown = [name for name in names if name not in known]
+        if unknown:
+            offered = ", ".join(["time"] + sorted(local_name(n) for n in boundary))
+            raise ValueError(f"GP input(s) {', '.join(map(repr, unknown))} are no boundary input of the model "
+                             f"(a target's measurements would feed the discrepancy of what it measures): "
+                             f"use {offered}, a node IRI or its CSV column")
+        return tuple(dict.fromkeys(known[name] for name in names))
+
+    def _gp_input_series(self, name: str, window: slice) -> np.ndarray:
+        """One GP input over ``window``: hours since the data's first step for ``"time"``, else the
+        boundary node's series with a gap holding the last value (the first value before it)."""
+        if name == "time":
+            return np.arange(window.start, window.stop) * self.data.step_s / 3600.0
+        values = self.data.series[name][window]
+        if not np.isfinite(values).any():
+            raise ValueError(f"GP input {name} has no measured value in the window")
+        return held_over_gaps(values)
+
+    def unscored_start_s(self, window: slice) -> float:
+        """Seconds at the start of ``window`` that are simulated but not scored: :data:`SETTLING_S`,
+        or what is left of the model's start memory (:func:`model_start_memory_s`) after the measured
+        data before the window, when longer: before the data's first step the warm-up repeats the
+        first day, and the states it leaves (a controller's integral) are a guess, not the
+        building's (its day before differed). A window deep enough in the data starts from a warm-up
+        on measured operation."""
+        history_s = (window.start or 0) * self.data.step_s
+        return max(SETTLING_S, model_start_memory_s(self.model) - history_s)
+
+    def unscored_start_steps(self, window: slice, settling_s: float | None = None) -> int:
+        """Data steps at the start of ``window`` that are not scored: ``settling_s`` seconds, or
+        :meth:`unscored_start_s` when None."""
+        unscored_s = self.unscored_start_s(window) if settling_s is None else settling_s
+        return int(round(unscored_s / self.data.step_s))
+
+    def default_theta(self) -> np.ndarray:
+        return np.array([ref.spec.default for ref in self.model.estimated_parameters])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        refs = self.model.estimated_parameters
+        return np.array([r.spec.lower for r in refs]), np.array([r.spec.upper for r in refs])
+
+    def problem(
+        self, window: slice | Sequence[slice], *, default: np.ndarray | None = None,
+        fixed: Mapping[str, float] | None = None, target_scales: Mapping[str, float] | None = None,
+        gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS, settling_s: float | None = None,
+    ) -> CalibrationProblem:
+        """The calibration problem of ``window`` (or of several windows, concatenated; each is
+        simulated on its own): θ = the model's estimated parameters.
+
+        :param default: a plausible θ screened with the start candidates (the components'
+            defaults when None).
+        :param target_scales: residual scales per target node (e.g. the training window's, so a
+            test window weighs alike).
+        :param gp_inputs: the discrepancy GP's inputs, named as :meth:`gp_input_nodes` takes them:
+            ``"time"`` (hours since the data's first step) and boundary inputs by node IRI, local name
+            or CSV column (their measured series, in the simulator's unit; a gap holds the last
+            value); empty: none (the calibrator's time index).
+        :param settling_s: the first ``settling_s`` seconds of each window are simulated but not
+            compared: the warm-up settles the model's states, it cannot give them the building's.
+            None: :meth:`unscored_start_s` of each window (an hour; six with a PI loop at the
+            data's start).
+        :raises ValueError: a GP input that is neither time nor a boundary input (named, with those
+            that are).
+        """
+        gp_inputs = self.gp_input_nodes(gp_inputs)
+        windows = [window] if isinstance(window, slice) else list(window)
+        lower, upper = self.bounds()
+        start = self.default_theta() if default is None else np.clip(np.asarray(default, float), lower, upper)
+        observed: dict[str, list[np.ndarray]] = {}
+        for part in windows:
+            settling = self.unscored_start_steps(part, settling_s)
+            for node, values in self.observed(part).items():
+                values = values.copy()
+                values[:settling] = np.nan
+                observed.setdefault(node, []).append(values)
+        columns = [np.concatenate([self._gp_input_series(name, w) for w in windows]) for name in gp_inputs]
+
+        def simulate(theta: np.ndarray) -> dict[str, np.ndarray]:
+            runs = [self.simulate_targets(part, theta, fixed) for part in windows]
+            return {node: np.concatenate([run[node] for run in runs], axis=1) for node in runs[0]}
+
+        return CalibrationProblem(
+            parameter_names=tuple(ref.key for ref in self.model.estimated_parameters),
+            lower=lower, upper=upper, simulate=simulate,
+            observed={node: np.concatenate(parts) for node, parts in observed.items()}, units=self.units,
+            default=start, target_scales=dict(target_scales or {}),
+            gp_inputs=np.column_stack(columns) if columns else None,
+            gp_input_names=tuple(name if name == "time" else local_name(name) for name in gp_inputs) or None,
+            vectorised_simulate=all(c.model_class.vectorised for c in self.model.components.values()),
+        )

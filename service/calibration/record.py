@@ -1,0 +1,83 @@
+"""What a calibration run produced, in a shape that is written as triples and printed as JSON.
+
+A :class:`CalibrationRecord` is independent of how the estimate was made (point or Bayesian): every
+estimated parameter gets a median and a 16–84 % interval (the Bayesian posterior quantiles, or for a
+point fit θ̂ ± one standard error of the Jacobian covariance, clipped to the prior bounds), a MAP
+(the posterior mode, or θ̂), and the identifiability verdict; every target gets its metrics on the
+training window and, when given, the test window, and there per operating regime.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+
+from service.calibration.metrics import TargetMetrics
+
+__all__ = ["ParameterEstimate", "CalibrationRecord"]
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    """One estimated parameter (physical unit ``unit``) of the component ``component`` that
+    represents building node ``node``."""
+
+    key: str
+    name: str
+    component: str
+    node: str
+    unit: str
+    lower: float
+    upper: float
+    median: float
+    quantile16: float
+    quantile84: float
+    map: float
+    standard_error: float
+    identified: bool
+    reasons: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name, "component": self.component, "node": self.node, "unit": self.unit,
+            "median": self.median, "quantile16": self.quantile16, "quantile84": self.quantile84,
+            "map": self.map, "standard_error": self.standard_error, "lower": self.lower, "upper": self.upper,
+            "identified": self.identified, "reasons": list(self.reasons),
+        }
+
+
+@dataclass
+class CalibrationRecord:
+    """A finished calibration: provenance, estimates and metrics (``metrics[window][target node]``)."""
+
+    run_id: str
+    model_name: str
+    model_version: str
+    method: str
+    seed: int | None
+    data_source: str
+    train_window: tuple[datetime, datetime]
+    test_window: tuple[datetime, datetime] | None
+    started: datetime
+    finished: datetime
+    settings: dict
+    estimates: list[ParameterEstimate]
+    metrics: dict[str, dict[str, TargetMetrics]] = field(default_factory=dict)
+    diagnostics: dict = field(default_factory=dict)
+    #: Test-window error per operating regime (:meth:`service.calibration.regime_breakdown.RegimeBreakdown.rows`).
+    regimes: list[dict] = field(default_factory=list)
+    regime_rule_accuracy: float = float("nan")
+
+    def to_dict(self) -> dict:
+        return {
+            "run_id": self.run_id, "model": self.model_name, "model_version": self.model_version,
+            "method": self.method, "seed": self.seed, "data": self.data_source,
+            "train": [t.isoformat() for t in self.train_window],
+            "test": [t.isoformat() for t in self.test_window] if self.test_window else None,
+            "started": self.started.isoformat(), "finished": self.finished.isoformat(),
+            "settings": self.settings,
+            "parameters": {e.key: e.to_dict() for e in self.estimates},
+            "metrics": {w: {t: m.to_dict() for t, m in per.items()} for w, per in self.metrics.items()},
+            "diagnostics": self.diagnostics,
+            "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
+        }

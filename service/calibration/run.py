@@ -1,0 +1,400 @@
+"""A calibration run end to end: assemble, read the data, fit, evaluate, write every result as triples.
+
+``calibrate`` is what ``graphtwin calibrate`` and the HTTP job run. Point (``method="point"``):
+multi-start bounded least squares; the 16–84 % interval is θ̂ ± one standard error of the Jacobian
+covariance, clipped to the prior. Bayesian (``method="bayes"``): Kennedy–O'Hagan with the Matérn-3/2
+discrepancy GP, parallel-tempering MCMC to 20 integrated autocorrelation times, posterior
+predictive intervals on the test window. The test window is simulated as the continuation of the
+training window (one run from the training start), so it carries no start-up transient. With a test
+window the run also records the error per operating regime (:mod:`service.calibration.regime_breakdown`).
+
+``start_from`` names another model in the store (the version before an effect was added, say): the
+latest calibrated values of the parameters the two share replace the component defaults as the
+plausible start screened with the Latin-hypercube candidates (:func:`calibrated_start`), so
+re-calibrating after ``add-effect`` starts where the base model's fit ended (the diagnosis's refit
+starts there too), with the effect's parameters at their defaults, instead of searching the whole
+prior again.
+
+Everything a run produced goes into its named graph in ONE transaction after the fit: a reader
+sees the whole run or none of it; a failed run writes nothing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import uuid
+from collections.abc import Callable, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import pyoxigraph as ox
+
+from service.model.assembled_model import AssembledModel
+from service.model.assembly import assemble, without_model
+from service.model.assembly_triples import assembly_iri, assembly_triples
+from service.calibration.model_data import DEFAULT_GP_INPUTS, SETTLING_S, ModelData, read_model_data
+from service.calibration.record import CalibrationRecord, ParameterEstimate
+from service.calibration.triples import calibration_triples
+from service.data.measurements import parse_timestamp
+from service.graph.namespaces import local_name
+from service.calibration.metrics import target_metrics
+from service.data.operating_filter import operating_mask
+from service.calibration.point import NonFiniteSimulationError, PointCalibrator
+from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
+from service.model.simulator import loop_substeps
+from service.graph.store import GraphStore
+from service.graph.units import unit_label
+
+__all__ = ["Window", "parse_window", "CalibrationOutcome", "calibrate", "calibrated_start", "model_version",
+           "fit_point", "continuation", "predict_test", "store_run"]
+
+Window = tuple[str | None, str | None]
+
+
+def parse_window(text: str | None) -> Window:
+    """``"START/END"`` (time stamps :func:`~service.data.measurements.parse_timestamp` reads, either side
+    may be empty) → (start, end), checked before any data is read.
+
+    :raises ValueError: without exactly one ``/``, naming the side whose time stamp is unreadable,
+        or when the end is before the start.
+    """
+    if text is None:
+        return (None, None)
+    if text.count("/") != 1:
+        raise ValueError(f"window {text!r}: write START/END, e.g. 2026-01-12/2026-01-15T23:50")
+    start, end = (part.strip() or None for part in text.split("/"))
+    parsed = {}
+    for side, stamp in (("start", start), ("end", end)):
+        if stamp is not None:
+            try:
+                parsed[side] = parse_timestamp(stamp)
+            except ValueError as exc:
+                raise ValueError(f"window {text!r}, its {side}: {exc}") from None
+    if len(parsed) == 2 and parsed["end"] < parsed["start"]:
+        raise ValueError(f"window {text!r}: the end is before the start")
+    return start, end
+
+
+def model_version(store: GraphStore, model_name: str) -> str:
+    """First 12 hex digits of the SHA-256 of the model graph's sorted N-Triples."""
+    data = store.backend.dump(store.model_graph(model_name), ox.RdfFormat.N_TRIPLES)
+    lines = sorted(line for line in data.decode("utf-8").splitlines() if line.strip())
+    return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()[:12]
+
+
+#: A test-window input counts as beyond the training's when it leaves the training's range by more
+#: than this share of that range.
+BEYOND_TRAINING_SHARE = 0.05
+
+
+def inputs_beyond_training(md: ModelData, train: slice, test: slice) -> list[str]:
+    """One sentence per boundary input the test window drives beyond the range the training window
+    saw (by more than :data:`BEYOND_TRAINING_SHARE` of that range): there the prediction rests on
+    what the training could not show (a valve's dead band fitted just above the highest command the
+    training day reached, a coil's capacity never exercised), so a test error there says little
+    about the model and a fault-free day can look failed."""
+    notes = []
+    for component in md.model.boundary_inputs:
+        node = md.node_of[component]
+        seen, tested = md.data.series[node][train], md.data.series[node][test]
+        seen, tested = seen[np.isfinite(seen)], tested[np.isfinite(tested)]
+        if not seen.size or not tested.size:
+            continue
+        low, high = float(seen.min()), float(seen.max())
+        margin = BEYOND_TRAINING_SHARE * max(high - low, 1e-9)
+        above, below = tested > high + margin, tested < low - margin
+        if above.any() or below.any():
+            unit = unit_label(md.data.units[node])
+            reach = (f"up to {tested.max():.3g} {unit} where training reached {high:.3g}" if above.any()
+                     else f"down to {tested.min():.3g} {unit} where training reached {low:.3g}")
+            notes.append(f"the test window drives {local_name(node)} beyond what the training window saw "
+                         f"({int(above.sum() + below.sum())} steps, {reach}): predictions there rest on what "
+                         "the training could not show")
+    return notes
+
+
+def continuation(train: slice, test: slice) -> slice | None:
+    """The window from the training start to the test end when the test follows the training."""
+    return slice(train.start, test.stop) if test.start >= train.start else None
+
+
+def predict_test(md: ModelData, train: slice, test: slice, theta: np.ndarray,
+                 settling_s: float | None = None) -> dict[str, np.ndarray]:
+    """Target node → prediction on ``test`` for one θ: the continuation of the training run when the
+    test follows the training start, else a run of its own (warmed up over the data before it) whose
+    first ``settling_s`` are NaN (the warm-up settles the model's states, it cannot give them the
+    building's; None: :meth:`ModelData.unscored_start_s`)."""
+    joined = continuation(train, test)
+    if joined is not None:
+        offset = test.start - joined.start
+        return {k: v[0][offset:] for k, v in md.simulate_targets(joined, theta[None, :]).items()}
+    settling = md.unscored_start_steps(test, settling_s)
+    out = {}
+    for node, values in md.simulate_targets(test, theta[None, :]).items():
+        values = values[0].copy()
+        values[:settling] = np.nan
+        out[node] = values
+    return out
+
+
+def fit_point(md: ModelData, train: slice, *, seed: int, default: np.ndarray | None = None,
+              n_starts: int = 2, n_candidates: int = 32, max_nfev: int = 40) -> tuple[PointCalibrator, object]:
+    """Point calibration on ``train``; returns the fitted calibrator and the problem."""
+    problem = md.problem(train, default=default)
+    calibrator = PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev)
+    with _non_finite_named(md, train, problem.default):
+        return calibrator.fit(problem), problem
+
+
+@contextmanager
+def _non_finite_named(md: ModelData, window: slice, theta: np.ndarray):
+    """Add to a :class:`NonFiniteSimulationError` the component output where the simulation of
+    ``window`` at ``theta`` first gives NaN or an infinite value."""
+    try:
+        yield
+    except NonFiniteSimulationError as exc:
+        source = md.non_finite_source(window, theta)
+        raise NonFiniteSimulationError(f"{exc}; it starts at {source}" if source else str(exc)) from None
+
+
+@dataclass
+class CalibrationOutcome:
+    """A finished run: the record (as written to the store) and what reports need beside it."""
+
+    record: CalibrationRecord
+    model: AssembledModel
+    model_data: ModelData
+    theta: np.ndarray
+    train: slice
+    test: slice | None
+    predictions: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # window → node → median
+    intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = field(default_factory=dict)
+    calibrator: object = None  # the fitted PointCalibrator or BayesianCalibrator (chains for plots)
+    regimes: RegimeBreakdown | None = None  # the test-window error per operating regime
+
+
+def _estimates(model: AssembledModel, theta, q16, q84, theta_map, se, verdicts) -> list[ParameterEstimate]:
+    estimates = []
+    for j, ref in enumerate(model.estimated_parameters):
+        instance = model.components[ref.component]
+        verdict = verdicts.get(ref.key)
+        estimates.append(ParameterEstimate(
+            key=ref.key, name=ref.name, component=ref.component, node=instance.node, unit=ref.spec.unit,
+            lower=ref.spec.lower, upper=ref.spec.upper, median=float(theta[j]), quantile16=float(q16[j]),
+            quantile84=float(q84[j]), map=float(theta_map[j]), standard_error=float(se[j]),
+            identified=bool(verdict.identified) if verdict is not None else True,
+            reasons=tuple(verdict.reasons) if verdict is not None else (),
+        ))
+    return estimates
+
+
+def calibrated_start(store: GraphStore, start_from: str, model_name: str,
+                     model: AssembledModel) -> tuple[np.ndarray, list[str], str]:
+    """θ to start ``model``'s calibration from, the IRIs of the runs its values come from, and a
+    sentence saying what it holds. For each estimated parameter: the latest calibrated value (the MAP,
+    ``calibrated-parameters.rq``) of the same parameter of the same component in model ``start_from``
+    (keys matched without the model name, :func:`without_model`), clipped to this model's bounds; the
+    component default where ``start_from`` has none (the parameters of an effect just added).
+
+    :raises ValueError: ``start_from`` is not in the store, has no calibration run, or shares no
+        estimated parameter with ``model``.
+    """
+    if not store.has_model(start_from):
+        raise ValueError(f"start from {start_from!r}: no such model in the store; it holds "
+                         f"{', '.join(store.models()) or 'none'}")
+    latest = {without_model(f"{row['component'].value}#{row['name'].value}"):
+              (float((row.get("map") or row["median"]).value), row["run"].value)
+              for row in store.run_named_query("calibrated-parameters", model=start_from)}
+    if not latest:
+        raise ValueError(f"start from {start_from!r}: the model has no calibration run in the store; "
+                         "calibrate it first")
+    theta = np.array([ref.spec.default for ref in model.estimated_parameters])
+    at_default, runs = [], set()
+    for j, ref in enumerate(model.estimated_parameters):
+        key = without_model(ref.key)
+        if key in latest:
+            value, run = latest[key]
+            theta[j] = min(max(value, ref.spec.lower), ref.spec.upper)
+            runs.add(run)
+        else:
+            at_default.append(key)
+    if not runs:
+        raise ValueError(f"start from {start_from!r}: its calibrated parameters ({', '.join(sorted(latest))}) include "
+                         f"none that model {model_name} estimates")
+    note = (f"started from the latest calibration of {start_from}: {len(theta) - len(at_default)} of {len(theta)} "
+            "parameters" + (f"; at their defaults: {', '.join(at_default)}" if at_default else ""))
+    return theta, sorted(runs), note
+
+
+def calibrate(
+    store: GraphStore,
+    model_name: str,
+    data_path: Path | str,
+    *,
+    train: Window = (None, None),
+    test: Window | None = None,
+    method: str = "point",
+    seed: int = 0,
+    substeps: int | None = None,
+    bayes_settings: dict | None = None,
+    progress: bool = False,
+    on_progress: Callable[[dict], None] | None = None,
+    only_when: Sequence[str] = (),
+    min_test_steps: int = 1,
+    gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS,
+    start_from: str | None = None,
+) -> CalibrationOutcome:
+    """Calibrate ``model_name`` against the CSV at ``data_path`` and store the run. A test window
+    that overlaps the training window is noted in the run's warnings (its metrics are then partly on
+    data the fit saw).
+
+    :param only_when: operating conditions (``"SF Spd Cmd (%) > 5"``, :mod:`service.data.operating_filter`):
+        the targets are compared only at the steps where all hold.
+    :param min_test_steps: a test window with fewer steps of data is refused.
+    :param gp_inputs: the inputs of the discrepancy GP (``method="bayes"``): ``"time"`` and boundary
+        inputs by node IRI, local name or CSV column (:meth:`ModelData.gp_input_nodes`).
+    :param start_from: a model in the store whose latest calibrated values start this fit
+        (:func:`calibrated_start`); None: the component defaults.
+
+    :raises ValueError: a bad window, a target without measurements, NaN-only series, an unknown
+        method, a ``start_from`` with nothing to start from; nothing is written to the store then.
+    """
+    if method not in ("point", "bayes"):
+        raise ValueError(f"unknown method {method!r}: use point or bayes")
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    started = datetime.now(timezone.utc)
+    version = model_version(store, model_name)  # of the model calibrated, read before anything else
+    model = assemble(store, model_name)
+    data = read_model_data(model, data_path)
+    substeps = substeps or loop_substeps(model, data.step_s)
+    md = ModelData(model, data, substeps, operating_mask(data, only_when))
+    train_slice = data.window(*train)
+    test_slice = data.window(*test) if test is not None else None
+    window_notes = []
+    if test_slice is not None:
+        if test_slice.stop - test_slice.start < min_test_steps:
+            raise ValueError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "
+                             f"steps of data: at least {min_test_steps} are needed")
+        overlap = min(train_slice.stop, test_slice.stop) - max(train_slice.start, test_slice.start)
+        if overlap > 0:
+            window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
+                                "partly on data the calibration fitted")
+        window_notes += inputs_beyond_training(md, train_slice, test_slice)
+    unscored_s = md.unscored_start_s(train_slice)
+    train_s = (train_slice.stop - train_slice.start) * data.step_s
+    if train_s <= unscored_s:
+        raise ValueError(f"the training window {train[0] or ''}/{train[1] or ''} holds {train_s / 3600:.3g} h of data, and "
+                         f"its first {unscored_s / 3600:g} h are simulated, not scored (the model's start state "
+                         f"settles): give a window longer than {unscored_s / 3600:g} h, or one starting later in the data")
+    if unscored_s > SETTLING_S:
+        window_notes.append(f"the training window's first {unscored_s / 3600:g} h are simulated, not scored: before the "
+                            "data's first step the model's start state is a guess, and its slowest loop carries it that "
+                            "long; data from before the window would let the fit use them")
+    gp_nodes = md.gp_input_nodes(gp_inputs)
+    if method == "point" and gp_nodes != DEFAULT_GP_INPUTS:
+        raise ValueError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
+                         "a point calibration has no discrepancy")
+    start = start_runs = start_note = None
+    if start_from is not None:
+        start, start_runs, start_note = calibrated_start(store, start_from, model_name, model)
+    problem = md.problem(train_slice, gp_inputs=gp_nodes, default=start)
+    n_par = problem.n_parameters
+    settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s,
+                "unscored_start_s": unscored_s}
+    if start_from is not None:
+        settings["start_from"] = {"model": start_from, "runs": start_runs}
+    if only_when:
+        settings["only_when"] = list(only_when)
+    if method == "bayes":
+        settings["gp_inputs"] = list(gp_nodes)
+    diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes) + list(md.simulator.notes) + window_notes}
+    if start_note:
+        diagnostics["start"] = start_note
+    intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
+    regimes = None
+    if method == "point":
+        with _non_finite_named(md, train_slice, problem.default):
+            calibrator = PointCalibrator(n_starts=2, n_candidates=32, random_state=seed, max_nfev=40).fit(problem)
+        theta = calibrator.theta_
+        se = calibrator.standard_errors_
+        lower, upper = problem.lower, problem.upper
+        q16, q84 = np.clip(theta - se, lower, upper), np.clip(theta + se, lower, upper)
+        theta_map, verdicts = theta, calibrator.identifiability_
+        settings.update({"n_starts": 2, "n_candidates": 32, "max_nfev": 40})
+        diagnostics["cost"] = calibrator.cost_
+    else:
+        from service.calibration.bayesian import BayesianCalibrator
+
+        options = {"n_temperatures": 4, "max_steps": 4000, "check_interval": 100, "progress": progress}
+        options.update(bayes_settings or {})
+        with _non_finite_named(md, train_slice, problem.default):
+            calibrator = BayesianCalibrator(random_state=seed, **options).fit(problem)
+        theta = calibrator.median_
+        q16, q84, theta_map = calibrator.quantile16_, calibrator.quantile84_, calibrator.map_
+        se = calibrator.samples_.std(axis=0)
+        verdicts = calibrator.point_calibrator_.identifiability_
+        settings.update({k: v for k, v in options.items() if k != "progress"})
+        diagnostics.update({"converged": bool(calibrator.converged_), "iat": np.asarray(calibrator.iat_).tolist(),
+                            "n_steps": int(calibrator.n_steps_), "acceptance": calibrator.acceptance_})
+    predictions = {"train": {k: v[0] for k, v in problem.run(theta[None, :]).items()}}
+    metrics = {"train": {
+        node: target_metrics(problem.observed[node], predictions["train"][node], n_parameters=n_par,
+                             unit=md.units[node], target=node)
+        for node in problem.observed
+    }}
+    if test_slice is not None:
+        joined = continuation(train_slice, test_slice)
+        offset = test_slice.start - joined.start if joined is not None else 0
+        if method == "bayes":
+            test_problem = md.problem(joined or test_slice, target_scales=problem.target_scales, settling_s=0.0,
+                                      gp_inputs=gp_nodes)
+            predictive = calibrator.predict(test_problem, n_draws=200,
+                                            steps_from_training_start=(joined or test_slice).start - train_slice.start)
+            median = {k: v[offset:] for k, v in predictive.median.items()}
+            intervals["test"] = {node: {level: tuple(b[offset:] for b in predictive.interval(node, level))
+                                        for level in (0.5, 0.68, 0.9, 0.95, 0.99)} for node in median}
+        else:
+            median = predict_test(md, train_slice, test_slice, theta)
+        predictions["test"] = median
+        observed_test = {node: np.where(np.isfinite(median[node]), values, np.nan)
+                         for node, values in md.observed(test_slice).items()}
+        metrics["test"] = {
+            node: target_metrics(observed_test[node], median[node], n_parameters=n_par,
+                                 intervals=intervals.get("test", {}).get(node), unit=md.units[node], target=node)
+            for node in observed_test
+        }
+        regimes = regime_breakdown(md, test_slice, observed_test, median, seed=seed)
+    finished = datetime.now(timezone.utc)
+    times = data.timestamps
+    as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime).replace(  # noqa: E731
+        tzinfo=timezone.utc if data.utc else None)  # the data's clock: UTC, or local (no offset) as the file gives it
+    record = CalibrationRecord(
+        run_id=f"{model_name}-{method}-{uuid.uuid4().hex[:8]}", model_name=model_name,
+        model_version=version, method=method, seed=seed,
+        data_source=Path(data_path).name,
+        train_window=(as_datetime(train_slice.start), as_datetime(train_slice.stop - 1)),
+        test_window=(as_datetime(test_slice.start), as_datetime(test_slice.stop - 1)) if test_slice else None,
+        started=started, finished=finished, settings=settings,
+        estimates=_estimates(model, theta, q16, q84, theta_map, se, verdicts), metrics=metrics,
+        diagnostics=diagnostics,
+        regimes=regimes.rows() if regimes is not None else [],
+        regime_rule_accuracy=regimes.rule_accuracy if regimes is not None else float("nan"),
+    )
+    store_run(store, model, model_name, record)
+    return CalibrationOutcome(record, model, md, theta, train_slice, test_slice, predictions, intervals,
+                              calibrator, regimes)
+
+
+def store_run(store: GraphStore, model: AssembledModel, model_name: str, record: CalibrationRecord,
+              extra: list[ox.Triple] | None = None) -> None:
+    """Write the assembly (its own graph) and the run (one graph, one transaction)."""
+    store.write_graph(store.assembly_graph(model_name), assembly_triples(model, model_name))
+    triples = calibration_triples(record, model_graph=store.model_graph(model_name).value,
+                                  assembly=assembly_iri(model_name).value)
+    store.write_graph(store.run_graph(record.run_id), triples + list(extra or []))
+
+

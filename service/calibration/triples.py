@@ -1,0 +1,163 @@
+"""A calibration run written back as triples (PROV-O provenance, estimates, metrics).
+
+Shape (vocabulary in ``ontologies/graphtwin.ttl``), all in the run's named graph ``gtr:graph/run/<id>``::
+
+    <run> a gt:CalibrationRun, prov:Activity ;
+        prov:used <building model graph>, <assembly> ; gt:forModel "name" ; gt:modelVersion "…" ;
+        gt:method "point" | "bayes" ; gt:seed 3 ; gt:dataSource "data.csv" ;
+        gt:trainStart / gt:trainEnd / gt:testStart / gt:testEnd xsd:dateTime ;
+        prov:startedAtTime / prov:endedAtTime xsd:dateTime ; gt:settings "{json}" ;
+        prov:wasAssociatedWith <software agent "graphtwin x.y.z"> .
+    <estimate> a gt:Estimate ; prov:wasGeneratedBy <run> ; gt:ofParameter <parameter> ;
+        gt:onComponent <component> ; gt:onNode <building node> ; gt:parameterName "…" ; gt:unit "…" ;
+        gt:median ; gt:quantile16 ; gt:quantile84 ; gt:map ; gt:standardError ;
+        gt:lowerBound ; gt:upperBound ; gt:identified true|false ; rdfs:comment "why not identified" .
+    <metric> a gt:Metric ; prov:wasGeneratedBy <run> ; gt:onSensor <sensor node> ;
+        gt:window "train" | "test" ; gt:metricName "rmse" ; gt:value 0.21 ; gt:unit "degC" .
+    <metric> … gt:metricName "coverage" | "ace" | "mean_interval_width" ; gt:intervalLevel 0.9 .
+                                            (per prediction interval of a Bayesian run)
+    <regime> a gt:OperatingRegime ; prov:wasGeneratedBy <run> ; gt:regimeRule "fan speed > 0.6 …" ;
+        gt:share 0.4 ; gt:ruleAccuracy 0.97 .
+    <metric> … gt:window "test" ; gt:metricName "rmse" ; gt:inRegime <regime> .   (the RMSE per regime)
+
+Parameter IRIs are those of the assembly (:func:`service.model.assembly_triples.parameter_iri`), so an
+estimate joins the assembled model's parameter, its component and the building node.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import datetime
+
+import pyoxigraph as ox
+
+from service import __version__
+from service.calibration.record import CalibrationRecord
+from service.graph.namespaces import GT, GTR, PROV, RDF, RDFS, XSD, distinct_local_names
+
+__all__ = ["run_iri", "calibration_triples", "software_agent"]
+
+#: Metrics written per sensor and window (attribute of :class:`~service.calibration.metrics.TargetMetrics`).
+METRIC_ATTRIBUTES = ("rmse", "mae", "r2", "cv_rmse_percent", "nmbe_percent", "lag1_autocorrelation")
+
+
+def run_iri(run_id: str) -> ox.NamedNode:
+    return ox.NamedNode(f"{GTR}run/{run_id}")
+
+
+def software_agent() -> ox.NamedNode:
+    return ox.NamedNode(f"{GTR}software/graphtwin/{__version__}")
+
+
+def _double(value: float) -> ox.Literal:
+    return ox.Literal(repr(float(value)), datatype=XSD.double)
+
+
+def _time(value: datetime) -> ox.Literal:
+    """``xsd:dateTime`` as the data's clock gives it: with its offset, or none for local time (a BMS
+    export's naive stamps are not UTC, and saying so would shift them)."""
+    return ox.Literal(value.isoformat(), datatype=XSD.dateTime)
+
+
+def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly: str) -> list[ox.Triple]:
+    """All triples of ``record``; non-finite numbers are left out (a NaN is no value)."""
+    run = run_iri(record.run_id)
+    agent = software_agent()
+    t = [
+        ox.Triple(run, RDF.type, GT.CalibrationRun),
+        ox.Triple(run, RDF.type, PROV.Activity),
+        ox.Triple(run, PROV.used, ox.NamedNode(model_graph)),
+        ox.Triple(run, PROV.used, ox.NamedNode(assembly)),
+        ox.Triple(run, GT.forModel, ox.Literal(record.model_name)),
+        ox.Triple(run, GT.modelVersion, ox.Literal(record.model_version)),
+        ox.Triple(run, GT.method, ox.Literal(record.method)),
+        ox.Triple(run, GT.dataSource, ox.Literal(record.data_source)),
+        ox.Triple(run, GT.trainStart, _time(record.train_window[0])),
+        ox.Triple(run, GT.trainEnd, _time(record.train_window[1])),
+        ox.Triple(run, PROV.startedAtTime, _time(record.started)),
+        ox.Triple(run, PROV.endedAtTime, _time(record.finished)),
+        ox.Triple(run, GT.settings, ox.Literal(json.dumps(record.settings, sort_keys=True, default=str))),
+        ox.Triple(run, PROV.wasAssociatedWith, agent),
+        ox.Triple(agent, RDF.type, PROV.SoftwareAgent),
+        ox.Triple(agent, RDFS.label, ox.Literal(f"graphtwin {__version__}")),
+        ox.Triple(run, RDFS.label, ox.Literal(f"{record.method} calibration of {record.model_name}")),
+    ]
+    if record.seed is not None:
+        t.append(ox.Triple(run, GT.seed, ox.Literal(str(int(record.seed)), datatype=XSD.integer)))
+    if record.test_window is not None:
+        t += [ox.Triple(run, GT.testStart, _time(record.test_window[0])),
+              ox.Triple(run, GT.testEnd, _time(record.test_window[1]))]
+    for estimate in record.estimates:
+        node = ox.NamedNode(f"{run.value}/estimate/{_component_slug(estimate.component)}/{estimate.name}")
+        t += [
+            ox.Triple(node, RDF.type, GT.Estimate),
+            ox.Triple(node, PROV.wasGeneratedBy, run),
+            ox.Triple(node, GT.ofParameter, ox.NamedNode(f"{estimate.component}/parameter/{estimate.name}")),
+            ox.Triple(node, GT.onComponent, ox.NamedNode(estimate.component)),
+            ox.Triple(node, GT.onNode, ox.NamedNode(estimate.node)),
+            ox.Triple(node, GT.parameterName, ox.Literal(estimate.name)),
+            ox.Triple(node, GT.unit, ox.Literal(estimate.unit)),
+            ox.Triple(node, GT.identified, ox.Literal("true" if estimate.identified else "false", datatype=XSD.boolean)),
+        ]
+        for predicate, value in (
+            (GT.median, estimate.median), (GT.quantile16, estimate.quantile16), (GT.quantile84, estimate.quantile84),
+            (GT.map, estimate.map), (GT.standardError, estimate.standard_error),
+            (GT.lowerBound, estimate.lower), (GT.upperBound, estimate.upper),
+        ):
+            if math.isfinite(value):
+                t.append(ox.Triple(node, predicate, _double(value)))
+        if estimate.reasons:
+            t.append(ox.Triple(node, RDFS.comment, ox.Literal("; ".join(estimate.reasons))))
+    sensor_name = distinct_local_names([*(n for per_sensor in record.metrics.values() for n in per_sensor),
+                                        *(n for row in record.regimes for n in row["rmse"])])
+    for window, per_sensor in record.metrics.items():
+        for sensor, metrics in per_sensor.items():
+            for attribute in METRIC_ATTRIBUTES:
+                value = getattr(metrics, attribute)
+                if not math.isfinite(value):
+                    continue
+                unit = ("%" if attribute.endswith("percent") else
+                        "1" if attribute in ("r2", "lag1_autocorrelation") else metrics.unit)
+                t += _metric_triples(ox.NamedNode(f"{run.value}/metric/{window}/{sensor_name[sensor]}/{attribute}"),
+                                     run, sensor, window, attribute, value, unit)
+            for interval in metrics.coverage:
+                for name, value, unit in (("coverage", interval.coverage, "1"), ("ace", interval.ace, "1"),
+                                          ("mean_interval_width", interval.mean_width, metrics.unit)):
+                    if math.isfinite(value):
+                        node = ox.NamedNode(f"{run.value}/metric/{window}/{sensor_name[sensor]}/{name}/{interval.level:g}")
+                        t += _metric_triples(node, run, sensor, window, name, value, unit)
+                        t.append(ox.Triple(node, GT.intervalLevel, _double(interval.level)))
+    units = {sensor: m.unit for sensor, m in record.metrics.get("test", {}).items()}
+    for row in record.regimes:
+        regime = ox.NamedNode(f"{run.value}/regime/{row['regime']}")
+        t += [ox.Triple(regime, RDF.type, GT.OperatingRegime), ox.Triple(regime, PROV.wasGeneratedBy, run),
+              ox.Triple(regime, GT.regimeRule, ox.Literal(row["rule"])), ox.Triple(regime, GT.share, _double(row["share"]))]
+        if math.isfinite(record.regime_rule_accuracy):
+            t.append(ox.Triple(regime, GT.ruleAccuracy, _double(record.regime_rule_accuracy)))
+        for sensor, value in row["rmse"].items():
+            if not math.isfinite(value):
+                continue
+            node = ox.NamedNode(f"{run.value}/metric/test/{sensor_name[sensor]}/rmse/regime/{row['regime']}")
+            t += _metric_triples(node, run, sensor, "test", "rmse", value, units.get(sensor, ""))
+            t.append(ox.Triple(node, GT.inRegime, regime))
+    return t
+
+
+def _metric_triples(node: ox.NamedNode, run: ox.NamedNode, sensor: str, window: str, name: str, value: float,
+                    unit: str) -> list[ox.Triple]:
+    """One gt:Metric: ``name`` = ``value`` [``unit``] of ``sensor`` on ``window``, made by ``run``."""
+    return [
+        ox.Triple(node, RDF.type, GT.Metric),
+        ox.Triple(node, PROV.wasGeneratedBy, run),
+        ox.Triple(node, GT.onSensor, ox.NamedNode(sensor)),
+        ox.Triple(node, GT.window, ox.Literal(window)),
+        ox.Triple(node, GT.metricName, ox.Literal(name)),
+        ox.Triple(node, GT.value, _double(value)),
+        ox.Triple(node, GT.unit, ox.Literal(unit)),
+    ]
+
+
+def _component_slug(iri: str) -> str:
+    """``…/component/Fan/supply_fan`` → ``Fan.supply_fan`` (unique within a model)."""
+    return iri.split("/component/", 1)[-1].replace("/", ".")

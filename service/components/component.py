@@ -1,0 +1,177 @@
+"""The contract every component model (and every effect) of the library fulfils.
+
+A component model steps a whole ensemble of parameter sets at once: every parameter, input, state
+and output is a 1-D ``numpy`` array of length ``n_ensemble``. A single parameter set is the case
+``n_ensemble == 1``; there is no other code path.
+
+Time stepping (see :mod:`service.model.simulator`): at step ``k`` the simulator calls
+``outputs = model.step(params, inputs, state, dt_s)`` with the inputs at time ``t_k`` and the state
+at ``t_k``; the model returns its outputs at ``t_k`` and updates ``state`` in place to ``t_{k+1}``.
+Dynamic models therefore report their state (a lag shows a step change one step later), and first-
+order lags use the exact discretisation ``x ← x + (1 − e^{−Δt/τ})·(x∞ − x)``, stable for any step.
+
+Units: SI inside the simulator, temperatures in °C (``"degC"``); the unit of every port and
+parameter is declared so that graph values and measured series are converted at the edge.
+
+Effects (:class:`SplicedEffect`) are component models that the assembly splices into one port of an
+existing component: they receive what the port carried (``value_in``) and return the changed value
+(``value_out``), so adding an effect never edits the base model's code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+__all__ = [
+    "Port", "Parameter", "ComponentModel", "SplicedEffect", "Params", "Signals", "State",
+    "first_order_lag_factor", "AIR_SPECIFIC_HEAT_J_PER_KG_K", "WATER_SPECIFIC_HEAT_J_PER_KG_K",
+    "AIR_DENSITY_KG_PER_M3", "WATER_DENSITY_KG_PER_M3", "DEFAULT_SETTLING_S",
+]
+
+Params = dict[str, np.ndarray]
+Signals = dict[str, np.ndarray]
+State = dict[str, np.ndarray]
+
+#: c_p of dry air near 20 °C, J/(kg·K).
+AIR_SPECIFIC_HEAT_J_PER_KG_K = 1006.0
+#: c_p of liquid water near 50 °C, J/(kg·K).
+WATER_SPECIFIC_HEAT_J_PER_KG_K = 4181.0
+#: Standard air (20 °C, 101.325 kPa), kg/m³: converts volumetric to mass air flow.
+AIR_DENSITY_KG_PER_M3 = 1.204
+#: Water near 50 °C, kg/m³.
+WATER_DENSITY_KG_PER_M3 = 988.0
+
+
+@dataclass(frozen=True)
+class Port:
+    """An input or output signal of a component model.
+
+    ``feedback=True`` marks an input that closes a control loop (a controller's measured value):
+    when the connections form a cycle, the simulator serves this input one step late.
+    """
+
+    name: str
+    unit: str
+    description: str = ""
+    feedback: bool = False
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A model parameter with its unit, default and physical prior bounds ``[lower, upper]``.
+
+    ``null`` is, for an effect, the value at which the effect vanishes (the base model).
+    """
+
+    name: str
+    unit: str
+    default: float
+    lower: float
+    upper: float
+    description: str = ""
+    null: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.lower <= self.default <= self.upper:
+            raise ValueError(
+                f"parameter {self.name}: default {self.default} outside bounds [{self.lower}, {self.upper}]"
+            )
+
+
+#: Settling time of a component with states that does not state its own [s]: a day, the period of
+#: building operation (an FMU's dynamics are unknown; a PI loop's are slow, see PIController).
+DEFAULT_SETTLING_S = 86400.0
+
+
+class ComponentModel:
+    """Base class of component models: declare ports, parameters and states; implement :meth:`step`.
+
+    Subclasses set the class attributes ``inputs``, ``outputs``, ``parameters`` and ``states`` and
+    keep ``__init__`` free of logic. Docstrings give the equations and the units.
+    """
+
+    inputs: ClassVar[tuple[Port, ...]] = ()
+    outputs: ClassVar[tuple[Port, ...]] = ()
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    states: ClassVar[tuple[str, ...]] = ()
+    #: One :meth:`step` advances a whole ensemble with numpy at about the cost of one member (False
+    #: when each member is stepped on its own, an FMU instance per member).
+    vectorised: ClassVar[bool] = True
+    #: How long the states take to forget their start [s], at the slowest the priors allow: the
+    #: warm-up a simulated window needs (:func:`service.calibration.model_data.model_warmup_s`). None: a
+    #: day for a model with states (:data:`DEFAULT_SETTLING_S`), nothing for a memoryless one.
+    settling_s: ClassVar[float | None] = None
+    #: How long the outputs remember a wrong start state at typical parameters [s]: when the warm-up
+    #: before a window reaches back past the data's first step, the state it gives the window is a
+    #: guess, and calibration leaves this much of the window unscored
+    #: (:meth:`service.calibration.model_data.ModelData.unscored_start_s`). Shorter than :attr:`settling_s`,
+    #: which holds at the priors' slowest corner.
+    start_memory_s: ClassVar[float] = 0.0
+
+    @classmethod
+    def memoryless(cls) -> bool:
+        """Outputs at t_k depend on the inputs at t_k alone: no declared state and no
+        :meth:`initial_state` of its own (the simulator then evaluates it over all steps at once)."""
+        return not cls.states and cls.initial_state is ComponentModel.initial_state
+
+    @classmethod
+    def settling_time_s(cls) -> float:
+        """:attr:`settling_s`, or its default."""
+        if cls.settling_s is not None:
+            return cls.settling_s
+        return 0.0 if cls.memoryless() else DEFAULT_SETTLING_S
+
+    @classmethod
+    def input_names(cls) -> tuple[str, ...]:
+        return tuple(p.name for p in cls.inputs)
+
+    @classmethod
+    def output_names(cls) -> tuple[str, ...]:
+        return tuple(p.name for p in cls.outputs)
+
+    @classmethod
+    def parameter(cls, name: str) -> Parameter:
+        for parameter in cls.parameters:
+            if parameter.name == name:
+                return parameter
+        raise KeyError(f"{cls.__name__} has no parameter {name!r}")
+
+    @classmethod
+    def port(cls, name: str) -> Port:
+        for port in cls.inputs + cls.outputs:
+            if port.name == name:
+                return port
+        raise KeyError(f"{cls.__name__} has no port {name!r}")
+
+    def initial_state(self, params: Params, inputs: Signals, dt_s: float) -> State:
+        """State at the first time step, from the parameters and the first inputs.
+
+        The default is no state. Dynamic models start in steady state with the first inputs.
+        """
+        return {}
+
+    def step(self, params: Params, inputs: Signals, state: State, dt_s: float) -> Signals:
+        """Outputs at ``t_k`` from inputs and state at ``t_k``; advances ``state`` to ``t_{k+1}``."""
+        raise NotImplementedError
+
+
+class SplicedEffect(ComponentModel):
+    """An effect spliced into one port of a base component: ``value_out = f(value_in, ...)``.
+
+    Its first input is ``value_in`` and its first output ``value_out``; further inputs (the fan's
+    power, an ambient temperature) are mapped by the effect's signature like any component input.
+    Every parameter has a ``null`` value at which ``value_out == value_in``.
+    """
+
+
+def first_order_lag_factor(dt_s: float, time_constant_s: np.ndarray) -> np.ndarray:
+    """``1 − exp(−Δt/τ)``: the share of the gap a first-order lag closes in one step (τ in s).
+
+    τ = 0 gives 1 (no lag).
+    """
+    tau = np.asarray(time_constant_s, dtype=float)
+    with np.errstate(divide="ignore"):
+        return np.where(tau > 0.0, -np.expm1(-dt_s / np.where(tau > 0.0, tau, 1.0)), 1.0)

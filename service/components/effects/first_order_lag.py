@@ -1,0 +1,29 @@
+"""A first-order lag: a sensor's response time, or the thermal mass of a coil modelled as static."""
+
+from __future__ import annotations
+
+from service.components.component import Parameter, Port, SplicedEffect, first_order_lag_factor
+
+__all__ = ["FirstOrderLag"]
+
+
+class FirstOrderLag(SplicedEffect):
+    """τ · dy/dt = x − y, discretised exactly: y_k = y_{k−1} + (1 − e^{−Δt/τ}) · (x_k − y_{k−1}).
+
+    The output at step k already includes x_k, so τ = 0 (the null value) passes x through
+    unchanged. Starts in steady state (y_{−1} = x_0). τ in s.
+    """
+
+    inputs = (Port("value_in", "degC", "value before the lag"),)
+    outputs = (Port("value_out", "degC", "lagged value"),)
+    parameters = (Parameter("time_constant", "s", 0.0, 0.0, 1800.0, "first-order time constant, τ", null=0.0),)
+    states = ("lagged",)
+    settling_s = 5.0 * parameters[0].upper  # five time constants at the slowest
+
+    def initial_state(self, params, inputs, dt_s):
+        return {"lagged": inputs["value_in"].copy()}
+
+    def step(self, params, inputs, state, dt_s):
+        lagged = state["lagged"]
+        lagged += first_order_lag_factor(dt_s, params["time_constant"]) * (inputs["value_in"] - lagged)
+        return {"value_out": lagged.copy()}

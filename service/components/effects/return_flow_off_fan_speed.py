@@ -1,0 +1,49 @@
+"""Recirculated air that does not follow the supply fan's speed (a return fan at its own speed)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.components.component import Parameter, Port, SplicedEffect
+
+__all__ = ["ReturnFlowOffFanSpeed", "MINIMUM_FAN_SPEED"]
+
+#: Fan speed (share of full speed) below which the effect holds the speed there: the recirculated
+#: share of a fan at a standstill is undefined (no air moves; the mixed air is then clipped).
+MINIMUM_FAN_SPEED = 0.05
+
+
+class ReturnFlowOffFanSpeed(SplicedEffect):
+    """T_mix' = T_oa − (T_oa − T_mix) · s^(−β),  clipped to [min(T_oa, T_ra), max(T_oa, T_ra)]   [°C]
+
+    The mixing box model gives the outdoor-air fraction x from the damper command alone, as if the
+    outdoor and the recirculated air both scaled with the supply flow. Where the return air is moved
+    by a return fan at its own (often fixed) speed, or driven by the building's pressure, the
+    recirculated flow does not follow the supply fan: with recirculated flow ṁ_rec ∝ s^(1−β) and
+    supply flow ṁ ∝ s (s the supply fan speed, 0–1), the recirculated share is (1 − x)·s^(−β) and
+
+        x' = 1 − (1 − x) · s^(−β),   T_mix' = T_ra + x'·(T_oa − T_ra) = T_oa − (T_oa − T_mix)·s^(−β),
+
+    so the outdoor-air share grows with the supply fan's speed. β = 1: a recirculated flow fixed
+    whatever the supply fan does; β = 0 (null): both scale with the fan, the base model. x' is held
+    in [0, 1] (the clip), and s at least :data:`MINIMUM_FAN_SPEED`. The damper law x(d) then holds at
+    full speed.
+    """
+
+    inputs = (
+        Port("value_in", "degC", "mixed air temperature with both streams following the fan, T_mix"),
+        Port("outdoor_air_temperature", "degC", "outdoor air temperature, T_oa"),
+        Port("return_air_temperature", "degC", "return air temperature, T_ra"),
+        Port("fan_speed", "1", "supply fan speed command, s"),
+    )
+    outputs = (Port("value_out", "degC", "mixed air temperature, T_mix'"),)
+    parameters = (
+        Parameter("recirculation_speed_exponent", "1", 0.0, 0.0, 2.0,
+                  "how far the recirculated flow fails to follow the supply fan's speed, β", null=0.0),
+    )
+
+    def step(self, params, inputs, state, dt_s):
+        outdoor, ret = inputs["outdoor_air_temperature"], inputs["return_air_temperature"]
+        speed = np.maximum(inputs["fan_speed"], MINIMUM_FAN_SPEED)
+        mixed = outdoor - (outdoor - inputs["value_in"]) * speed ** -params["recirculation_speed_exponent"]
+        return {"value_out": np.clip(mixed, np.minimum(outdoor, ret), np.maximum(outdoor, ret))}

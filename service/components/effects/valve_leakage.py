@@ -1,0 +1,31 @@
+"""Flow through a valve commanded shut: seat leakage or an open bypass."""
+
+from __future__ import annotations
+
+from service.components.component import Parameter, Port, SplicedEffect
+
+__all__ = ["ValveLeakage"]
+
+
+class ValveLeakage(SplicedEffect):
+    """u_eff = u + λ · (1 − u)   [1]
+
+    u the commanded position (0 shut … 1 open), λ the leakage as a fraction of the fully open
+    flow coefficient: a linear valve with a parallel leak path of Kv_leak = λ·Kv (a shut valve still
+    passes λ of its open flow). Null: λ = 0.
+
+    The effect acts on the command the valve's model receives. Where that model maps the command to
+    an opening through an actuator dead band u₀ (:class:`service.components.water_coil.WaterCoil`), λ is the
+    command-equivalent leak: the shut valve passes the flow share (λ − u₀)/(1 − u₀), and a leak below
+    that share's resolution (λ ≤ u₀) cannot be told from a tight valve.
+    """
+
+    inputs = (Port("value_in", "1", "commanded valve position"),)
+    outputs = (Port("value_out", "1", "effective valve position"),)
+    parameters = (
+        Parameter("leakage_fraction", "1", 0.0, 0.0, 0.8, "leak flow coefficient as a share of the open one, λ", null=0.0),
+    )
+
+    def step(self, params, inputs, state, dt_s):
+        position = inputs["value_in"]
+        return {"value_out": position + params["leakage_fraction"] * (1.0 - position)}

@@ -1,0 +1,39 @@
+"""Fan with a variable-speed drive, driven by a logged speed command: flow from speed, power from the
+part-load curve of :class:`service.components.fan.Fan`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.components.component import AIR_DENSITY_KG_PER_M3, ComponentModel, Port
+from service.components.fan import Fan, part_load_power_fraction
+
+__all__ = ["SpeedControlledFan"]
+
+
+class SpeedControlledFan(ComponentModel):
+    """V̇ = s·V̇_nom [m³/s],  ṁ = ρ_air·V̇ [kg/s],  P = P_nom·(c1 + c2·s + c3·s² + c4·s³) [W]
+
+    s the speed command (0–1, clipped; a VFD's logged output frequency over its nominal one). The
+    flow is proportional to the speed (fan affinity law at a fixed system curve, i.e. fixed damper
+    positions), so the flow fraction of the part-load curve is s itself. The air leaves at its inlet
+    temperature (motor heat in the air stream is the FanMotorHeat effect). Parameters, defaults and
+    bounds are :class:`service.components.fan.Fan`'s.
+    """
+
+    inputs = (
+        Port("speed", "1", "fan speed command, s"),
+        Port("inlet_air_temperature", "degC", "air temperature at the fan inlet"),
+    )
+    outputs = Fan.outputs
+    parameters = Fan.parameters
+
+    def step(self, params, inputs, state, dt_s):
+        speed = np.minimum(np.maximum(inputs["speed"], 0.0), 1.0)
+        power = params["nominal_power"] * part_load_power_fraction(
+            speed, params["c1"], params["c2"], params["c3"], params["c4"])
+        return {
+            "outlet_air_temperature": inputs["inlet_air_temperature"],
+            "outlet_air_mass_flow": AIR_DENSITY_KG_PER_M3 * params["nominal_air_flow"] * speed,
+            "electric_power": power,
+        }

@@ -1,0 +1,493 @@
+"""The measured-data contract: a CSV of time stamps and sensor columns, matched to graph nodes.
+
+**Format.** The first column is the time stamp: ISO 8601 (``2025-01-01 00:15:00``,
+``2025-01-01T00:15:00+01:00``; an offset is converted to UTC, and a file either gives every stamp an
+offset or none), the BMS format ``m/d/yyyy h:mm`` / ``m/d/yy h:mm`` (the LBNL FLEXLAB export) or the
+European ``d.m.yyyy h:mm``. Columns are separated by commas, or by semicolons when the header has
+semicolons and no comma; a semicolon file may write decimal commas (``20,5``). Every other column is a series; a column is matched to a
+measuring device of the model by the device's full IRI, its local name, or the literal it gives as
+``gt:timeSeriesId`` (header whitespace stripped). Empty cells, ``NaN``, ``NA`` and ``null`` are
+missing values, and so are spreadsheet error cells (``#VALUE!``, ``#N/A``, ``#DIV/0!`` …, counted
+in the warnings: exports of real BMS trends contain them). Values are converted from the device's QUDT unit to the unit of the model port that
+consumes them (:mod:`service.graph.units`).
+
+**Checks**, all reported at once in one :class:`MeasurementError` naming the column and the line:
+non-numeric cells, unparseable, duplicate or unsorted time stamps, rows with more or fewer fields
+than the header (a cell added or lost would shift the others into the wrong columns), columns missing
+for a boundary input or a target, two columns naming one device. Columns no device claims are listed in ``warnings`` (a BMS export has many),
+and so are frozen points: a sensor whose value holds exactly for 12 hours or more
+(:func:`frozen_spans`; not for devices whose signature says ``holds_values``, schedules and commands).
+A position, command or speed (a fraction 0–1 in the model) above 1.5 after conversion is an error
+(percent declared as a fraction); one never above 0.01 from a percent column is a warning.
+
+**Regular step.** The step is the median spacing of the time stamps, in whole seconds. An irregular
+file is resampled to that step by linear interpolation, with a warning; a grid point on a row keeps
+the row's value. Gaps (missing values or missing rows) of up to ``max_gap_steps`` steps are
+interpolated linearly; longer gaps stay NaN and are reported: they are never silently filled. The simulator holds a boundary input's last value through a gap and the
+calibration leaves the affected target steps out.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from service.graph.namespaces import local_name
+from service.graph.units import UnitError, convert, unit_label
+
+__all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "write_csv",
+           "write_comparison_csv", "frozen_spans"]
+
+_MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
+_BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S",
+                "%d.%m.%Y %H:%M", "%d.%m.%Y %H:%M:%S")
+
+
+class MeasurementError(ValueError):
+    """Measured data that cannot be used; ``problems`` lists every one (column, line)."""
+
+    def __init__(self, source: str, problems: list[str]):
+        self.source, self.problems = source, tuple(problems)
+        shown = problems[:25] + ([f"... and {len(problems) - 25} more"] if len(problems) > 25 else [])
+        super().__init__(f"{source}:\n  - " + "\n  - ".join(shown))
+
+
+@dataclass(frozen=True)
+class SeriesSpec:
+    """What the model needs from a column: the device ``node`` IRI, the names a column may carry
+    (``series_id``), the QUDT ``unit`` the values are in, the ``port_unit`` the model wants, and
+    whether the model cannot run without it (``required``); ``holds_values``: it may hold one value
+    for days (a schedule, a command), so no frozen-point warning."""
+
+    node: str
+    series_id: str | None
+    unit: str | None
+    port_unit: str
+    required: bool = True
+    holds_values: bool = False
+
+    def names(self) -> set[str]:
+        local = local_name(self.node)
+        return {n.strip() for n in (self.node, local, self.series_id) if n and n.strip()}
+
+
+@dataclass(frozen=True)
+class MeasuredData:
+    """Regular series on one time grid: ``series[node]`` (``ndarray[n_steps]``) in the port unit
+    ``units[node]``, read from the CSV column ``columns[node]`` recorded in the QUDT unit
+    ``source_units[node]``; NaN where not measured (gaps longer than the limit), and :attr:`valid`
+    masks the steps where every series is measured."""
+
+    timestamps: np.ndarray  # datetime64[s], UTC or naive local as in the file
+    step_s: float
+    series: dict[str, np.ndarray]
+    units: dict[str, str]
+    source: str = "<data>"
+    columns: dict[str, str] = field(default_factory=dict)  # node → CSV column
+    warnings: tuple[str, ...] = ()
+    source_units: dict[str, str] = field(default_factory=dict)  # node → the QUDT unit of its column
+    utc: bool = False  # the file gave its stamps with a UTC offset: ``timestamps`` are UTC
+    #: header → the numbers of a column no device claims (a fan status), in the file's own unit, on the
+    #: same grid (NaN where a cell is empty or no number): what an operating filter may read
+    other_columns: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.timestamps.size)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """``ndarray[n_steps]`` of bool: steps where every series is measured (no long gap)."""
+        mask = np.ones(self.n_steps, dtype=bool)
+        for values in self.series.values():
+            mask &= np.isfinite(values)
+        return mask
+
+    def window(self, start: datetime | str | None, end: datetime | str | None) -> slice:
+        """Index slice of the steps with ``start ≤ t ≤ end`` (None: the data's first / last).
+
+        :raises ValueError: a window outside the data or empty, naming the data's range; a window
+            reaching more than one step beyond the data's first or last time stamp (``2026-01-14``
+            as the end of data that stop at 23:50 the day before is fine; a week of data asked of a
+            day is not cut silently).
+        """
+        first, last = self.timestamps[0], self.timestamps[-1]
+        lo = first if start is None else self._bound(start, "start")
+        hi = last if end is None else self._bound(end, "end")
+        window, data = f"window {self.shown(lo)} – {self.shown(hi)}", f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
+        if hi < lo:
+            raise ValueError(f"{window}: the end is before the start")
+        if lo > last or hi < first:
+            raise ValueError(f"{window} lies outside {data}")
+        step = np.timedelta64(int(round(self.step_s)), "s")
+        if lo < first - step or hi > last + step:
+            side = "starts before" if lo < first - step else "ends after"
+            raise ValueError(f"{window} {side} {data}: give a window inside the data")
+        i = int(np.searchsorted(self.timestamps, lo, side="left"))
+        j = int(np.searchsorted(self.timestamps, hi, side="right"))
+        if j - i < 2:
+            raise ValueError(f"{window} holds fewer than 2 steps of {self.source}")
+        return slice(i, j)
+
+    def _bound(self, value: datetime | str, which: str) -> np.datetime64:
+        """A window bound on the data's clock: with a UTC offset where the file gives its stamps with
+        one (they are read as UTC), without one where the file's are local (an offset would shift
+        the window by it, silently).
+
+        :raises ValueError: a bound on the other clock."""
+        text = value.isoformat() if isinstance(value, datetime) else str(value)
+        stamp, with_offset = _parsed_timestamp(text)
+        if with_offset != self.utc:
+            stamps = "with a UTC offset (read as UTC)" if self.utc else "without a UTC offset (local time)"
+            wanted = "with an offset too (…T06:00-07:00, or …T13:00Z)" if self.utc else "without an offset"
+            raise ValueError(f"the window's {which} {text!r}: the data {self.source} give their time stamps {stamps}; "
+                             f"give it {wanted}")
+        return np.datetime64(stamp, "s")
+
+    def shown(self, stamp: np.datetime64) -> str:
+        """A time stamp of the data as text, ``… UTC`` where the file's carried offsets."""
+        return f"{stamp} UTC" if self.utc else str(stamp)
+
+    def select(self, start: datetime | str | None, end: datetime | str | None) -> MeasuredData:
+        """The data with ``start ≤ t ≤ end`` (errors as :meth:`window`)."""
+        window = self.window(start, end)
+        return replace(self, timestamps=self.timestamps[window], series={k: v[window] for k, v in self.series.items()},
+                       other_columns={k: v[window] for k, v in self.other_columns.items()})
+
+
+def _decoded(raw: bytes, source: str, warnings: list[str]) -> str:
+    """The file's text: UTF-8 (a byte-order mark dropped), else Windows-1252 — what a BMS export
+    with a ``°`` in its headers often is — with a warning.
+
+    :raises MeasurementError: neither, naming the first offending byte's line and offset.
+    """
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as utf8:
+        where = "line %d" % (raw.count(b"\n", 0, utf8.start) + 1)
+        try:
+            text = raw.decode("cp1252")
+        except UnicodeDecodeError:
+            raise MeasurementError(source, [
+                f"{where}: byte 0x{raw[utf8.start]:02x} at offset {utf8.start} is neither UTF-8 nor "
+                "Windows-1252 text: is this a CSV file?"]) from None
+        warnings.append(f"not UTF-8 ({where}: byte 0x{raw[utf8.start]:02x}): read as Windows-1252")
+        return text
+
+
+def parse_timestamp(text: str) -> datetime:
+    """ISO 8601 (an offset is converted to UTC and dropped), the BMS ``m/d/yy h:mm`` or the European
+    ``d.m.yyyy h:mm`` format.
+
+    :raises ValueError: naming the text.
+    """
+    return _parsed_timestamp(text)[0]
+
+
+def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
+    """:func:`parse_timestamp`, and whether the text gave a UTC offset."""
+    value = text.strip()
+    try:
+        parsed = datetime.fromisoformat(value.replace("Z", "+00:00"))
+    except ValueError:
+        for fmt in _BMS_FORMATS:
+            try:
+                return datetime.strptime(value, fmt), False
+            except ValueError:
+                continue
+        raise ValueError(f"time stamp {text!r} is neither ISO 8601 nor m/d/yyyy h:mm nor d.m.yyyy h:mm") from None
+    if parsed.tzinfo is not None:
+        return parsed.astimezone(timezone.utc).replace(tzinfo=None), True
+    return parsed, False
+
+
+def _fill_short_gaps(values: np.ndarray, max_gap: int) -> tuple[np.ndarray, int]:
+    """Interpolate NaN runs of at most ``max_gap`` steps between two measured values; returns the
+    filled array and the number of longer runs left NaN."""
+    missing = np.isnan(values)
+    if not missing.any() or missing.all():
+        return values, int(missing.all())
+    out = values.copy()
+    index = np.arange(values.size)
+    edges = np.diff(np.concatenate([[0], missing.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    long_runs = 0
+    known = ~missing
+    for start, end in zip(starts, ends):
+        if end - start <= max_gap and start > 0 and end < values.size:
+            out[start:end] = np.interp(index[start:end], index[known], values[known])
+        else:
+            long_runs += 1
+    return out, long_runs
+
+
+#: A position, command or speed (a fraction in the model) above this after conversion is an error:
+#: its column is in percent but declared as a fraction (BMS exports write 0–100).
+_FRACTION_MAX = 1.5
+
+
+def _check_fraction(values: np.ndarray, where: str, unit: str, problems: list[str], warnings: list[str]) -> None:
+    """A series the model reads as a fraction 0–1: an error when it reaches above
+    :data:`_FRACTION_MAX` (percent declared as a fraction), a warning when it never exceeds 0.01 but
+    is not all zero (a fraction declared as percent)."""
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return
+    peak, label = float(np.max(np.abs(finite))), unit_label(unit)
+    if peak > _FRACTION_MAX:
+        problems.append(f"{where}: reaches {peak:g}, but its unit ({label}) makes it a fraction (0–1): "
+                        f"is it in percent? Declare saref:isMeasuredIn unit:PERCENT")
+    elif 0 < peak <= 0.01 and unit.endswith("/PERCENT"):
+        warnings.append(f"{where}: never above {peak:g} as a fraction (0–1) after conversion from {label}: "
+                        f"is it a fraction already? Then declare saref:isMeasuredIn unit:UNITLESS")
+
+
+def read_measurements(
+    path: Path | str,
+    specs: Mapping[str, SeriesSpec],
+    *,
+    max_gap_steps: int = 5,
+    frozen_after_s: float = 12 * 3600.0,
+) -> MeasuredData:
+    """Read and check a measurement CSV (see the module docstring).
+
+    :param specs: node IRI → what the model needs from it.
+    :param frozen_after_s: a sensor's value held exactly for this long is reported (:func:`frozen_spans`).
+    :raises MeasurementError: every problem found, with column and line.
+    """
+    path = Path(path)
+    source = str(path)
+    problems: list[str] = []
+    warnings: list[str] = []
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise MeasurementError(source, [str(exc)]) from None
+    text = _decoded(raw, source, warnings)
+    first_line = text.split("\n", 1)[0]
+    delimiter = ";" if ";" in first_line and "," not in first_line else ","
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
+
+    def as_number(cell: str) -> float:
+        """A cell's number (a semicolon file may write decimal commas); :raises ValueError: none."""
+        return float(cell.replace(",", ".") if delimiter == ";" else cell)
+
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise MeasurementError(source, ["the file is empty"]) from None
+    rows = list(reader)
+    if len(header) < 2:
+        raise MeasurementError(source, ["line 1: expected a time column and at least one series column"])
+
+    claimed: dict[str, int] = {}
+    for node, spec in specs.items():
+        names = spec.names()
+        found = [i for i, h in enumerate(header[1:], start=1) if h in names]
+        if len(found) > 1:
+            problems.append(f"columns {', '.join(f'{i + 1} ({header[i]!r})' for i in found)} all name device {node}: "
+                            "keep one (which one the model reads would be a guess)")
+        if found:
+            claimed[node] = found[0]
+        elif spec.required:
+            problems.append(
+                f"no column for {node} (expected a header named {' or '.join(sorted(repr(n) for n in names))})"
+            )
+    unknown = sorted(set(range(1, len(header))) - set(claimed.values()))
+    if unknown:
+        warnings.append(f"columns no device of the model claims: {', '.join(header[i] for i in unknown)} "
+                        "(an operating filter may read them)")
+    other_index = {header[i]: i for i in unknown if header[i] and header.count(header[i]) == 1}
+    others = {name: np.full(len(rows), np.nan) for name in other_index}
+
+    times: list[datetime] = []
+    first_with_offset: dict[bool, tuple[int, str]] = {}
+    values = {node: np.full(len(rows), np.nan) for node in claimed}
+    error_cells: dict[str, int] = {}
+    misshapen: list[str] = []
+    for line, row in enumerate(rows, start=2):
+        if not row or all(not c.strip() for c in row):
+            problems.append(f"line {line}: empty row")
+            continue
+        if len(row) != len(header):  # a cell added or lost shifts every cell after it into another column
+            misshapen.append(f"line {line}: {len(row)} fields, the header has {len(header)}")
+        try:
+            stamp, with_offset = _parsed_timestamp(row[0])
+            times.append(stamp)
+            first_with_offset.setdefault(with_offset, (line, row[0].strip()))
+        except ValueError as exc:
+            problems.append(f"line {line}, column {header[0]!r}: {exc}")
+            times.append(datetime.min)
+        for node, column in claimed.items():
+            cell = row[column].strip() if column < len(row) else ""
+            if cell.lower() in _MISSING:
+                continue
+            if cell.startswith("#"):
+                error_cells[header[column]] = error_cells.get(header[column], 0) + 1
+                continue
+            try:
+                value = as_number(cell)
+            except ValueError:
+                problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a number")
+                continue
+            if np.isfinite(value):
+                values[node][line - 2] = value
+            else:
+                problems.append(f"line {line}, column {header[column]!r}: {cell!r} is not a finite number")
+        for name, column in other_index.items():
+            try:
+                others[name][line - 2] = as_number(row[column])
+            except (IndexError, ValueError):
+                pass  # not the model's: a word or an empty cell there is no number, and no error
+    problems += misshapen[:10] + ([f"… and {len(misshapen) - 10} more lines whose fields do not match the header"]
+                                  if len(misshapen) > 10 else [])
+    if len(times) < 2:
+        problems.append("fewer than two data rows")
+    if len(first_with_offset) == 2:
+        (with_line, with_text), (without_line, without_text) = first_with_offset[True], first_with_offset[False]
+        problems.append(f"line {with_line}: time stamp {with_text!r} has a UTC offset but line {without_line}'s "
+                        f"{without_text!r} has none: give every stamp an offset, or none")
+    warnings += [f"column {name!r}: {count} spreadsheet error cell(s) read as missing" for name, count in error_cells.items()]
+    stamps = np.array(times, dtype="datetime64[s]")
+    if len(times) >= 2:
+        steps = np.diff(stamps).astype(np.int64)
+        for i in np.flatnonzero(steps == 0)[:10]:
+            problems.append(f"line {i + 3}: duplicate time stamp {stamps[i + 1]}")
+        for i in np.flatnonzero(steps < 0)[:10]:
+            problems.append(f"line {i + 3}: time stamp {stamps[i + 1]} is before the previous one ({stamps[i]})")
+    converted: dict[str, np.ndarray] = {}
+    for node, column in claimed.items():
+        spec = specs[node]
+        if spec.unit is None:
+            problems.append(f"column {header[column]!r}: device {node} declares no unit (saref:isMeasuredIn)")
+            continue
+        try:
+            converted[node] = convert(values[node], spec.unit, spec.port_unit, where=f"column {header[column]!r}")
+        except UnitError as exc:
+            problems.append(str(exc))
+            continue
+        if spec.port_unit == "1":
+            _check_fraction(converted[node], f"column {header[column]!r}", spec.unit, problems, warnings)
+    if problems:
+        raise MeasurementError(source, problems)
+    step_s = float(round(np.median(np.diff(stamps).astype(np.int64))))  # whole seconds, as the grid
+    for node, column in claimed.items():
+        if not specs[node].holds_values:
+            warnings += [f"column {header[column]!r}: {text}" for text in frozen_spans(
+                stamps, values[node], specs[node].unit or "", min_span_s=frozen_after_s,
+                max_gap_s=max_gap_steps * step_s)]
+
+    regular = np.all(np.diff(stamps).astype(np.int64) == step_s)
+    if not regular:
+        grid = np.arange(stamps[0], stamps[-1] + np.timedelta64(1, "s"), np.timedelta64(int(step_s), "s"))
+        t_old = (stamps - stamps[0]).astype(np.int64).astype(float)
+        t_new = (grid - stamps[0]).astype(np.int64).astype(float)
+        n_irregular = int(np.sum(np.diff(stamps).astype(np.int64) != step_s))
+        warnings.append(
+            f"irregular time stamps ({n_irregular} spacings differ from the median step {step_s:g} s): "
+            f"resampled linearly to {grid.size} steps"
+        )
+        # a gap longer than the limit stays a gap: interpolate a grid point only between two of the
+        # series' own values at most max_gap_steps + 1 steps apart (a run of empty cells is as much
+        # a gap as a run of missing rows); a grid point on a row keeps the row's value
+        limit_s = (max_gap_steps + 1) * step_s
+
+        def on_grid(series: np.ndarray) -> np.ndarray:
+            finite = np.isfinite(series)
+            t_known, y_known = t_old[finite], series[finite]
+            resampled = np.full(grid.size, np.nan)
+            if t_known.size:
+                after = np.searchsorted(t_known, t_new, side="right")  # first known value after the point
+                before = np.clip(after - 1, 0, None)
+                on_row = (after > 0) & (t_known[before] == t_new)
+                between = (after > 0) & (after < t_known.size)
+                close = between & (t_known[np.clip(after, 0, t_known.size - 1)] - t_known[before] <= limit_s)
+                resampled[close] = np.interp(t_new[close], t_known, y_known)
+                resampled[on_row] = y_known[before[on_row]]
+            return resampled
+
+        converted = {node: on_grid(series) for node, series in converted.items()}
+        others = {name: on_grid(series) for name, series in others.items()}
+        stamps = grid
+    for node in list(converted):
+        converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps)
+        if long_runs:
+            warnings.append(
+                f"column {header[claimed[node]]!r}: {long_runs} gap(s) longer than {max_gap_steps} steps left "
+                f"unfilled ({int(np.isnan(converted[node]).sum())} steps)"
+            )
+    return MeasuredData(
+        timestamps=stamps, step_s=step_s, series=converted,
+        units={n: specs[n].port_unit for n in converted}, source=source,
+        columns={n: header[c] for n, c in claimed.items()}, warnings=tuple(warnings),
+        source_units={n: specs[n].unit for n in converted}, utc=True in first_with_offset, other_columns=others,
+    )
+
+
+def frozen_spans(stamps: np.ndarray, values: np.ndarray, unit: str, *, min_span_s: float,
+                 max_gap_s: float = np.inf) -> list[str]:
+    """One sentence per span where ``values`` (in ``unit``, at ``stamps`` datetime64) hold exactly
+    one non-zero value for at least ``min_span_s`` seconds: a frozen point (a BMS that keeps the
+    last reading of a failed sensor or a lost connection; a live sensor's reading flickers by its
+    resolution at least). Zero is exempt: a flow or power meter reads a true zero with the fan off.
+    Readings more than ``max_gap_s`` apart (a day missing from the file, a long run of empty cells)
+    do not make one span: two equal readings across a gap are no evidence of a hold."""
+    finite = np.isfinite(values)
+    index = np.flatnonzero(finite)
+    if index.size < 2:
+        return []
+    kept = values[index]
+    gap = np.diff(stamps[index]).astype("timedelta64[s]").astype(float) > max_gap_s
+    starts = np.flatnonzero(np.r_[True, (kept[1:] != kept[:-1]) | gap])
+    stops = np.r_[starts[1:], kept.size]
+    found = []
+    for start, stop in zip(starts, stops):
+        first, last = stamps[index[start]], stamps[index[stop - 1]]
+        span_s = float((last - first) / np.timedelta64(1, "s"))
+        if span_s >= min_span_s and kept[start] != 0.0:
+            found.append(f"holds {kept[start]:g} {unit_label(unit)} exactly from {str(first)[:16]} to {str(last)[:16]} "
+                         f"({span_s / 86400.0:.1f} days): a frozen point? The model takes it as measured")
+    return found
+
+
+def write_csv(path: Path, timestamps: np.ndarray, columns: Mapping[str, np.ndarray], *, decimals: int = 4) -> None:
+    """Write ``columns`` beside an ISO time column (``time``); NaN as an empty cell."""
+    with Path(path).open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["time", *columns])
+        arrays = list(columns.values())
+        for i, stamp in enumerate(timestamps):
+            cells = [str(np.datetime64(stamp, "s")).replace("T", " ")]
+            cells += ["" if not np.isfinite(a[i]) else f"{a[i]:.{decimals}f}" for a in arrays]
+            writer.writerow(cells)
+
+
+def write_comparison_csv(path: Path, data: MeasuredData, simulated: Mapping[str, np.ndarray], *, decimals: int = 4) -> None:
+    """Write every measured series beside its simulation: for each node of ``data``, its column
+    (the file's header, the file's unit) and, when ``simulated`` has the node, ``<header> (simulated)``
+    in the same unit. The result reads back with :func:`read_measurements` and the same model (the
+    simulated columns are then unclaimed columns).
+
+    :param simulated: node IRI → ``ndarray[n_steps]`` in the port unit ``data.units[node]``.
+    :raises ValueError: a simulated node without a series in ``data``, or a series of another length.
+    """
+    unknown = sorted(set(simulated) - set(data.series))
+    if unknown:
+        raise ValueError(f"simulated series for node(s) the data {data.source} does not hold: {', '.join(unknown)}")
+    columns: dict[str, np.ndarray] = {}
+    for node, measured in data.series.items():
+        header = data.columns.get(node, node)
+        unit = data.source_units.get(node, data.units[node])
+        columns[header] = convert(measured, data.units[node], unit, where=f"column {header!r}")
+        if node in simulated:
+            values = np.asarray(simulated[node], dtype=float)
+            if values.shape != (data.n_steps,):
+                raise ValueError(f"simulated series for {node} has shape {values.shape}, the data {data.n_steps} steps")
+            columns[f"{header} (simulated)"] = convert(values, data.units[node], unit, where=f"column {header!r}")
+    write_csv(path, data.timestamps, columns, decimals=decimals)

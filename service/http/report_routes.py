@@ -1,0 +1,44 @@
+"""``GET /runs/{run_id}/report``: a run's report page (:mod:`service.report.page`) over HTTP.
+
+A read endpoint (open or behind the token as ``open_reads`` says). The run's data file is the
+measurement upload its ``gt:dataSource`` names (``<upload id>.csv``); when that upload is gone, the
+page shows the stored numbers without the measured-vs-model figures and says why. The page is
+built on a worker thread (it simulates the model once).
+
+Included by :func:`service.http.app.create_app` (``app.include_router(report_routes.router)``, imported
+there: this module imports :mod:`service.http.app`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import APIRouter
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import HTMLResponse
+
+from service.http.app import ApiError, ReadAccess, Service, ServiceDep
+from service.http.schemas import ErrorBody
+from service.report.page import UnknownRunError, report_html
+
+__all__ = ["router"]
+
+router = APIRouter(tags=["reports"])
+
+
+def _page(service: Service, run_id: str) -> str:
+    try:
+        return report_html(service.store, run_id, locate_data=lambda source: service.uploads.locate(Path(source).stem))
+    except UnknownRunError as exc:
+        raise ApiError(404, str(exc)) from None
+
+
+@router.get("/runs/{run_id}/report", response_class=HTMLResponse, dependencies=[ReadAccess],
+            responses={404: {"model": ErrorBody}, 401: {"model": ErrorBody}, 403: {"model": ErrorBody},
+                       200: {"content": {"text/html": {}}, "description": "the report page"}})
+async def run_report(run_id: str, service: ServiceDep) -> HTMLResponse:
+    """One self-contained HTML page for calibration run ``run_id`` (or diagnosis graph
+    ``<run_id>-diagnosis``): measured vs model with intervals per sensor, the failure located on the
+    flow topology, the operating regimes, the ranked missing effects with their evidence, and the
+    error across the model's versions."""
+    return HTMLResponse(await run_in_threadpool(_page, service, run_id))

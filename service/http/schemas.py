@@ -1,0 +1,232 @@
+"""Request and response bodies of the HTTP API (pydantic models; they make the OpenAPI document).
+
+Job requests are checked here, before a job is queued: model names (letters, digits, ``_-.+``),
+windows (``START/END``, ISO time stamps, either side may be empty), the calibration method.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from service.calibration.model_data import DEFAULT_GP_INPUTS
+from service.calibration.run import parse_window
+from service.data.operating_filter import parse_condition
+from service.graph.store import GraphStore
+
+__all__ = [
+    "ErrorBody", "Health", "ModelSummary", "ModelList", "ModelInfo", "ModelUploaded", "MeasurementsInfo",
+    "MeasurementsList", "NamedQueryInfo", "NamedQueryList", "AssembleRequest", "CalibrateRequest",
+    "DiagnoseRequest", "AddEffectRequest", "ProgressEntry", "JobPublic", "JobList",
+]
+
+
+class ErrorBody(BaseModel):
+    """Every error: ``detail`` says what is wrong; the other fields when they apply."""
+
+    detail: str
+    problems: list[str] | None = Field(default=None, description="every problem found (measurements, assembly)")
+    line: int | None = Field(default=None, description="1-based line of a syntax error in uploaded RDF")
+    column: int | None = Field(default=None, description="1-based column of a syntax error in uploaded RDF")
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+    backend: Literal["embedded", "remote"]
+    executor: str = Field(description="where job work runs: threads, processes or dask://HOST:PORT")
+    jobs_active: int
+
+
+class ModelSummary(BaseModel):
+    name: str
+    graph: str = Field(description="IRI of the model's named graph")
+
+
+class ModelList(BaseModel):
+    data: list[ModelSummary]
+    count: int
+
+
+class ModelInfo(ModelSummary):
+    triples: int
+    inferred_triples: int = Field(description="what the alignment rules derived (the model's inferred graph)")
+    assembled: bool = Field(description="an assembly graph exists (an assemble or calibrate job ran)")
+    measurements: list[str] = Field(description="ids of the measurement uploads validated against this model")
+
+
+class UnalignedClassPublic(BaseModel):
+    class_iri: str
+    count: int = Field(description="nodes of the model typed with the class")
+    unaligned: int = Field(description="of them, those no alignment rule used")
+    needed: str = Field(description="what would be needed for graphtwin to use them")
+
+
+class UnreadRelationPublic(BaseModel):
+    predicate: str
+    count: int = Field(description="triples of the model with the predicate")
+    needed: str
+
+
+class AssumptionPublic(BaseModel):
+    about: str = Field(description="the node the assumption is about")
+    assumption: str = Field(description="what the alignment assumed")
+    resolved_by: str = Field(description="the triple(s) that would remove the ambiguity")
+    rule: str = Field(description="the alignment rule that assumed it")
+
+
+class BrickReportPublic(BaseModel):
+    model_name: str
+    official_ontology: bool = Field(description=(
+        "the service knows the official Brick classes (GRAPHTWIN_BRICK_ONTOLOGY): an unaligned class outside "
+        "graphtwin's subset is then told apart as official Brick or not Brick at all"))
+    unaligned_classes: list[UnalignedClassPublic]
+    unread_relations: list[UnreadRelationPublic]
+    assumptions: list[AssumptionPublic]
+    points_without_column: list[str]
+    points_without_unit: list[str]
+    temperature_points_off_path: list[str]
+
+
+class ModelUploaded(ModelSummary):
+    triples: int
+    replaced: bool = Field(description="a model of this name existed and was replaced")
+    changed: bool = Field(description=(
+        "the store changed: false when it held this model already, triple for triple (its inferences, "
+        "assembly and runs are kept as they were)"))
+
+
+class MeasurementsInfo(BaseModel):
+    """A validated measurement upload (``service.data.measurements``: the data contract)."""
+
+    id: str
+    model: str
+    rows: int = Field(description="time steps after resampling to the regular step")
+    start: str
+    end: str
+    step_s: float = Field(description="the regular time step, s")
+    columns: dict[str, str] = Field(description="device IRI → CSV column")
+    warnings: list[str]
+
+
+class MeasurementsList(BaseModel):
+    data: list[MeasurementsInfo]
+    count: int
+
+
+class NamedQueryInfo(BaseModel):
+    name: str
+    description: str
+    variables: list[str] = Field(description="variables a query parameter of the same name binds")
+
+
+class NamedQueryList(BaseModel):
+    data: list[NamedQueryInfo]
+    count: int
+
+
+class _ModelRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")  # a misspelt field ("start-from") is an error, not ignored
+
+    model: str = Field(description="model name in the store")
+
+    @field_validator("model")
+    @classmethod
+    def _model_name(cls, value: str) -> str:
+        return GraphStore.check_name(value)
+
+
+def _check_window(value: str | None) -> str | None:
+    if value is not None:
+        parse_window(value)
+    return value
+
+
+_ONLY_WHEN = ("operating conditions COLUMN OP NUMBER in the column's unit, e.g. 'SF Spd Cmd (%) > 5': the "
+              "targets are compared only where all hold (README: operating filter)")
+
+
+def _check_conditions(value: list[str]) -> list[str]:
+    for condition in value:
+        parse_condition(condition)
+    return value
+
+
+class AssembleRequest(_ModelRequest):
+    pass
+
+
+class _FitRequest(_ModelRequest):
+    """What calibrate and diagnose jobs share: the data, the seed, the operating filter, the start."""
+
+    measurements: str = Field(description="id of a measurement upload")
+    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
+    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
+    start_from: str | None = Field(default=None, description=(
+        "a model in the store whose latest calibrated parameters start the fit (the version before an added "
+        "effect, say); the others start at their defaults"))
+
+    _conditions = field_validator("only_when")(_check_conditions)
+
+    @field_validator("start_from")
+    @classmethod
+    def _start_model_name(cls, value: str | None) -> str | None:
+        return GraphStore.check_name(value) if value is not None else None
+
+
+class CalibrateRequest(_FitRequest):
+    train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
+    test: str | None = Field(default=None, description="test window START/END")
+    method: Literal["point", "bayes"] = "point"
+    gp_inputs: list[str] = Field(default=list(DEFAULT_GP_INPUTS), min_length=1, description=(
+        "inputs of the discrepancy GP (method bayes): 'time' and boundary inputs by node IRI, local name or "
+        "CSV column"))
+
+    _windows = field_validator("train", "test")(_check_window)
+
+
+class DiagnoseRequest(_FitRequest):
+    train: str = Field(description="training window START/END")
+    test: str = Field(description="test window START/END")
+
+    _windows = field_validator("train", "test")(_check_window)
+
+
+class AddEffectRequest(_ModelRequest):
+    effect: str = Field(description="effect signature id, e.g. FanMotorHeat")
+    target: str = Field(description="IRI of the building node the effect applies to")
+    version: str | None = Field(default=None, description="name of the new model version (default "
+                                "<model>+<effect>); an existing version with other effects is not overwritten (409)")
+
+    @field_validator("version")
+    @classmethod
+    def _version_name(cls, value: str | None) -> str | None:
+        return value if value is None else GraphStore.check_name(value)
+
+
+class ProgressEntry(BaseModel):
+    time: str
+    message: str
+
+
+class JobPublic(BaseModel):
+    """A job: ``status`` is queued, running, succeeded, failed, cancelled or interrupted."""
+
+    id: str
+    kind: str
+    params: dict
+    status: Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
+    created: str
+    started: str | None
+    finished: str | None
+    progress: list[ProgressEntry]
+    result: dict | None
+    links: dict[str, str] = Field(description="this job, and what it wrote (graph IRIs, query URLs)")
+    error: str | None
+    cancel_requested: bool
+    resubmitted_from: str | None
+
+
+class JobList(BaseModel):
+    data: list[JobPublic]
+    count: int

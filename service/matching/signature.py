@@ -1,0 +1,514 @@
+"""Signature patterns: the declarative description of where a component model (or an effect) applies.
+
+A signature is read from one TOML file in ``signatures/``. It names pattern nodes (local ids with
+allowed classes, a fixed IRI, or a literal slot), pattern triples between them with a rule each,
+the nodes the model represents, and the input / output / parameter mapping of the paper's Table 1
+(Bjørnskov, Jradi & Wetter, "Automated model generation and parameter estimation of building energy
+models using an ontology-based framework"). File format (every key documented in ``signatures/README.md``)::
+
+    id = "Fan"
+    label = "Fan, polynomial part-load power curve"
+    kind = "component"                 # or "effect"
+    model = "service.components.fan:Fan"          # Python class, "module:Class"; or fmu = "fan.fmu"
+    complexity = 1                     # tie-break when several signatures claim the same node
+    modeled_nodes = ["fan"]
+
+    [nodes]
+    fan = { classes = ["s4bldg:Fan"] }
+    inlet = { classes = ["gt:TemperatureSensor", "s4bldg:Coil"] }
+    nominal_flow_kind = { iri = "s4bldg:nominalAirFlowRate" }
+    nominal_flow = { literal = true }
+    nominal_flow_unit = { any = true }
+
+    [[triples]]
+    subject = "inlet"
+    predicate = "fso:suppliesFluidTo"
+    object = "fan"
+    rule = "traverse"                  # "exact" (default), "traverse" or "optional"
+
+    [inputs.inlet_air_temperature]     # the model's input port
+    source = "inlet"                   # the pattern node whose model feeds it
+    quantity = "temperature"           # which output of that node's model
+
+    [outputs.outlet_air_temperature]   # the model's output port
+    node = "fan"                       # located at this node's outlet (default: first modeled node)
+    quantity = "temperature"
+
+    [parameters.nominal_air_flow]      # the model's parameter
+    node = "nominal_flow"              # mapped from this literal node's value
+    unit_node = "nominal_flow_unit"    # optional: node bound to the value's QUDT unit IRI
+
+Reading a file (:func:`load_signature`) also imports the ``model`` class and checks that every
+input, output and parameter the file maps is one the class declares (:func:`check_model_names`),
+and that a splice's port is one every ``host_models`` class declares; quantities are those of
+:data:`QUANTITIES`. Every problem raises :class:`SignatureError` naming the file and the key.
+
+Rules (the paper's Sec. 3.2): ``exact`` is one triple; ``optional`` triples may be absent from the
+graph (connected optional triples form one OPTIONAL block); ``traverse`` follows the predicate from
+subject to object through any number of intermediate nodes and stops at the *nearest* match: no
+intermediate node is an instance of the searched-for end's allowed classes, the end the signature
+does not model (see :mod:`service.matching.compiler`; exact on recirculation loops).
+"""
+
+from __future__ import annotations
+
+import importlib
+import tomllib
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+from service.components.component import ComponentModel
+from service.graph.namespaces import GTR, expand_curie
+
+__all__ = [
+    "Rule", "PatternNode", "PatternTriple", "InputMapping", "OutputMapping", "ParameterMapping",
+    "EffectSplice", "Signature", "SignatureError", "QUANTITIES", "load_signature", "load_signature_library",
+    "check_model_names", "import_model_class", "signature_iri",
+]
+
+#: What a port may carry (``signatures/README.md``, *Quantities*); the simulator's unit of each is
+#: ``service.calibration.model_data.QUANTITY_UNITS``.
+QUANTITIES = frozenset({"temperature", "mass_flow", "volume_flow", "power", "position", "heat_rate"})
+
+
+class SignatureError(ValueError):
+    """A signature file is malformed; the message names the file and the offending key."""
+
+
+class Rule(str, Enum):
+    EXACT = "exact"
+    TRAVERSE = "traverse"
+    OPTIONAL = "optional"
+
+
+@dataclass(frozen=True)
+class PatternNode:
+    """A node of the pattern: a variable restricted to ``classes`` (subclasses match too), a fixed
+    ``iri``, a ``literal`` slot (the object of a datatype triple), or ``any`` term (a unit IRI)."""
+
+    id: str
+    classes: tuple[str, ...] = ()
+    iri: str | None = None
+    literal: bool = False
+    any: bool = False
+
+
+@dataclass(frozen=True)
+class PatternTriple:
+    subject: str
+    predicate: str
+    object: str
+    rule: Rule = Rule.EXACT
+    optional: bool = False  # True for an optional traverse (rule TRAVERSE); OPTIONAL rule implies it
+    #: a traverse that, where the triple as written gives the end it searches from no partner, takes
+    #: the triple reversed (a coil's fan: upstream in a blow-through unit, else downstream)
+    or_reverse: bool = False
+    #: classes a traverse does not pass, beside the searched-for end's (a mixing box, where streams join)
+    stop_at: tuple[str, ...] = ()
+
+    @property
+    def is_optional(self) -> bool:
+        return self.optional or self.rule is Rule.OPTIONAL
+
+
+@dataclass(frozen=True)
+class InputMapping:
+    """Input port ``port`` is fed by output ``quantity`` of the model that represents node ``source``."""
+
+    port: str
+    source: str
+    quantity: str
+
+
+@dataclass(frozen=True)
+class OutputMapping:
+    """Output port ``port`` carries ``quantity`` at the outlet of pattern node ``node``."""
+
+    port: str
+    node: str
+    quantity: str
+
+
+@dataclass(frozen=True)
+class ParameterMapping:
+    """Parameter ``name`` may be read from the literal bound to ``node`` (unit from ``unit_node``)."""
+
+    name: str
+    node: str
+    unit_node: str | None = None
+
+
+@dataclass(frozen=True)
+class EffectSplice:
+    """Where an effect enters the model it extends: on an ``input`` port (the effect transforms what
+    the port receives) or on an ``output`` port (it transforms what the port emits) of the component
+    that represents node ``node``. ``host_models`` (``module:Class`` names), when given, restricts the
+    effect to hosts of those models (e.g. coil thermal mass only where the chosen coil model is static).
+    """
+
+    node: str
+    port: str
+    side: str  # "input" or "output"
+    host_models: tuple[str, ...] = ()
+
+    def host_ports(self, model_class: type[ComponentModel]) -> tuple[str, ...]:
+        """The ports of ``model_class`` on this splice's side (one of them must be :attr:`port`)."""
+        return model_class.input_names() if self.side == "input" else model_class.output_names()
+
+
+@dataclass(frozen=True)
+class Signature:
+    id: str
+    label: str
+    kind: str
+    nodes: dict[str, PatternNode]
+    triples: tuple[PatternTriple, ...]
+    modeled_nodes: tuple[str, ...]
+    inputs: tuple[InputMapping, ...] = ()
+    outputs: tuple[OutputMapping, ...] = ()
+    parameters: tuple[ParameterMapping, ...] = ()
+    model: str | None = None
+    fmu: Path | None = None
+    complexity: int = 1
+    comment: str = ""
+    splice: EffectSplice | None = None
+    source_file: Path | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    can_appear: bool = True  # effects: may appear from one day to the next (a fault), else a property
+    holds_values: bool = False  # measuring devices whose series may hold one value for days (schedules, commands)
+
+    @property
+    def iri(self) -> str:
+        return signature_iri(self.id)
+
+    def node(self, node_id: str) -> PatternNode:
+        return self.nodes[node_id]
+
+
+def signature_iri(signature_id: str) -> str:
+    return f"{GTR}signature/{signature_id}"
+
+
+_TOP_KEYS = {
+    "id", "label", "comment", "kind", "model", "fmu", "complexity", "modeled_nodes", "nodes",
+    "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values",
+}
+_NODE_KEYS = ("classes", "iri", "literal", "any")
+_TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_reverse", "stop_at"}
+_SPLICE_KEYS = {"node", "input", "output", "host_models"}
+
+
+def _fail(path: Path | None, where: str, message: str) -> SignatureError:
+    return SignatureError(f"{path or '<signature>'}: {where}: {message}")
+
+
+def _kind_of(value: Any) -> str:
+    """What a parsed TOML value is, in words for a message (``None`` stands for a missing key)."""
+    if value is None:
+        return "nothing (the key is missing)"
+    if isinstance(value, (str, list, dict)) and not value:
+        return {str: "an empty string", list: "an empty array", dict: "an empty table"}[type(value)]
+    for kind, words in ((bool, "a boolean"), (int, "an integer"), (float, "a float"), (str, "a string"),
+                        (list, "an array"), (dict, "a table")):
+        if isinstance(value, kind):
+            return words
+    return f"a {type(value).__name__}"  # a TOML date or time
+
+
+def _table(path: Path | None, where: str, value: Any, expected: str) -> dict[str, Any]:
+    """``value`` when it is a table; else an error saying it should be ``expected`` and what it is."""
+    if not isinstance(value, dict):
+        raise _fail(path, where, f"expected {expected}, got {_kind_of(value)}")
+    return value
+
+
+def _array(path: Path | None, where: str, value: Any, expected: str, *, empty_ok: bool = True) -> list[Any]:
+    """``value`` when it is an array (a non-empty one unless ``empty_ok``); else an error as :func:`_table`."""
+    if not isinstance(value, list) or not (value or empty_ok):
+        raise _fail(path, where, f"expected {expected}, got {_kind_of(value)}")
+    return value
+
+
+def _text(path: Path | None, where: str, value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise _fail(path, where, f"expected a non-empty string, got {_kind_of(value)}")
+    return value
+
+
+def _only_keys(path: Path | None, where: str, spec: dict[str, Any], allowed: set[str]) -> None:
+    unknown = set(spec) - allowed
+    if unknown:
+        raise _fail(path, where, f"unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+
+def _quantity(path: Path | None, where: str, value: Any) -> str:
+    quantity = _text(path, where, value)
+    if quantity not in QUANTITIES:
+        raise _fail(path, where, f"{quantity!r} is not a quantity; known: {', '.join(sorted(QUANTITIES))}")
+    return quantity
+
+
+def _model_name(path: Path | None, where: str, value: Any) -> str:
+    """``value`` when it reads ``module:Class``: a dotted module path, a colon, a class name."""
+    module, sep, name = value.partition(":") if isinstance(value, str) else ("", "", "")
+    if not (sep and name.isidentifier() and all(part.isidentifier() for part in module.split("."))):
+        raise _fail(path, where, f"{value!r} must read 'module:Class'")
+    return value
+
+
+def _curie(path: Path | None, where: str, text: Any) -> str:
+    if not isinstance(text, str):
+        raise _fail(path, where, f"expected a CURIE or IRI string, got {_kind_of(text)}")
+    try:
+        return expand_curie(text)
+    except ValueError as exc:
+        raise _fail(path, where, str(exc)) from None
+
+
+def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signature:
+    """Build and validate a :class:`Signature` from parsed TOML: every key is checked for its type
+    (table, array, string, …) where it is read. Model classes are not imported here (see
+    :func:`load_signature`).
+
+    :raises SignatureError: naming the file and key of the first problem found.
+    """
+    _only_keys(path, "top level", data, _TOP_KEYS)
+    for key in ("id", "nodes", "modeled_nodes"):
+        if key not in data:
+            raise _fail(path, "top level", f"missing required key {key!r}")
+    sig_id = data["id"]
+    if not isinstance(sig_id, str) or not sig_id.isidentifier():
+        raise _fail(path, "id", f"{sig_id!r} must be an identifier (letters, digits, underscores)")
+    kind = data.get("kind", "component")
+    if kind not in ("component", "effect"):
+        raise _fail(path, "kind", f"{kind!r} must be 'component' or 'effect'")
+    label, comment = data.get("label", sig_id), data.get("comment", "")
+    for key, value in (("label", label), ("comment", comment)):
+        if not isinstance(value, str):
+            raise _fail(path, key, f"expected a string, got {_kind_of(value)}")
+
+    nodes: dict[str, PatternNode] = {}
+    for node_id, spec in _table(path, "nodes", data["nodes"], "a table of pattern nodes ([nodes])").items():
+        where = f"nodes.{node_id}"
+        if not node_id.isidentifier():
+            raise _fail(path, where, "node ids must be identifiers")
+        spec = _table(path, where, spec, "a table with one of 'classes', 'iri', 'literal = true', 'any = true'")
+        chosen = [k for k in _NODE_KEYS if k in spec]
+        if len(chosen) != 1 or set(spec) - set(_NODE_KEYS):
+            raise _fail(path, where, "give exactly one of 'classes', 'iri', 'literal = true', 'any = true'")
+        if "classes" in spec:
+            classes = _array(path, where + ".classes", spec["classes"], "a non-empty array of classes", empty_ok=False)
+            nodes[node_id] = PatternNode(node_id, classes=tuple(
+                _curie(path, f"{where}.classes[{i}]", c) for i, c in enumerate(classes)))
+        elif "iri" in spec:
+            nodes[node_id] = PatternNode(node_id, iri=_curie(path, where + ".iri", spec["iri"]))
+        else:
+            flag = chosen[0]
+            if spec[flag] is not True:
+                raise _fail(path, f"{where}.{flag}", "must be true")
+            nodes[node_id] = PatternNode(node_id, literal=flag == "literal", any=flag == "any")
+
+    def known(node_id: Any, where: str) -> str:
+        if not isinstance(node_id, str):
+            raise _fail(path, where, f"expected a node id (a string), got {_kind_of(node_id)}")
+        if node_id not in nodes:
+            raise _fail(path, where, f"names node {node_id!r}, which is not in [nodes]")
+        return node_id
+
+    triples = []
+    for i, spec in enumerate(_array(path, "triples", data.get("triples", []), "an array of tables ([[triples]])")):
+        where = f"triples[{i}]"
+        spec = _table(path, where, spec, "a table with 'subject', 'predicate', 'object', optional 'rule', 'optional', 'or_reverse' and 'stop_at'")
+        _only_keys(path, where, spec, _TRIPLE_KEYS)
+        rule_text = spec.get("rule", "exact")
+        try:
+            rule = Rule(str(rule_text).lower())
+        except ValueError:
+            raise _fail(path, where + ".rule", f"{rule_text!r} must be exact, traverse or optional") from None
+        subject = known(spec.get("subject"), where + ".subject")
+        obj = known(spec.get("object"), where + ".object")
+        if nodes[subject].literal:
+            raise _fail(path, where + ".subject", "a literal node cannot be a subject")
+        if rule is Rule.TRAVERSE and not (nodes[subject].classes and nodes[obj].classes):
+            raise _fail(path, where, "traverse needs class-restricted nodes at both ends")
+        predicate = _curie(path, where + ".predicate", spec.get("predicate"))
+        optional = spec.get("optional", False)
+        or_reverse = spec.get("or_reverse", False)
+        for key, flag in (("optional", optional), ("or_reverse", or_reverse)):
+            if not isinstance(flag, bool):
+                raise _fail(path, f"{where}.{key}", "must be true or false")
+        if or_reverse and rule is not Rule.TRAVERSE:
+            raise _fail(path, where + ".or_reverse", "only a traverse can fall back to the reverse direction")
+        stop_at = tuple(_curie(path, f"{where}.stop_at[{j}]", c) for j, c in enumerate(
+            _array(path, f"{where}.stop_at", spec.get("stop_at", []), "an array of class CURIEs")))
+        if stop_at and rule is not Rule.TRAVERSE:
+            raise _fail(path, where + ".stop_at", "only a traverse has places to stop at")
+        triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL, or_reverse, stop_at))
+
+    modeled = tuple(known(n, f"modeled_nodes[{i}]") for i, n in enumerate(_array(
+        path, "modeled_nodes", data["modeled_nodes"], "a non-empty array of node ids", empty_ok=False)))
+
+    def entries(key: str, expected: str, allowed: set[str]) -> list[tuple[str, str, dict[str, Any]]]:
+        """(name, key path, table) of each ``[key.NAME]`` table, checked to hold only ``allowed`` keys."""
+        found = []
+        for name, spec in _table(path, key, data.get(key, {}), f"a table of [{key}.NAME] tables").items():
+            where = f"{key}.{name}"
+            spec = _table(path, where, spec, expected)
+            _only_keys(path, where, spec, allowed)
+            found.append((name, where, spec))
+        return found
+
+    inputs = []
+    for port, where, spec in entries("inputs", "a table with keys 'source' and 'quantity'", {"source", "quantity"}):
+        source = known(spec.get("source"), where + ".source")
+        inputs.append(InputMapping(port, source, _quantity(path, where + ".quantity", spec.get("quantity"))))
+    outputs = []
+    for port, where, spec in entries("outputs", "a table with key 'quantity' and optional 'node'", {"node", "quantity"}):
+        node_id = known(spec.get("node", modeled[0]), where + ".node")
+        outputs.append(OutputMapping(port, node_id, _quantity(path, where + ".quantity", spec.get("quantity"))))
+    parameters = []
+    expected = "a table with key 'node' and optional 'unit_node'"
+    for name, where, spec in entries("parameters", expected, {"node", "unit_node"}):
+        node_id = known(spec.get("node"), where + ".node")
+        unit_node = spec.get("unit_node")
+        if unit_node is not None:
+            known(unit_node, where + ".unit_node")
+        parameters.append(ParameterMapping(name, node_id, unit_node))
+
+    splice = None
+    if "splice" in data:
+        expected = "a table with 'node', 'input' or 'output', and optional 'host_models'"
+        spec = _table(path, "splice", data["splice"], expected)
+        _only_keys(path, "splice", spec, _SPLICE_KEYS)
+        sides = [side for side in ("input", "output") if side in spec]
+        if len(sides) != 1 or kind != "effect":
+            raise _fail(path, "splice", "an effect's splice names node and one of 'input' or 'output'")
+        side = sides[0]
+        host_models = _array(path, "splice.host_models", spec.get("host_models", []), "an array of 'module:Class' names")
+        splice = EffectSplice(
+            known(spec.get("node"), "splice.node"), _text(path, f"splice.{side}", spec[side]), side,
+            tuple(_model_name(path, f"splice.host_models[{i}]", m) for i, m in enumerate(host_models)),
+        )
+    elif kind == "effect":
+        raise _fail(path, "splice", "an effect must say where it enters the model ([splice])")
+
+    model = data.get("model")
+    fmu = data.get("fmu")
+    if (model is None) == (fmu is None):
+        raise _fail(path, "model", "give exactly one of 'model' (module:Class) or 'fmu' (file)")
+    if model is not None:
+        _model_name(path, "model", model)
+    fmu_path = None
+    if fmu is not None:
+        fmu = _text(path, "fmu", fmu)
+        fmu_path = Path(fmu) if Path(fmu).is_absolute() or path is None else path.parent / fmu
+
+    complexity = data.get("complexity", 1)
+    if not isinstance(complexity, int) or isinstance(complexity, bool):
+        raise _fail(path, "complexity", "must be an integer")
+    can_appear = data.get("can_appear", True)
+    if not isinstance(can_appear, bool) or ("can_appear" in data and kind != "effect"):
+        raise _fail(path, "can_appear", "effects only, true or false")
+    holds_values = data.get("holds_values", False)
+    if not isinstance(holds_values, bool) or ("holds_values" in data and kind != "component"):
+        raise _fail(path, "holds_values", "components only, true or false")
+    extra = _table(path, "extra", data.get("extra", {}), "a table")
+    return Signature(
+        id=sig_id, label=label, kind=kind, nodes=nodes,
+        triples=tuple(triples), modeled_nodes=modeled, inputs=tuple(inputs), outputs=tuple(outputs),
+        parameters=tuple(parameters), model=model, fmu=fmu_path, complexity=complexity,
+        comment=comment, splice=splice, source_file=path,
+        extra=dict(extra), can_appear=can_appear, holds_values=holds_values,
+    )
+
+
+def import_model_class(path: Path | None, where: str, name: str) -> type[ComponentModel]:
+    """The :class:`~service.components.component.ComponentModel` subclass ``name`` (``module:Class``) names.
+
+    :raises SignatureError: naming file ``path`` and key ``where`` when it cannot be imported or is
+        no component model.
+    """
+    module_name, _, class_name = name.partition(":")
+    try:
+        model_class = getattr(importlib.import_module(module_name), class_name)
+    except (ImportError, AttributeError) as exc:
+        raise _fail(path, where, f"model {name!r} cannot be imported: {exc}") from None
+    if not (isinstance(model_class, type) and issubclass(model_class, ComponentModel)):
+        raise _fail(path, where, f"{name!r} is not a ComponentModel")
+    return model_class
+
+
+def _undeclared(path: Path | None, where: str, model: str, what: str, name: str, declared: tuple[str, ...]) -> None:
+    """Refuses ``name`` unless it is one of the ``declared`` names of ``model``'s ``what`` (port, parameter)."""
+    if name not in declared:
+        raise _fail(path, where, f"{model} has no {what} {name!r}; its {what}s: {', '.join(declared) or 'none'}")
+
+
+#: Input ports the simulator feeds without a mapping: a measuring device's ``measured_value`` (its
+#: measurement, replayed when it is a boundary input) and an effect's ``value_in`` (what the spliced port carries).
+_FED_WITHOUT_MAPPING = {"component": ("measured_value",), "effect": ("value_in",)}
+
+
+def check_model_names(signature: Signature, model_class: type[ComponentModel]) -> None:
+    """Every input, output and parameter ``signature`` maps is one that ``model_class`` (the class
+    its ``model`` names, or the class built for its ``fmu``) declares, and every input port of the
+    class is mapped (but those the simulator feeds itself, :data:`_FED_WITHOUT_MAPPING`): an
+    unmapped input would run on NaN.
+
+    :raises SignatureError: naming the file, the key and the names the class declares.
+    """
+    path, model = signature.source_file, signature.model or str(signature.fmu)
+    parameter_names = tuple(p.name for p in model_class.parameters)
+    for mapping in signature.inputs:
+        _undeclared(path, f"inputs.{mapping.port}", model, "input port", mapping.port, model_class.input_names())
+    for mapping in signature.outputs:
+        _undeclared(path, f"outputs.{mapping.port}", model, "output port", mapping.port, model_class.output_names())
+    for parameter in signature.parameters:
+        _undeclared(path, f"parameters.{parameter.name}", model, "parameter", parameter.name, parameter_names)
+    mapped = {mapping.port for mapping in signature.inputs} | set(_FED_WITHOUT_MAPPING.get(signature.kind, ()))
+    unmapped = [name for name in model_class.input_names() if name not in mapped]
+    if unmapped:
+        raise _fail(path, f"inputs.{unmapped[0]}", f"{model} has input port(s) {', '.join(map(repr, unmapped))} the "
+                    "signature does not map: add [inputs.NAME] with its source node and quantity (an input left "
+                    "unfed would run on NaN)")
+
+
+def load_signature(path: Path) -> Signature:
+    """Read one signature file and check it against the Python classes it names: its ``model``
+    declares every port and parameter the file maps (:func:`check_model_names`; a signature with an
+    ``fmu`` is checked where the FMU's class is built) and every ``host_models`` class has the
+    splice's port on the splice's side.
+
+    :raises SignatureError: on TOML syntax errors (with line and column), invalid content, a model
+        that cannot be imported, or a port or parameter name its class does not declare.
+    """
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise SignatureError(f"{path}: {exc}") from None
+    signature = signature_from_dict(data, path)
+    if signature.model is not None:
+        check_model_names(signature, import_model_class(path, "model", signature.model))
+    if signature.splice is not None:
+        splice = signature.splice
+        for i, host in enumerate(splice.host_models):
+            host_class = import_model_class(path, f"splice.host_models[{i}]", host)
+            _undeclared(path, f"splice.{splice.side}", host, f"{splice.side} port", splice.port, splice.host_ports(host_class))
+    return signature
+
+
+def load_signature_library(folder: Path) -> dict[str, Signature]:
+    """Every ``*.toml`` signature under ``folder`` (recursively), keyed by id, each read and checked
+    by :func:`load_signature`.
+
+    :raises SignatureError: for an invalid file or two files with the same id.
+    """
+    library: dict[str, Signature] = {}
+    for path in sorted(folder.rglob("*.toml")):
+        sig = load_signature(path)
+        if sig.id in library:
+            raise SignatureError(f"{path}: id {sig.id!r} is already used by {library[sig.id].source_file}")
+        library[sig.id] = sig
+    return library

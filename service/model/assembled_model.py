@@ -1,0 +1,141 @@
+"""The assembled simulation model: components matched in the graph, their wiring and their parameters.
+
+This is the value object that :mod:`service.model.assembly` produces from a building graph and that the
+simulator, the calibrators and the diagnosis consume. It holds IRIs, not store handles, so it can be
+pickled to a worker process.
+
+Paper (Bjørnskov, Jradi & Wetter, Sec. 3.3): boundary inputs are measuring devices (and schedules)
+with no inputs; calibration targets are measuring devices with exactly one input (Eq. 1); the
+parameters to estimate are all parameters minus those mapped from the graph (Eq. 2).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+from service.components.component import ComponentModel, Parameter
+from service.matching.signature import Signature, check_model_names, import_model_class
+
+__all__ = [
+    "MeasurementLink", "ComponentInstance", "Connection", "ParameterRef", "AssembledModel",
+    "load_model_class", "mapped_values_outside_bounds",
+]
+
+
+@dataclass(frozen=True)
+class MeasurementLink:
+    """Where a measuring device's series comes from: its node, the time-series id a CSV column
+    may carry instead of the IRI, and the QUDT unit the values are recorded in."""
+
+    node: str
+    series_id: str | None
+    unit: str | None
+
+
+@dataclass(frozen=True)
+class ComponentInstance:
+    """One match of a signature: the model that represents ``modeled_nodes`` of the building graph."""
+
+    iri: str
+    signature: Signature
+    bindings: dict[str, str]  # pattern node id → bound IRI or literal lexical form
+    modeled_nodes: tuple[str, ...]  # building node IRIs, in the signature's order
+    mapped_parameters: dict[str, float]  # parameter name → value in the model's unit
+    measurement: MeasurementLink | None = None
+
+    @property
+    def model_class(self) -> type[ComponentModel]:
+        return load_model_class(self.signature)
+
+    @property
+    def node(self) -> str:
+        """The first node this component represents (its name in reports)."""
+        return self.modeled_nodes[0]
+
+
+@dataclass(frozen=True)
+class Connection:
+    """Output ``source_port`` of component ``source`` feeds input ``target_port`` of ``target``."""
+
+    source: str
+    source_port: str
+    target: str
+    target_port: str
+
+
+@dataclass(frozen=True)
+class ParameterRef:
+    """A parameter of one component instance, with its value or prior bounds in the model's unit."""
+
+    component: str
+    spec: Parameter
+    value: float | None = None  # mapped from the graph, or fixed; None when it is to be estimated
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def key(self) -> str:
+        """``<component IRI>#<parameter name>``: unique across the model."""
+        return f"{self.component}#{self.spec.name}"
+
+
+@dataclass
+class AssembledModel:
+    components: dict[str, ComponentInstance]
+    connections: tuple[Connection, ...]
+    boundary_inputs: tuple[str, ...]  # component IRIs of measuring devices with no input
+    targets: tuple[str, ...]  # component IRIs of measuring devices with one input
+    mapped_parameters: tuple[ParameterRef, ...]
+    estimated_parameters: tuple[ParameterRef, ...]  # the columns of θ, in this order
+    building_graph: str = ""
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def component_for_node(self, node_iri: str) -> ComponentInstance | None:
+        for component in self.components.values():
+            if node_iri in component.modeled_nodes:
+                return component
+        return None
+
+    def measurement(self, component_iri: str) -> MeasurementLink:
+        link = self.components[component_iri].measurement
+        if link is None:
+            raise KeyError(f"{component_iri} is not a measuring device")
+        return link
+
+
+def mapped_values_outside_bounds(mapped: Iterable[ParameterRef], components: Mapping[str, ComponentInstance]) -> list[str]:
+    """One sentence per parameter the graph maps to a value outside its physical bounds, or to no
+    number (a nominal power of 80 kW for a fan whose signature allows 50 W – 50 kW is a typo or a
+    wrong unit), in the parameter's unit."""
+    return [f"{ref.spec.name} of {components[ref.component].node} is mapped from the graph to {ref.value:g} "
+            f"{ref.spec.unit}, outside its bounds [{ref.spec.lower:g}, {ref.spec.upper:g}] {ref.spec.unit}"
+            for ref in mapped if ref.value is not None and not ref.spec.lower <= ref.value <= ref.spec.upper]
+
+
+_MODEL_CACHE: dict[str, type[ComponentModel]] = {}
+
+
+def load_model_class(signature: Signature) -> type[ComponentModel]:
+    """The Python model a signature names (``"module:Class"``, imported once); FMU signatures get the
+    FMU wrapper class built for that file, checked against the ports and parameters the signature
+    maps (:func:`~service.matching.signature.check_model_names`; a Python model was checked when the library
+    was loaded).
+
+    :raises SignatureError: the model cannot be imported, or the FMU lacks a port or parameter, or
+        declares a mapped port in another unit than the simulator passes.
+    """
+    if signature.fmu is not None:
+        from service.components.fmu import check_port_units, fmu_model_class
+
+        model_class = fmu_model_class(signature.fmu)
+        check_model_names(signature, model_class)
+        check_port_units(signature, model_class)
+        return model_class
+    assert signature.model is not None
+    cached = _MODEL_CACHE.get(signature.model)
+    if cached is None:
+        cached = _MODEL_CACHE[signature.model] = import_model_class(signature.source_file, "model", signature.model)
+    return cached

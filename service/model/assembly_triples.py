@@ -1,0 +1,90 @@
+"""The assembled model written back as triples, linked to the building nodes it models.
+
+Shape (vocabulary in ``ontologies/graphtwin.ttl``)::
+
+    <assembly> a gt:AssembledModel ; gt:assembledFrom <building model graph> ;
+        gt:hasComponent <component> ; gt:hasConnection <connection> ;
+        gt:hasBoundaryInput <component> ; gt:hasTarget <component> .
+    <component> a gt:ComponentInstance ; gt:instanceOf <signature> ; gt:represents <building node> ;
+        gt:hasParameter <parameter> .
+    <connection> a gt:Connection ; gt:fromComponent <c1> ; gt:fromPort "p" ; gt:toComponent <c2> ; gt:toPort "q" .
+    <parameter> a gt:Parameter ; gt:parameterName "UA_nominal" ; gt:unit "W/K" ;
+        gt:lowerBound 500.0 ; gt:upperBound 8000.0 ; gt:defaultValue 2000.0 ;
+        ( gt:mappedValue 2.5 ; a gt:MappedParameter ) | a gt:EstimatedParameter .
+"""
+
+from __future__ import annotations
+
+import pyoxigraph as ox
+
+from service.model.assembled_model import AssembledModel, ParameterRef
+from service.graph.namespaces import GT, GTR, RDF, RDFS, XSD
+
+__all__ = ["assembly_iri", "assembly_triples", "parameter_iri"]
+
+
+def assembly_iri(model_name: str) -> ox.NamedNode:
+    return ox.NamedNode(f"{GTR}model/{model_name}/assembly")
+
+
+def parameter_iri(ref: ParameterRef) -> ox.NamedNode:
+    return ox.NamedNode(f"{ref.component}/parameter/{ref.name}")
+
+
+def _double(value: float) -> ox.Literal:
+    return ox.Literal(repr(float(value)), datatype=XSD.double)
+
+
+def assembly_triples(model: AssembledModel, model_name: str) -> list[ox.Triple]:
+    """All triples describing ``model``; IRIs minted under ``gtr:model/<name>/``."""
+    root = assembly_iri(model_name)
+    triples = [ox.Triple(root, RDF.type, GT.AssembledModel)]
+    if model.building_graph:
+        triples.append(ox.Triple(root, GT.assembledFrom, ox.NamedNode(model.building_graph)))
+    for iri, instance in model.components.items():
+        node = ox.NamedNode(iri)
+        triples += [
+            ox.Triple(root, GT.hasComponent, node),
+            ox.Triple(node, RDF.type, GT.ComponentInstance),
+            ox.Triple(node, GT.instanceOf, ox.NamedNode(instance.signature.iri)),
+            ox.Triple(node, RDFS.label, ox.Literal(f"{instance.signature.id} at {instance.node}")),
+        ]
+        triples += [ox.Triple(node, GT.represents, ox.NamedNode(n)) for n in instance.modeled_nodes]
+    for index, connection in enumerate(model.connections):
+        edge = ox.NamedNode(f"{root.value}/connection/{index}")
+        triples += [
+            ox.Triple(root, GT.hasConnection, edge),
+            ox.Triple(edge, RDF.type, GT.Connection),
+            ox.Triple(edge, GT.fromComponent, ox.NamedNode(connection.source)),
+            ox.Triple(edge, GT.fromPort, ox.Literal(connection.source_port)),
+            ox.Triple(edge, GT.toComponent, ox.NamedNode(connection.target)),
+            ox.Triple(edge, GT.toPort, ox.Literal(connection.target_port)),
+        ]
+    triples += [ox.Triple(root, GT.hasBoundaryInput, ox.NamedNode(i)) for i in model.boundary_inputs]
+    triples += [ox.Triple(ox.NamedNode(i), RDF.type, GT.BoundaryInput) for i in model.boundary_inputs]
+    triples += [ox.Triple(root, GT.hasTarget, ox.NamedNode(i)) for i in model.targets]
+    triples += [ox.Triple(ox.NamedNode(i), RDF.type, GT.CalibrationTarget) for i in model.targets]
+    for ref in model.mapped_parameters + model.estimated_parameters:
+        triples += _parameter_triples(ref)
+    return triples
+
+
+def _parameter_triples(ref: ParameterRef) -> list[ox.Triple]:
+    node = parameter_iri(ref)
+    spec = ref.spec
+    triples = [
+        ox.Triple(ox.NamedNode(ref.component), GT.hasParameter, node),
+        ox.Triple(node, RDF.type, GT.Parameter),
+        ox.Triple(node, GT.parameterName, ox.Literal(spec.name)),
+        ox.Triple(node, GT.unit, ox.Literal(spec.unit)),
+        ox.Triple(node, GT.lowerBound, _double(spec.lower)),
+        ox.Triple(node, GT.upperBound, _double(spec.upper)),
+        ox.Triple(node, GT.defaultValue, _double(spec.default)),
+    ]
+    if spec.description:
+        triples.append(ox.Triple(node, RDFS.comment, ox.Literal(spec.description)))
+    if ref.value is not None:
+        triples += [ox.Triple(node, RDF.type, GT.MappedParameter), ox.Triple(node, GT.mappedValue, _double(ref.value))]
+    else:
+        triples.append(ox.Triple(node, RDF.type, GT.EstimatedParameter))
+    return triples

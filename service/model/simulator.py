@@ -1,0 +1,420 @@
+"""Ensemble-vectorised fixed-step simulation of an assembled model.
+
+:class:`Simulator` prepares once what does not depend on θ (component order, where every input comes
+from, the boundary series as per-step views) and then :meth:`Simulator.run` steps all ensemble
+members together: every component's ``step`` receives arrays of shape ``(n_ensemble,)``, so the
+Python work per step is per component, not per member. A single parameter set is ``n_ensemble = 1``.
+
+**Order and feedback.** Components run in topological order of the connections (ties broken by
+IRI, so runs are deterministic). A control loop (controller → valve → coil → sensor → controller)
+is a cycle; it is broken with a **one-step delay on the loop-closing connection**: the connection
+into an input declared ``Port(..., feedback=True)`` (a controller's measured value) when it lies on
+a cycle. A cycle without such a port (a draw-through fan whose air flow feeds the coils upstream of it: a
+loop of components, not of physics) is broken at a connection carrying a flow (kg/s, m³/s: set by
+commands, slow) if the cycle has one, else at the connection whose target comes first in IRI order,
+with a warning naming it. A delayed input at step ``k`` receives the producer's output of
+step ``k − 1``; at ``k = 0`` it receives the producer's measured value when the producer is a
+measuring device with a series in ``boundary`` (the sensor's first reading: what the real
+controller saw); else, on a feedback port, 0 (not a value from the producer's ``initial_state``: a
+state is not an output, and the output at ``t_0`` depends on the loop being broken); else the
+producer's output of a first pass over step 0 (a draw-through fan's air flow, which does not depend
+on the coils that read it: they saw still air at step 0 before).
+
+**Sub-steps.** ``substeps = S`` runs the components at ``step_s / S`` (a PI loop sampled every few
+minutes would oscillate where the real controller, sampled every second, does not) with the
+boundary series interpolated linearly between data steps; outputs are reported at the data steps.
+
+**Stepping.** Only what needs it is stepped: a component with a state or on a loop. A
+*memoryless* component (no state, :meth:`~service.components.component.ComponentModel.memoryless`) fed only by
+the boundary and other such components (the boundary sensors, a fan driven by its measured flow) is
+evaluated once over all internal steps, arrays ``(n_steps, n_ensemble)``; a memoryless component
+whose outputs feed only other such components (the target sensors after the loop) is evaluated once
+over the data steps after the stepping. Step functions are elementwise, so the outputs are those of
+stepping every component, at a fraction of the Python work per step (tests/model/test_simulator.py).
+
+**Boundary inputs** (measuring devices with no connected input) receive their measured series
+through their ``measured_value`` input; NaN gaps in a boundary series are held at the last value
+(the calibration leaves those steps out). Dynamic components start from ``initial_state`` with
+their first inputs (a PI controller's integral at 0); ``warmup_steps`` lets them settle first, over
+the steps before a window (:func:`warmup_index`), before the steps the result reports.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.model.assembled_model import AssembledModel, Connection
+
+__all__ = ["Simulator", "SimulationResult", "simulate", "component_order", "loop_substeps", "MAX_LOOP_STEP_S",
+           "target_series", "held_over_gaps", "warmup_index"]
+
+#: Longest internal step of a model with a closed control loop, s: at 2 minutes the case study's
+#: heating loop is free of the sampling limit cycle over its whole prior (tests/components).
+MAX_LOOP_STEP_S = 120.0
+
+
+@dataclass
+class SimulationResult:
+    """``outputs[(component IRI, port)]``: ``ndarray[n_ensemble, n_steps]``."""
+
+    outputs: dict[tuple[str, str], np.ndarray]
+    step_s: float
+
+    def target(self, component_iri: str) -> np.ndarray:
+        """The virtual sensor's series (a measuring device's ``measured_value`` output)."""
+        return self.outputs[(component_iri, "measured_value")]
+
+
+_FLOW_UNITS = frozenset({"kg/s", "m3/s", "m3/h"})
+
+
+def _strongly_connected(nodes: list[str], edges: Mapping[str, set[str]]) -> dict[str, int]:
+    """Tarjan's algorithm (iterative): node → component id."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    comp: dict[str, int] = {}
+    counter = 0
+    for root in nodes:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges.get(root, ()))))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            advanced = False
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(edges.get(child, ())))))
+                    advanced = True
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            if advanced:
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    comp[member] = index[node]
+                    if member == node:
+                        break
+    return comp
+
+
+def warmup_index(window: slice, warmup_steps: int, period_steps: int = 1) -> np.ndarray:
+    """Indices of a series that give ``window`` preceded by ``warmup_steps`` steps of warm-up: the
+    steps before the window, and before the series' first step its first ``period_steps`` repeated
+    (the first day: the plant ran the same day before the log began, as EnergyPlus repeats its first
+    day to warm up; 1: the first value held). Index ``k`` from ``window.start − warmup_steps`` to
+    ``window.stop − 1``, a negative ``k`` replaced by ``k mod period_steps``."""
+    index = np.arange(window.start - warmup_steps, window.stop)
+    before = index < 0
+    index[before] %= period_steps
+    return index
+
+
+def held_over_gaps(values: np.ndarray) -> np.ndarray:
+    """``values`` with each NaN replaced by the last finite value before it (the first finite value
+    before that one); at least one value must be finite."""
+    finite = np.isfinite(values)
+    index = np.where(finite, np.arange(values.size), 0)
+    np.maximum.accumulate(index, out=index)
+    held = values[index]
+    first = int(np.argmax(finite))
+    held[:first] = values[first]
+    return held
+
+
+def component_order(model: AssembledModel) -> tuple[list[str], set[Connection], list[str]]:
+    """Topological order, the delayed (loop-closing) connections and warnings (module docstring)."""
+    nodes = sorted(model.components)
+    edges: dict[str, set[str]] = defaultdict(set)
+    for c in model.connections:
+        edges[c.source].add(c.target)
+    scc = _strongly_connected(nodes, edges)
+    delayed: set[Connection] = set()
+    for c in model.connections:
+        port = model.components[c.target].model_class.port(c.target_port)
+        if port.feedback and scc[c.source] == scc[c.target]:
+            delayed.add(c)
+    notes: list[str] = []
+    while True:
+        live = [c for c in model.connections if c not in delayed]
+        indegree = {n: 0 for n in nodes}
+        children: dict[str, list[str]] = defaultdict(list)
+        for c in live:
+            if c.source != c.target:
+                indegree[c.target] += 1
+                children[c.source].append(c.target)
+        ready = sorted(n for n in nodes if indegree[n] == 0)
+        order: list[str] = []
+        while ready:
+            node = ready.pop(0)
+            order.append(node)
+            for child in sorted(children[node]):
+                indegree[child] -= 1
+                if indegree[child] == 0:
+                    ready.append(child)
+                    ready.sort()
+        self_loops = [c for c in live if c.source == c.target]
+        if len(order) == len(nodes) and not self_loops:
+            return order, delayed, notes
+        stuck = sorted(set(nodes) - set(order)) or [self_loops[0].target]
+        candidates = sorted((c for c in live if c.target in stuck and (c.source in stuck or c.source == c.target)),
+                            key=lambda c: (model.components[c.source].model_class.port(c.source_port).unit not in _FLOW_UNITS,
+                                           c.target, c.target_port, c.source))
+        chosen = candidates[0]
+        delayed.add(chosen)
+        notes.append(
+            f"cycle without a feedback port: delayed {chosen.source}.{chosen.source_port} → "
+            f"{chosen.target}.{chosen.target_port} by one step"
+        )
+
+
+def loop_substeps(model: AssembledModel, step_s: float) -> int:
+    """Sub-steps per data step: ``ceil(step_s / MAX_LOOP_STEP_S)`` when the model closes a loop
+    (a delayed connection), else 1 (a command-driven model has no loop to destabilise)."""
+    _, delayed, _ = component_order(model)
+    return max(1, int(np.ceil(step_s / MAX_LOOP_STEP_S - 1e-9))) if delayed else 1
+
+
+class Simulator:
+    """Prepared simulation of ``model`` at fixed step ``step_s`` (seconds); ``notes`` says how a
+    cycle without a feedback port was broken (calibration runs report them with the data's)."""
+
+    def __init__(self, model: AssembledModel, step_s: float, substeps: int = 1):
+        if not step_s > 0:
+            raise ValueError(f"step must be positive, got {step_s}")
+        if int(substeps) < 1:
+            raise ValueError(f"substeps must be a positive integer, got {substeps}")
+        self.model = model
+        self.step_s = float(step_s)
+        self.substeps = int(substeps)
+        self.order, self.delayed, self.notes = component_order(model)
+        self.instances = {iri: model.components[iri].model_class() for iri in self.order}
+        self.column = {ref.key: j for j, ref in enumerate(model.estimated_parameters)}
+        self.n_parameters = len(model.estimated_parameters)
+        feeding: dict[str, list[Connection]] = defaultdict(list)
+        for c in model.connections:
+            feeding[c.target].append(c)
+        self.feeding = feeding
+        boundary = set(model.boundary_inputs)
+        self.unconnected: dict[str, list[str]] = {}
+        for iri in self.order:
+            cls = model.components[iri].model_class
+            fed = {c.target_port for c in feeding[iri]}
+            missing = [p.name for p in cls.inputs if p.name not in fed]
+            if iri in boundary:
+                missing = [m for m in missing if m != "measured_value"]
+            if missing:
+                self.unconnected[iri] = missing
+        self.ahead, self.behind = self._memoryless_ends()
+
+    def _memoryless_ends(self) -> tuple[list[str], list[str]]:
+        """(ahead, behind): the memoryless components evaluated over all steps at once (module
+        docstring, *Stepping*), in order; the others are stepped."""
+        consumers: dict[str, set[str]] = defaultdict(set)
+        for c in self.model.connections:
+            consumers[c.source].add(c.target)
+        in_loop = {c.source for c in self.delayed} | {c.target for c in self.delayed}
+        free = {iri for iri in self.order
+                if self.model.components[iri].model_class.memoryless() and iri not in in_loop}
+        ahead: list[str] = []
+        for iri in self.order:
+            if iri in free and all(c.source in ahead for c in self.feeding[iri]):
+                ahead.append(iri)
+        behind: set[str] = set()
+        for iri in reversed(self.order):
+            if iri in free and iri not in ahead and consumers[iri] <= behind:
+                behind.add(iri)
+        return ahead, [iri for iri in self.order if iri in behind]
+
+    def _parameters(self, theta: np.ndarray, fixed: Mapping[str, float]) -> dict[str, dict[str, np.ndarray]]:
+        n_ens = theta.shape[0]
+        params: dict[str, dict[str, np.ndarray]] = {iri: {} for iri in self.order}
+        for ref in self.model.mapped_parameters:
+            params[ref.component][ref.name] = np.full(n_ens, float(fixed.get(ref.key, ref.value)))
+        for ref in self.model.estimated_parameters:
+            if ref.key in fixed:
+                params[ref.component][ref.name] = np.full(n_ens, float(fixed[ref.key]))
+            else:
+                params[ref.component][ref.name] = np.ascontiguousarray(theta[:, self.column[ref.key]])
+        return params
+
+    def run(
+        self,
+        boundary: Mapping[str, np.ndarray],
+        theta: np.ndarray,
+        fixed: Mapping[str, float] | None = None,
+        *,
+        record: Iterable[tuple[str, str]] | None = None,
+        warmup_steps: int = 0,
+    ) -> SimulationResult:
+        """Simulate every ensemble member over the boundary series.
+
+        :param boundary: component IRI of a measuring device → ``ndarray[n_steps]`` measured series
+            (every boundary input; targets' series are optional and only serve delayed inputs at
+            step 0).
+        :param theta: ``ndarray[n_ensemble, n_estimated]`` in the order of
+            ``model.estimated_parameters``.
+        :param fixed: parameter key → value overriding θ or a mapped value.
+        :param record: the (component, port) outputs to keep; all when None.
+        :param warmup_steps: the first ``warmup_steps`` data steps of ``boundary`` are a warm-up
+            (:func:`warmup_index`): simulated, left out of the result (``n_steps − warmup_steps``
+            steps).
+        :raises ValueError: a boundary input without a series, series of different lengths, θ of
+            the wrong shape, a warm-up as long as the series.
+        """
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        if theta.shape[1] != self.n_parameters:
+            raise ValueError(f"theta has {theta.shape[1]} columns, the model estimates {self.n_parameters} parameters")
+        missing = [iri for iri in self.model.boundary_inputs if iri not in boundary]
+        if missing:
+            raise ValueError(f"no measured series for boundary input(s): {', '.join(missing)}")
+        lengths = {np.asarray(boundary[iri]).shape[0] for iri in boundary}
+        if len(lengths) != 1:
+            raise ValueError(f"boundary series have different lengths: {sorted(lengths)}")
+        n_steps = lengths.pop()
+        if not 0 <= warmup_steps < n_steps:
+            raise ValueError(f"a warm-up of {warmup_steps} steps leaves nothing of {n_steps} steps to simulate")
+        n_kept = n_steps - warmup_steps
+        n_ens = theta.shape[0]
+        params = self._parameters(theta, fixed or {})
+        substeps = self.substeps
+        dt = self.step_s / substeps
+        n_internal = (n_steps - 1) * substeps + 1
+
+        series: dict[str, np.ndarray] = {}
+        for iri, values in boundary.items():
+            filled = np.asarray(values, dtype=float).copy()
+            bad = ~np.isfinite(filled)
+            if bad.all():
+                if iri in self.model.boundary_inputs:
+                    raise ValueError(f"boundary input {iri} has no finite value in the window")
+                continue
+            if bad.any():
+                filled = held_over_gaps(filled)
+            if substeps > 1:
+                filled = np.interp(np.arange(n_internal) / substeps, np.arange(n_steps), filled)
+            series[iri] = np.broadcast_to(filled[:, None], (filled.size, n_ens))
+
+        wanted = None if record is None else set(record)
+        components = self.model.components
+        kept = {iri: [p for p in components[iri].model_class.output_names() if wanted is None or (iri, p) in wanted]
+                for iri in self.order}
+        ahead, behind = set(self.ahead), set(self.behind)
+        stepped = [iri for iri in self.order if iri not in ahead and iri not in behind]
+        links = {iri: [(c.target_port, (c.source, c.source_port), c in self.delayed) for c in self.feeding[iri]]
+                 for iri in self.order}
+
+        def evaluate_at_once(iri: str, sources: Mapping, measured: np.ndarray | None, shape: tuple[int, int]):
+            inputs = {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])}
+            inputs.update({name: sources[source] for name, source, _ in links[iri]})
+            if measured is not None:
+                inputs["measured_value"] = measured
+            outputs = self.instances[iri].step(params[iri], inputs, {}, dt)
+            return {(iri, port): np.broadcast_to(value, shape) for port, value in outputs.items()}
+
+        # memoryless components fed by the boundary alone: every internal step in one call
+        early: dict[tuple[str, str], np.ndarray] = {}
+        for iri in self.ahead:
+            measured = series.get(iri) if iri in self.model.boundary_inputs else None
+            early.update(evaluate_at_once(iri, early, measured, (n_internal, n_ens)))
+
+        # the rest, step by step (a loop's state or a delayed input); what they need of `early`
+        # is one row per step, and what `behind` needs of them is recorded at the data steps
+        needed_late = {src for iri in self.behind for _, src, _ in links[iri] if src[0] not in ahead}
+        feeding_steps = sorted({src for iri in stepped for _, src, _ in links[iri] if src[0] in ahead})
+        buffers: dict[tuple[str, str], np.ndarray] = {}
+        plan = []
+        for iri in stepped:
+            record_ports = sorted(set(kept[iri]) | {port for source, port in needed_late if source == iri})
+            for port in record_ports:
+                buffers[(iri, port)] = np.empty((n_kept, n_ens))
+            plan.append((iri, self.instances[iri], params[iri],
+                         [(name, source) for name, source, late in links[iri] if not late],
+                         [(name, source) for name, source, late in links[iri] if late],
+                         series.get(iri) if iri in self.model.boundary_inputs else None, record_ports,
+                         {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])}))
+
+        current: dict[tuple[str, str], np.ndarray] = {}
+        previous: dict[tuple[str, str], np.ndarray] = {}
+        for (iri, _port) in {src for entry in plan for _, src in entry[4]}:
+            start = series.get(iri)
+            previous[(iri, _port)] = start[0].copy() if start is not None else np.zeros(n_ens)
+        states: dict[str, dict] = {}
+
+        def advance(i: int, record: bool) -> None:
+            """Step every stepped component from internal step ``i`` (initialising it at 0)."""
+            k, offset = divmod(i, substeps)
+            for key in feeding_steps:
+                current[key] = early[key][i]
+            for iri, instance, p, live, late, measured, keep, constant in plan:
+                inputs = dict(constant)
+                for name, source in live:
+                    inputs[name] = current[source]
+                for name, source in late:
+                    inputs[name] = previous[source]
+                if measured is not None:
+                    inputs["measured_value"] = measured[i]
+                if i == 0:
+                    states[iri] = instance.initial_state(p, inputs, dt)
+                outputs = instance.step(p, inputs, states[iri], dt)
+                for port, value in outputs.items():
+                    current[(iri, port)] = value
+                if record and offset == 0 and k >= warmup_steps:
+                    for port in keep:
+                        buffers[(iri, port)][k - warmup_steps] = outputs[port]
+
+        # a delayed input off a feedback port and without a measured seed starts from its source's
+        # output of a first pass over step 0 (module docstring)
+        unseeded = {(c.source, c.source_port) for c in self.delayed if series.get(c.source) is None
+                    and not components[c.target].model_class.port(c.target_port).feedback}
+        if plan and unseeded:
+            advance(0, record=False)
+            for key in unseeded:
+                previous[key] = current[key]
+            states.clear()  # free the first pass's states (an FMU's instances) before step 0 makes new ones
+        for i in range(n_internal if plan else 0):
+            advance(i, record=True)
+            for key in previous:
+                previous[key] = current[key]
+
+        # memoryless components that only feed each other: at the data steps, in one call each
+        at_data_steps = {key: values[::substeps][warmup_steps:] for key, values in early.items()} | buffers
+        for iri in self.behind:
+            at_data_steps.update(evaluate_at_once(iri, at_data_steps, None, (n_kept, n_ens)))
+        outputs = {(iri, port): at_data_steps[(iri, port)] for iri in self.order for port in kept[iri]}
+        return SimulationResult({key: values.T if key in buffers else np.array(values.T)
+                                 for key, values in outputs.items()}, self.step_s)
+
+
+def simulate(
+    model: AssembledModel, boundary: Mapping[str, np.ndarray], theta: np.ndarray, *, step_s: float,
+    fixed: Mapping[str, float] | None = None, substeps: int = 1,
+) -> SimulationResult:
+    """One-shot :class:`Simulator` run (prepare + run)."""
+    return Simulator(model, step_s, substeps).run(boundary, theta, fixed=fixed)
+
+
+def target_series(model: AssembledModel, result: SimulationResult, member: int = 0) -> dict[str, np.ndarray]:
+    """Building node IRI of every target (virtual sensor) → its simulated ``ndarray[n_steps]`` for
+    ensemble member ``member``, in the port unit: what
+    :func:`service.data.measurements.write_comparison_csv` writes beside the measurements."""
+    return {model.measurement(c).node: result.target(c)[member] for c in model.targets}

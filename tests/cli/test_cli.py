@@ -1,0 +1,353 @@
+"""The command line: JSON output, clear errors with exit code 2, add-effect round trip."""
+
+import csv
+import gc
+import io
+import json
+import subprocess
+import sys
+
+import pyoxigraph as ox
+import pytest
+from case_study import CASE_STUDY, EX
+from store_holder import held_by_another_process
+from typer.testing import CliRunner
+
+from service.model.assembly import assemble
+from service.cli import app
+from service.resources import signatures_dir
+from service.matching.signature import load_signature_library
+from service.matching.compiler import compile_signature
+from service.graph.store import GraphStore
+
+runner = CliRunner()
+
+
+def test_assemble_prints_the_model_as_json():
+    result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--memory", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert len(data["targets"]) == 5 and len(data["boundary_inputs"]) == 4
+    assert len(data["parameters"]["estimated"]) == 14
+
+
+def test_assemble_prints_tables_a_terminal_of_80_columns_can_read(monkeypatch):
+    """Local names (the namespace said once) and unit labels: full IRIs were cut to "https://example.o…"."""
+    monkeypatch.setenv("COLUMNS", "80")
+    result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--memory"])
+    assert result.exit_code == 0, result.output
+    assert f"nodes in {EX}" in result.output and "https://example.o…" not in result.output
+    assert "coil_outlet_air_temperature_se" in result.output and "°C" in result.output  # names fold, not cut
+    assert "HotWaterLoop/heating_" in result.output and "Fan/supply_fan" in result.output  # signature/node
+    assert "…" not in result.output
+
+
+def test_a_broken_model_fails_with_line_and_column(tmp_path):
+    broken = tmp_path / "broken.ttl"
+    broken.write_text("@prefix ex: <https://example.org/x#> .\nex:a ex:b ex:c .\nex:d zz:e ex:f .\n")
+    result = runner.invoke(app, ["assemble", str(broken), "--memory"])
+    assert result.exit_code == 2
+    assert "line 3" in result.output and "zz:" in result.output
+
+
+def test_signature_explain_prints_the_compiled_query():
+    result = runner.invoke(app, ["signature", "explain", "Fan"])
+    assert result.exit_code == 0 and "suppliesFluidTo+" in result.output
+    # piped: the text as it is (no wrapping of long comment lines), a query any endpoint parses
+    assert result.output == compile_signature(load_signature_library(signatures_dir())["Fan"]).text
+    assert list(ox.Store().query(result.output)) == []
+    assert runner.invoke(app, ["signature", "explain", "Fann"]).exit_code == 2
+
+
+def test_add_effect_records_triples_that_reassembly_picks_up(tmp_path):
+    output = tmp_path / "with_effect.ttl"
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "ValveLeakage",
+                                 "--target", EX + "heating_valve", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    text = output.read_text()
+    assert text.startswith(CASE_STUDY.read_text().rstrip("\n")) and "hasEffect" in text
+    store = GraphStore.embedded(None)
+    store.load_model("v2", output)
+    model = assemble(store, "v2")
+    assert any(c.signature.id == "ValveLeakage" for c in model.components.values())
+
+
+@pytest.mark.parametrize("suffix", [".jsonld", ".rdf", ".nt"])
+def test_add_effect_writes_the_format_its_output_names_and_refuses_the_same_effect_twice(tmp_path, suffix):
+    output = tmp_path / f"with_effect{suffix}"
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "ValveLeakage",
+                                 "--target", EX + "heating_valve", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    store = GraphStore.embedded(None)
+    store.load_model("v2", output)  # parsed as its suffix says
+    assert any(c.signature.id == "ValveLeakage" for c in assemble(store, "v2").components.values())
+    again = runner.invoke(app, ["add-effect", str(output), "--effect", "ValveLeakage",
+                                "--target", EX + "heating_valve", "-o", str(tmp_path / f"twice{suffix}")])
+    assert again.exit_code == 2 and "is recorded at" in again.output and "already" in again.output
+    assert not (tmp_path / f"twice{suffix}").exists()
+    unknown = runner.invoke(app, ["add-effect", str(output), "--effect", "FanMotorHeat",
+                                  "--target", EX + "supply_fan", "-o", str(tmp_path / "v3.txt")])
+    assert unknown.exit_code == 2 and "v3.txt" in unknown.output and "unsupported RDF format" in unknown.output
+
+
+def test_add_effect_refuses_an_effect_that_does_not_apply(tmp_path):
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "FanMotorHeat",
+                                 "--target", EX + "heating_valve", "-o", str(tmp_path / "x.ttl")])
+    assert result.exit_code == 2 and "does not apply" in result.output
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "Nope", "--target", EX + "x",
+                                 "-o", str(tmp_path / "x.ttl")])
+    assert result.exit_code == 2 and "FanMotorHeat" in result.output
+
+
+def test_example_generate_writes_the_columns_the_model_needs(tmp_path):
+    output = tmp_path / "data.csv"
+    truth = tmp_path / "truth.json"
+    result = runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "SensorOffset",
+                                 "--days", "1", "-o", str(output), "--truth-json", str(truth)])
+    assert result.exit_code == 0, result.output
+    written = json.loads(truth.read_text())
+    assert written["hidden_effect"] == "SensorOffset" and written["node"].startswith(EX)
+    assert any(key.endswith("#offset") for key in written["parameters"]) and len(written["parameters"]) > 14
+    again = tmp_path / "again.json"  # read back, it is the truth again (the noise is drawn anew)
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "SensorOffset", "--days",
+                               "1", "-o", str(tmp_path / "again.csv"), "--truth-from", str(truth), "--truth-json", str(again)]).exit_code == 0
+    assert json.loads(again.read_text()) == written
+    header = output.read_text().splitlines()[0].split(",")
+    assert header[0] == "time" and "coil_outlet_air_temperature" in header and len(header) == 10
+    assert len(output.read_text().splitlines()) == 1 + 144
+    bad = runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "Nope", "-o", str(output)])
+    assert bad.exit_code == 2 and "CoilThermalMass" in bad.output
+
+
+def test_example_generate_drives_a_given_truth_with_a_measured_operation(tmp_path):
+    """Semi-synthetic data: the boundary columns and time grid of a measured file, the targets from a
+    truth whose parameters come from a calibration's JSON (keys of the model under another name)."""
+    operation = tmp_path / "operation.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "--seed", "3",
+                               "-o", str(operation)]).exit_code == 0
+    key = "https://w3id.org/graphtwin/resource/model/elsewhere/component/PIController/coil_outlet_air_temperature_controller#proportional_gain"
+    columns = {}
+    for gain in (0.004, 0.04):
+        run = tmp_path / f"run-{gain}.json"
+        run.write_text(json.dumps({"parameters": {key: {"median": gain, "quantile16": 0.0}}}))
+        output = tmp_path / f"semi-{gain}.csv"
+        result = runner.invoke(app, ["example", "generate", str(CASE_STUDY), "--operation", str(operation),
+                                     "--truth-from", str(run), "--hidden-effect", "FanMotorHeat", "-o", str(output)])
+        assert result.exit_code == 0, result.output
+        assert "1 parameters from" in result.output and "FanMotorHeat" in result.output
+        header, *rows = [line.split(",") for line in output.read_text().splitlines()]
+        columns[gain] = dict(zip(header, zip(*rows)))
+    measured_header, *measured_rows = [line.split(",") for line in operation.read_text().splitlines()]
+    measured = dict(zip(measured_header, zip(*measured_rows)))
+    for name in ("time", "supply_air_flow", "coil_outlet_air_temperature_setpoint", "fan_inlet_air_temperature",
+                 "supply_water_temperature"):
+        assert columns[0.004][name] == columns[0.04][name] == measured[name], name  # the measured operation
+    assert columns[0.004]["valve_position"] != columns[0.04]["valve_position"]  # the given gain drives the loop
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"parameters": {key.replace("proportional_gain", "proportional_gian"): {"median": 1.0}}}))
+    result = runner.invoke(app, ["example", "generate", str(CASE_STUDY), "--truth-from", str(bad), "-o", str(tmp_path / "x.csv")])
+    assert result.exit_code == 2 and "proportional_gian" in result.output
+    bad.write_text("{}")
+    result = runner.invoke(app, ["example", "generate", str(CASE_STUDY), "--truth-from", str(bad), "-o", str(tmp_path / "x.csv")])
+    assert result.exit_code == 2 and "calibrate --json" in result.output
+
+
+def test_simulate_writes_simulation_beside_measurements(tmp_path):
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
+    params = tmp_path / "params.json"
+    params.write_text(json.dumps({"proportional_gain": 0.02}))
+    out = tmp_path / "out.csv"
+    result = runner.invoke(app, ["simulate", str(CASE_STUDY), str(data), "--params", str(params), "-o", str(out), "--memory"])
+    assert result.exit_code == 0, result.output
+    header = out.read_text().splitlines()[0].split(",")
+    assert "coil_outlet_air_temperature (simulated)" in header
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"proportional_gian": 0.02}))
+    result = runner.invoke(app, ["simulate", str(CASE_STUDY), str(data), "--params", str(bad), "--memory"])
+    assert result.exit_code == 2 and "proportional_gian" in result.output
+
+
+def test_compare_locates_a_hidden_leak_without_testing_the_catalog_and_saves_its_plots(tmp_path):
+    from matplotlib.image import imread
+
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "ValveLeakage",
+                               "--days", "2", "--seed", "2", "-o", str(data)]).exit_code == 0
+    window = ["--train", "2026-01-12/2026-01-12T23:59", "--test", "2026-01-13/"]
+    result = runner.invoke(app, ["compare", str(CASE_STUDY), str(data), *window, "--memory", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["effects"] == [] and report["effects_tested"] is False
+    assert report["nothing_significant_missing"] is None  # not asked, so not answered
+    failing = {node for node, sensor in report["sensors"].items() if sensor["fails"]}
+    assert EX + "coil_outlet_air_temperature_sensor" in failing, report["sensors"]
+    assert any(EX + "heating_valve" in loc["components"] for loc in report["localization"]), report["localization"]
+    assert set(report["residual_dependence"]) == failing  # pointers for every failing sensor
+    plots = tmp_path / "plots"
+    text = runner.invoke(app, ["compare", str(CASE_STUDY), str(data), *window, "--memory", "--plots", str(plots)])
+    assert text.exit_code == 0, text.output
+    assert "fails" in text.output and "Which effect is missing" not in text.output
+    pngs = sorted(plots.glob("*.png"))
+    assert [p.name.rsplit("-", 1)[1] for p in pngs] == ["residuals.png", "test.png"]
+    assert all(imread(p).shape[0] > 200 for p in pngs)
+
+
+def test_compare_strategies_prints_both_fits_per_regime_and_their_cross_validation(tmp_path):
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "--seed", "1",
+                               "-o", str(data)]).exit_code == 0
+    result = runner.invoke(app, ["compare-strategies", str(CASE_STUDY), str(data), "--folds", "2", "--memory", "--json"])
+    assert result.exit_code == 0, result.output
+    comparison = json.loads(result.output)
+    assert set(comparison["strategies"]) == {"joint", "successive"} and comparison["better"] in (
+        "joint", "successive", "tie")
+    assert all(len(s["cv"]) == 2 for s in comparison["strategies"].values())
+    assert comparison["plan"] and comparison["rules"]
+    text = runner.invoke(app, ["compare-strategies", str(CASE_STUDY), str(data), "--folds", "2", "--memory"])
+    assert text.exit_code == 0 and "better on held-out data:" in text.output and "joint | successive" in text.output
+    short = runner.invoke(app, ["compare-strategies", str(CASE_STUDY), str(data), "--folds", "30", "--memory"])
+    assert short.exit_code == 2 and "30 folds" in short.output
+
+
+def test_a_store_another_process_holds_is_a_one_line_error(tmp_path):
+    path = tmp_path / "data"
+    with held_by_another_process(path):
+        result = runner.invoke(app, ["assemble", str(CASE_STUDY), "--store", str(path)])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"error: store {path} is in use by another process (another graphtwin command, or a running graphtwin serve" in result.output
+
+
+def test_add_effect_with_a_local_name_suggests_the_full_iri(tmp_path):
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "FanMotorHeat", "--target", "supply_fan",
+                                 "-o", str(tmp_path / "x.ttl")])
+    assert result.exit_code == 2
+    assert f"the model has no node supply_fan: give its full IRI, e.g. {EX}supply_fan" in result.output
+
+
+def test_a_model_ttl_in_the_current_folder_is_model_named_model(tmp_path, monkeypatch):
+    (tmp_path / "model.ttl").write_bytes(CASE_STUDY.read_bytes())
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, ["assemble", "model.ttl", "--store", str(tmp_path / "store")])
+    assert result.exit_code == 0, result.output
+    assert GraphStore.embedded(tmp_path / "store").models() == ["model"]
+
+
+def _run(args: list[str]) -> tuple[int, str]:
+    """Exit code and output of a command that opens the on-disk store; its store is closed after
+    (the runner keeps the command's frames, which hold it, in the result: a process would exit)."""
+    result = runner.invoke(app, args)
+    outcome = (result.exit_code, result.output)
+    del result
+    gc.collect()
+    return outcome
+
+
+def test_query_prints_csv_or_json_with_full_iris_and_refuses_an_unknown_model(tmp_path):
+    store = ["--store", str(tmp_path / "store")]
+    assert _run(["assemble", str(CASE_STUDY), *store])[0] == 0
+    coil = ["--param", "class=https://saref.etsi.org/saref4bldg/Coil"]
+    code, output = _run(["query", "models-for-class", *coil, *store])  # piped: CSV
+    assert code == 0, output
+    rows = list(csv.DictReader(io.StringIO(output)))
+    assert {r["id"] for r in rows} >= {"HotWaterLoop", "WaterCoil"}
+    assert all(r["signature"].startswith("https://w3id.org/graphtwin/resource/signature/") for r in rows)
+    code, output = _run(["query", "models-for-class", *coil, "--format", "json", *store])
+    assert [r["id"] for r in json.loads(output)] == [r["id"] for r in rows]
+    code, output = _run(["query", "calibrated-parameters", "--model", "modle", *store])
+    assert code == 2 and "no model 'modle' in the store" in output and "ventilation_case_study" in output
+    code, output = _run(["query", "calibrated-paramters", *store])
+    assert code == 2 and "error: no query 'calibrated-paramters'" in output
+    # a query about a building graph runs over the model's graphs (it printed no rows before)
+    code, output = _run(["query", "flow-edges", "--model", "ventilation_case_study", *store])
+    edges = {(r["from"].removeprefix(EX), r["to"].removeprefix(EX), r["kind"]) for r in csv.DictReader(io.StringIO(output))}
+    assert code == 0 and ("heating_coil_water_side", "heating_coil_air_side", "heat") in edges and len(edges) > 10
+    code, output = _run(["query", "measurement-link", "--model", "ventilation_case_study", "--param",
+                         f"device={EX}fan_power_meter", *store])
+    assert code == 0 and "supply_fan_power,http://qudt.org/vocab/unit/W" in output
+    code, output = _run(["query", "flow-edges", *store])
+    assert code == 2 and "query flow-edges reads a building model's graphs: give --model" in output
+
+
+def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(tmp_path):
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "2", "--seed", "3",
+                               "-o", str(data)]).exit_code == 0
+    stamps = [line.split(",")[0] for line in data.read_text().splitlines()[1:]]
+    result = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory",
+                                 "--train", f"{stamps[0]}/{stamps[143]}", "--test", f"{stamps[144]}/"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    assert "Estimates (point" in result.output and "Metrics, test window" in result.output
+    regimes = result.output[result.output.index("Test RMSE per operating regime"):]
+    assert "supply air flow meter" in regimes and " %" in regimes and "°C" in regimes  # rules, shares, units
+    refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--gp-input", "supply_air_flow"])
+    assert refused.exit_code == 2 and "a point calibration has no discrepancy" in refused.output
+    no_start = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--start-from", "v0"])
+    assert no_start.exit_code == 2 and "start from 'v0': no such model in the store" in no_start.output
+
+
+def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():
+    from types import SimpleNamespace
+
+    from service import cli
+
+    sensor = EX + "coil_outlet_air_temperature_sensor"
+    record = SimpleNamespace(regime_rule_accuracy=1.0, metrics={"test": {sensor: SimpleNamespace(unit="degC")}}, regimes=[
+        {"rule": "setpoint > 18.5 °C", "share": 1.0, "rmse": {sensor: 0.31}},
+        {"rule": "setpoint ≤ 14 °C", "share": 0.0, "rmse": {sensor: float("nan")}}])
+    with cli.console.capture() as captured:
+        cli._print_regimes(record)
+    rows = {line.split("│")[1].strip(): line for line in captured.get().splitlines() if line.count("│") > 2}
+    assert "0.31 °C" in rows["setpoint > 18.5 °C"]
+    assert "nan" not in rows["setpoint ≤ 14 °C"] and "–" in rows["setpoint ≤ 14 °C"]
+
+
+def test_the_command_line_starts_without_the_calibration_libraries():
+    """`graphtwin --help`, `assemble` and `query` do not import SciPy's optimisers or scikit-learn (a
+    second of start-up); the commands that calibrate import them when they run."""
+    probe = ("import sys, service.cli; print(sorted(m for m in ('scipy.optimize', 'sklearn', 'service.diagnosis.loop', "
+             "'service.calibration.run') if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
+    assert loaded == "[]"
+
+
+def test_a_mistyped_store_and_a_file_name_that_is_no_model_name_are_said_as_such(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for command in (["history", "model"], ["query", "calibrated-parameters"], ["report", "run-1", "-o", "r.html"]):
+        result = runner.invoke(app, [*command, "--store", "nowhere"])
+        assert result.exit_code == 2 and "no store at nowhere" in result.output, (command, result.output)
+    assert not (tmp_path / "nowhere").exists()  # not created empty
+    spaced = tmp_path / "my flexlab (v2).ttl"
+    spaced.write_bytes(CASE_STUDY.read_bytes())
+    result = runner.invoke(app, ["assemble", str(spaced), "--memory"])
+    assert result.exit_code == 2 and "model name 'my flexlab (v2)'" in result.output and "--name" in result.output
+    assert runner.invoke(app, ["assemble", str(spaced), "--memory", "--name", "flexlab"]).exit_code == 0
+
+
+def test_example_generate_refuses_data_of_fewer_than_two_steps(tmp_path):
+    for days in ("0.01", "-1"):
+        result = runner.invoke(app, ["example", "generate", "ventilation_case_study", f"--days={days}", "-o", str(tmp_path / "x.csv")])
+        assert result.exit_code == 2 and f"{float(days):g} days of data: give at least two steps of 10 min" in result.output
+        assert not (tmp_path / "x.csv").exists()
+
+
+def test_a_bayesian_runs_metrics_show_the_90_percent_intervals_ace_and_width(monkeypatch):
+    from types import SimpleNamespace
+
+    from rich.console import Console
+
+    import service.cli as cli
+    from service.calibration.metrics import IntervalCoverage
+
+    printed = Console(record=True, width=200)
+    monkeypatch.setattr(cli, "console", printed)
+    common = dict(rmse=0.1, mae=0.08, r2=0.9, cv_rmse_percent=1.0, nmbe_percent=0.2, unit="degC")
+    cli._print_metrics("Metrics, test window", {
+        EX + "a_sensor": SimpleNamespace(**common, coverage=(IntervalCoverage(0.5, 0.52, 0.02, 0.1),
+                                                             IntervalCoverage(0.9, 0.87, -0.03, 0.33))),
+        EX + "b_sensor": SimpleNamespace(**common, coverage=())})
+    text = printed.export_text()
+    assert "ACE 90 %" in text and "90 % width" in text
+    assert any("a_sensor" in line and "-3.0" in line and "0.33" in line for line in text.splitlines())
+    cli._print_metrics("Metrics, train window", {EX + "a_sensor": SimpleNamespace(**common, coverage=())})
+    assert "ACE" not in printed.export_text()  # a point fit has no intervals

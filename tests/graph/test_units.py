@@ -1,0 +1,66 @@
+"""QUDT unit IRIs → simulator port units: hand-computed conversions, differences, clear errors."""
+
+import numpy as np
+import pytest
+
+from service.graph.units import QUDT_UNITS, UnitError, convert, unit_label
+
+U = "http://qudt.org/vocab/unit/"
+
+
+@pytest.mark.parametrize(("value", "unit", "port", "expected"), [
+    (32.0, "DEG_F", "degC", 0.0),
+    (212.0, "DEG_F", "degC", 100.0),
+    (-40.0, "DEG_F", "degC", -40.0),
+    (293.15, "K", "degC", 20.0),
+    (20.0, "DEG_C", "degC", 20.0),
+    (50.0, "PERCENT", "1", 0.5),
+    (3600.0, "M3-PER-HR", "m3/s", 1.0),
+    (250.0, "L-PER-SEC", "m3/h", 900.0),  # 0.25 m³/s · 3600 s/h
+    (1000.0, "FT3-PER-MIN", "m3/s", 0.47194745),  # 1 cfm = 0.3048³ m³ / 60 s
+    (3600.0, "KiloGM-PER-HR", "kg/s", 1.0),
+    (1.5, "KiloW", "W", 1500.0),
+    (1000.0, "BTU_IT-PER-HR", "W", 293.07107),
+    (100.0, "KiloPA", "bar", 1.0),
+    (2.0, "IN_H2O", "Pa", 498.17782),  # 1 inH₂O (4 °C) = 249.08891 Pa
+    (3.0, "MIN", "s", 180.0),
+    (2.0, "HR", "s", 7200.0),
+    (0.8, "KiloW-PER-K", "W/K", 800.0),
+])
+def test_qudt_units_convert_to_port_units(value, unit, port, expected):
+    assert convert([value], U + unit, port) == pytest.approx([expected], rel=1e-9, abs=1e-12)
+
+
+def test_temperature_differences_drop_the_offset():
+    # port unit "K" is a difference: a 9 °F bias is 5 K, a 3 °C rise is 3 K
+    assert convert([9.0, -1.8], U + "DEG_F", "K") == pytest.approx([5.0, -1.0])
+    assert convert([3.0], U + "DEG_C", "K") == pytest.approx([3.0])
+    assert convert([5.0], "K", U + "DEG_F") == pytest.approx([9.0])
+    # the QUDT IRI unit:K stays absolute
+    assert convert([273.15], U + "K", "degC") == pytest.approx([0.0], abs=1e-12)
+
+
+def test_conversion_is_affine_keeps_shape_and_round_trips():
+    values = np.array([[14.0, 68.0], [95.0, np.nan]])
+    celsius = convert(values, U + "DEG_F", "degC")
+    assert celsius.shape == (2, 2) and np.isnan(celsius[1, 1])
+    assert celsius[0] == pytest.approx([-10.0, 20.0])
+    np.testing.assert_allclose(convert(celsius, "degC", U + "DEG_F"), values, rtol=1e-12)
+    assert convert([1.0], "DEG_F", "degC") == pytest.approx(convert([1.0], U + "DEG_F", "degC"))  # local name
+
+
+def test_incompatible_and_unknown_units_are_named_with_the_port():
+    with pytest.raises(UnitError, match=r"DEG_F \(temperature\) to kg/s \(mass_flow\) for port fan\.outlet_air_mass_flow"):
+        convert([1.0], U + "DEG_F", "kg/s", where="port fan.outlet_air_mass_flow")
+    with pytest.raises(UnitError, match=r"unknown unit '.*FURLONG' for column 'speed':.*DEG_F"):
+        convert([1.0], U + "FURLONG", "m3/s", where="column 'speed'")
+    with pytest.raises(UnitError, match="unknown unit 'furlong/s'"):
+        convert([1.0], U + "M3-PER-SEC", "furlong/s")
+    with pytest.raises(UnitError, match=r"1/K \(inverse_temperature\) to K \(temperature\)"):
+        convert([1.0], "1/K", "K")
+
+
+def test_labels_for_reports():
+    assert unit_label(U + "DEG_F") == "°F" and unit_label("m3/s") == "m³/s"
+    assert unit_label(U + "FURLONG") == U + "FURLONG"
+    assert all(spec.multiplier > 0 for spec in QUDT_UNITS.values())

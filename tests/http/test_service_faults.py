@@ -1,0 +1,142 @@
+"""Faults: a real ``graphtwin serve`` (uvicorn, on-disk store, the default process-pool executor) is
+killed with SIGKILL, its job processes with it, while a calibration runs, and started again on the same
+folders: the finished results are intact, the interrupted job is marked and can be resubmitted, and
+the store holds exactly what it held before the kill (the half-done job wrote nothing)."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+from case_study import CASE_STUDY
+from oxigraph_server import free_loopback_port
+
+from service.resources import signatures_dir
+from service.matching.signature import load_signature_library
+from service.graph.store import GraphStore
+from service.data.synthetic import generate_synthetic_data
+
+TOKEN = "fault-token-0123456789"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+SHORT_TRAIN = "2026-01-12T06:00/2026-01-12T09:00"  # a calibration of about a second
+GRAPH_SIZES = "SELECT ?g (COUNT(*) AS ?n) WHERE { GRAPH ?g { ?s ?p ?o } } GROUP BY ?g"
+
+
+class Server:
+    """``graphtwin serve`` in a process group of its own (the pool processes it spawns join it)."""
+
+    def __init__(self, folder: Path):
+        self.port = free_loopback_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        env = {**os.environ, "GRAPHTWIN_TOKEN": TOKEN, "GRAPHTWIN_EXECUTOR": "processes",
+               "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+        self.log = (folder / f"serve-{self.port}.log").open("wb")
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", "from service.cli import app; app()", "serve", "--store", str(folder / "store"),
+             "--data-dir", str(folder / "service"), "--port", str(self.port)],
+            env=env, stdin=subprocess.DEVNULL, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.client = httpx.Client(base_url=self.url, timeout=30)
+        deadline = time.monotonic() + 60
+        while True:
+            assert self.process.poll() is None, f"graphtwin serve exited: {Path(self.log.name).read_text()[-2000:]}"
+            try:
+                if self.client.get("/health").status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            assert time.monotonic() < deadline, "graphtwin serve did not answer within 60 s"
+            time.sleep(0.1)
+
+    def kill(self, sig: int) -> None:
+        """``sig`` to the whole process group; waits for the server to exit."""
+        self.client.close()
+        try:
+            os.killpg(self.process.pid, sig)
+        except ProcessLookupError:
+            pass
+        self.process.wait(timeout=30)
+        self.log.close()
+
+    def wait_job(self, job_id: str, timeout_s: float = 120) -> dict:
+        deadline = time.monotonic() + timeout_s
+        while (job := self.client.get(f"/jobs/{job_id}").json())["status"] in ("queued", "running"):
+            assert time.monotonic() < deadline, f"job {job_id} still {job['status']}: {job['progress']}"
+            time.sleep(0.05)
+        return job
+
+    def graph_sizes(self) -> dict[str, int]:
+        rows = self.client.get("/sparql", params={"query": GRAPH_SIZES}).json()["results"]["bindings"]
+        return {r["g"]["value"]: int(r["n"]["value"]) for r in rows}
+
+    def calibrated_parameters(self) -> list[dict]:
+        return self.client.get("/queries/calibrated-parameters", params={"model": "case"}).json()["results"]["bindings"]
+
+
+@pytest.fixture
+def servers(tmp_path):
+    started = []
+
+    def start() -> Server:
+        started.append(Server(tmp_path))
+        return started[-1]
+
+    yield start
+    for server in started:
+        if server.process.poll() is None:
+            server.kill(signal.SIGTERM)
+        try:  # pool processes a killed server left behind
+            os.killpg(server.process.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+@pytest.mark.slow  # two server starts (each spawning its pool process), three calibrations: ~30 s
+def test_a_server_killed_mid_job_restarts_with_finished_results_intact_and_the_job_interrupted(
+        servers, case_csv, tmp_path):
+    first = servers()
+    assert first.client.put("/models/case", content=CASE_STUDY.read_bytes(), headers=AUTH).status_code == 201
+    upload = first.client.post("/models/case/measurements", content=case_csv.read_bytes(),
+                               headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
+    # the job to kill calibrates on four days (several seconds): still running 0.5 s in on any machine
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    days = tmp_path / "four_days.csv"
+    generate_synthetic_data(store, "case", days, library=load_signature_library(signatures_dir()), n_days=4)
+    long_upload = first.client.post("/models/case/measurements", content=days.read_bytes(),
+                                    headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
+    finished = first.wait_job(first.client.post("/jobs/calibrate", headers=AUTH, json={
+        "model": "case", "measurements": upload, "train": SHORT_TRAIN}).json()["id"])
+    assert finished["status"] == "succeeded", finished
+    sizes, parameters = first.graph_sizes(), first.calibrated_parameters()
+    assert len(parameters) == len(finished["result"]["parameters"]) > 0
+
+    killed = first.client.post("/jobs/calibrate", headers=AUTH, json={
+        "model": "case", "measurements": long_upload, "seed": 1}).json()
+    deadline = time.monotonic() + 30
+    while not any(p["message"].startswith("sent to a local process pool")
+                  for p in first.client.get(f"/jobs/{killed['id']}").json()["progress"]):
+        assert time.monotonic() < deadline, "the job did not reach the process pool"
+        time.sleep(0.02)
+    time.sleep(0.5)  # the work is under way in its pool process
+    assert first.client.get(f"/jobs/{killed['id']}").json()["status"] == "running"
+    first.kill(signal.SIGKILL)
+
+    second = servers()
+    assert second.client.get("/health").json()["jobs_active"] == 0
+    again = second.client.get(f"/jobs/{finished['id']}").json()
+    assert again["status"] == "succeeded" and again["result"] == finished["result"] and again["links"] == finished["links"]
+    interrupted = second.client.get(f"/jobs/{killed['id']}").json()
+    assert interrupted["status"] == "interrupted" and "while the job was running" in interrupted["error"]
+    assert second.graph_sizes() == sizes, "the killed job wrote nothing, the store lost nothing"
+    assert second.calibrated_parameters() == parameters
+
+    resubmitted = second.client.post(f"/jobs/{killed['id']}/resubmit", headers=AUTH)
+    assert resubmitted.status_code == 202 and resubmitted.json()["resubmitted_from"] == killed["id"]
+    redone = second.wait_job(resubmitted.json()["id"])
+    assert redone["status"] == "succeeded", redone
+    assert {p["run"]["value"].rsplit("/", 1)[-1] for p in second.calibrated_parameters()} == {redone["result"]["run_id"]}
+    assert set(second.graph_sizes()) == set(sizes) | {redone["links"]["run_graph"]}

@@ -1,0 +1,305 @@
+"""Assembly of the case study: components, wiring, boundary inputs, targets, parameters, effects."""
+
+import dataclasses
+
+import pytest
+from case_study import CASE_STUDY, EX, case_study_with_effect
+
+from service.model.assembly import AssemblyError, EffectRequest, IncompleteModelError, assemble
+from service.model.assembly_triples import assembly_triples
+from service.resources import signatures_dir
+from service.matching.signature import load_signature_library
+from service.graph.store import GraphStore
+
+
+def _nodes(model, components):
+    return sorted(model.components[c].node.rsplit("#", 1)[-1] for c in components)
+
+
+def test_case_study_assembles_like_the_paper(case_store):
+    model = assemble(case_store, "case")
+    assert _nodes(model, model.boundary_inputs) == [
+        "fan_inlet_air_temperature_sensor", "setpoint_schedule",
+        "supply_air_flow_meter", "supply_water_temperature_sensor"]
+    assert _nodes(model, model.targets) == [
+        "coil_inlet_water_temperature_sensor", "coil_outlet_air_temperature_sensor",
+        "coil_outlet_water_temperature_sensor", "fan_power_meter", "valve_position_sensor"]
+    mapped = {ref.name: ref.value for ref in model.mapped_parameters}
+    assert mapped == {"nominal_air_flow": 1.5, "nominal_power": pytest.approx(1800.0), "valve_flow_coefficient": 2.5}
+    assert len(model.estimated_parameters) == 14
+    loop = model.component_for_node(EX + "heating_valve")
+    assert loop.signature.id == "HotWaterLoop" and EX + "check_valve" in loop.modeled_nodes
+    wires = {(model.components[c.source].signature.id, c.source_port, model.components[c.target].node.rsplit("#")[-1], c.target_port)
+             for c in model.connections}
+    assert ("PIController", "control_signal", "heating_coil_air_side", "valve_position") in wires
+    assert ("TemperatureSensor", "measured_value", "coil_outlet_air_temperature_controller", "measured_value") in wires
+    assert ("Fan", "outlet_air_mass_flow", "heating_coil_air_side", "air_mass_flow") in wires
+
+
+def test_assembly_triples_describe_every_component(case_store):
+    model = assemble(case_store, "case")
+    triples = assembly_triples(model, "case")
+    case_store.write_graph(case_store.assembly_graph("case"), triples)
+    rows = case_store.query(
+        "PREFIX gt: <https://w3id.org/graphtwin/ontology#> SELECT ?c ?node WHERE { GRAPH ?g { ?a gt:hasTarget ?c . ?c gt:represents ?node } }")
+    assert len(rows) == 5
+
+
+def test_a_recorded_effect_is_spliced_on_reassembly(tmp_path):
+    library = load_signature_library(signatures_dir())
+    store = GraphStore.embedded(None)
+    store.load_model("with_heat", case_study_with_effect(library["FanMotorHeat"], EX + "supply_fan"))
+    model = assemble(store, "with_heat")
+    effect = [c for c in model.components.values() if c.signature.id == "FanMotorHeat"]
+    assert len(effect) == 1
+    coil = model.component_for_node(EX + "heating_coil_air_side").iri
+    into_coil = [c for c in model.connections if (c.target, c.target_port) == (coil, "inlet_air_temperature")]
+    assert [model.components[c.source].signature.id for c in into_coil] == ["FanMotorHeat"]
+    assert {r.name for r in model.estimated_parameters} >= {"motor_heat_fraction"}
+
+
+def test_an_effect_where_its_pattern_does_not_match_is_refused(case_store):
+    with pytest.raises(AssemblyError, match="does not apply"):
+        assemble(case_store, "case", extra_effects=[EffectRequest("FanMotorHeat", EX + "heating_valve")])
+
+
+def test_a_missing_upstream_source_is_reported_in_words():
+    store = GraphStore.embedded(None)
+    text = CASE_STUDY.read_text().replace("fso:suppliesFluidTo ex:supply_fan .", ".")
+    store.load_model("broken", text.encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "broken")
+    assert any("supply_fan" in p and "upstream" in p for p in info.value.problems)
+
+
+def test_two_units_whose_nodes_share_local_names_keep_every_component():
+    """Two copies of the case study in two namespaces: ``…/unit1#supply_fan`` and
+    ``…/unit2#supply_fan`` are two fans, two components (before, one replaced the other)."""
+    text = CASE_STUDY.read_text()
+    units = [text.replace(EX, EX.replace("case-study#", f"case-study/unit{k}#")) for k in (1, 2)]
+    store = GraphStore.embedded(None)
+    store.ensure_ontologies()
+    store.load_model("two", "\n".join(units).encode())
+    store.load_model("case", CASE_STUDY)
+    one = assemble(store, "case")
+    both = assemble(store, "two")
+    assert len(both.components) == 2 * len(one.components)
+    assert len(both.targets) == 10 and len(both.boundary_inputs) == 2 * len(one.boundary_inputs)
+    fans = sorted(c.node for c in both.components.values() if c.signature.id == "Fan")
+    assert [f.rsplit("/", 1)[-1] for f in fans] == ["unit1#supply_fan", "unit2#supply_fan"]
+    # each unit's coil is fed by its own fan
+    for unit in ("unit1", "unit2"):
+        coil = both.component_for_node(EX.replace("case-study#", f"case-study/{unit}#") + "heating_coil_air_side").iri
+        fed_by = {both.components[c.source].node for c in both.connections if c.target == coil and c.target_port == "air_mass_flow"}
+        assert fed_by == {EX.replace("case-study#", f"case-study/{unit}#") + "supply_fan"}
+
+
+def test_a_device_whose_upstream_model_lacks_its_quantity_is_a_boundary_input_with_a_note():
+    """The coil outlet water sensor moved after the check valve: the hot-water loop models the check
+    valve but gives no temperature there, so the sensor cannot be a target — said, not silent."""
+    text = CASE_STUDY.read_text()
+    for old, new in (("fso:suppliesFluidTo ex:coil_outlet_water_temperature_sensor .", "fso:suppliesFluidTo ex:check_valve ."),
+                     ('gt:timeSeriesId "coil_outlet_water_temperature" ;\n    fso:suppliesFluidTo ex:check_valve .',
+                      'gt:timeSeriesId "coil_outlet_water_temperature" .'),
+                     ("fso:suppliesFluidTo ex:return_water_pipe .\n\nex:return_water_pipe",
+                      "fso:suppliesFluidTo ex:coil_outlet_water_temperature_sensor .\n\nex:return_water_pipe")):
+        assert old in text
+        text = text.replace(old, new)
+    store = GraphStore.embedded(None)
+    store.load_model("moved", text.encode())
+    model = assemble(store, "moved")
+    sensor = model.component_for_node(EX + "coil_outlet_water_temperature_sensor").iri
+    assert sensor in model.boundary_inputs and sensor not in model.targets
+    assert any(f"{EX}check_valve is modelled by HotWaterLoop, which has no output carrying 'temperature' there" in note
+               and note.endswith("coil_outlet_water_temperature_sensor is a boundary input, not a calibration target")
+               for note in model.notes)
+
+
+def test_two_nearest_partners_alike_are_a_note_naming_both():
+    """A second fan feeding the coil in parallel: the coil's nearest upstream fan is either; one is
+    kept (the first in IRI order, deterministic) and the note names the one set aside."""
+    store = GraphStore.embedded(None)
+    store.load_model("parallel", CASE_STUDY.read_text().encode()
+                     + b"\nex:supply_fan_2 a s4bldg:Fan ; fso:suppliesFluidTo ex:heating_coil_air_side .\n")
+    model = assemble(store, "parallel", allow_incomplete=True)  # the second fan has no flow meter
+    [note] = [n for n in model.notes if "ways alike" in n]
+    assert note.startswith("heating_coil_air_side: HotWaterLoop matches 4 ways alike; kept air_inlet = supply_fan, fan = supply_fan")
+    assert "fan = supply_fan_2" in note
+    assert model.component_for_node(EX + "heating_coil_air_side").bindings["fan"] == EX + "supply_fan"
+
+
+SHARED_PUMP = """@prefix ex: <https://example.org/plant/> . @prefix saref: <https://saref.etsi.org/core/> .
+@prefix s4bldg: <https://saref.etsi.org/saref4bldg/> . @prefix fso: <https://w3id.org/fso#> .
+@prefix gt: <https://w3id.org/graphtwin/ontology#> . @prefix unit: <http://qudt.org/vocab/unit/> .
+ex:sws a s4bldg:Sensor ; saref:observes ex:sws_t ; saref:isMeasuredIn unit:DEG_C ; fso:suppliesFluidTo ex:pump .
+ex:sws_t a saref:Temperature . ex:pump a s4bldg:Pump ; fso:suppliesFluidTo ex:v1, ex:v2 .
+""" + "".join(f"""
+ex:v{k} a s4bldg:Valve ; saref:hasProperty ex:v{k}_pos ; fso:suppliesFluidTo ex:c{k}_w . ex:v{k}_pos a gt:OpeningPosition .
+ex:c{k}_w a s4bldg:Coil ; fso:transfersHeatTo ex:c{k}_a ; fso:suppliesFluidTo ex:cv{k} . ex:cv{k} a s4bldg:Valve .
+ex:in{k} a s4bldg:Sensor ; saref:observes ex:in{k}_t ; saref:isMeasuredIn unit:DEG_C ; fso:suppliesFluidTo ex:fm{k} .
+ex:in{k}_t a saref:Temperature . ex:fm{k}_q a gt:FlowRate .
+ex:fm{k} a s4bldg:FlowMeter ; saref:observes ex:fm{k}_q ; saref:isMeasuredIn unit:M3-PER-SEC ; fso:suppliesFluidTo ex:fan{k} .
+ex:fan{k} a s4bldg:Fan ; fso:suppliesFluidTo ex:c{k}_a . ex:c{k}_a a s4bldg:Coil ; fso:suppliesFluidTo ex:out{k} .
+ex:out{k} a s4bldg:Sensor ; saref:observes ex:out{k}_t ; saref:isMeasuredIn unit:DEG_C . ex:out{k}_t a saref:Temperature .
+ex:ctl{k} a s4bldg:Controller ; saref:observes ex:out{k}_t ; saref:controls ex:v{k}_pos ; saref:hasProfile ex:sp{k} .
+ex:sp{k} a gt:SetpointSchedule ; saref:isMeasuredIn unit:DEG_C .""" for k in (1, 2))
+
+
+def test_a_match_that_loses_a_node_it_needs_is_reported_as_the_reason():
+    """One pump serving two coils: the hot-water loop of coil 2 matches but needs the pump, which the
+    loop of coil 1 represents; the report says so, not only which triples another signature missed."""
+    store = GraphStore.embedded(None)
+    store.load_model("plant", SHARED_PUMP.encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "plant")
+    assert ("https://example.org/plant/c2_a is not modelled: HotWaterLoop matches there but also needs "
+            "https://example.org/plant/pump: the HotWaterLoop at c1_a represents it already") in info.value.problems
+
+
+def test_a_nominal_value_without_its_unit_is_estimated_with_a_note(case_store):
+    text = CASE_STUDY.read_text()
+    old = 'saref:hasValue "1.8"^^xsd:double ;\n    saref:isMeasuredIn unit:KiloW .'
+    assert old in text
+    store = GraphStore.embedded(None)
+    store.load_model("no_unit", text.replace(old, 'saref:hasValue "1.8"^^xsd:double .').encode())
+    model = assemble(store, "no_unit")
+    assert "nominal_power" not in {ref.name for ref in model.mapped_parameters}
+    assert (f"supply_fan: parameter nominal_power of Fan is estimated, not mapped: the graph gives 1.8 but no unit "
+            f"for it (add <{EX}supply_fan_nominal_power> <https://saref.etsi.org/core/isMeasuredIn> <a QUDT unit IRI> .)"
+            ) in model.notes
+    assert not [n for n in assemble(case_store, "case").notes if "no unit" in n]  # with its unit: no note
+
+
+def test_an_effect_splicing_a_port_its_host_lacks_is_refused_by_name(case_store):
+    """The pattern matches, but the component modelling the node has no such port: an assembly
+    error naming the port and the host's ports (before, the simulation failed with a KeyError)."""
+    library = load_signature_library(signatures_dir())
+    offset = library["SensorOffset"]
+    library["SensorOffset"] = dataclasses.replace(offset, splice=dataclasses.replace(offset.splice, port="inlet_value"))
+    with pytest.raises(AssemblyError, match=r"splices input 'inlet_value', which service\.components\.measuring_device:MeasuringDevice "
+                                            r"\(modelling .*coil_outlet_air_temperature_sensor\) does not have; its inputs: measured_value"):
+        assemble(case_store, "case", library=library,
+                 extra_effects=[EffectRequest("SensorOffset", EX + "coil_outlet_air_temperature_sensor")])
+
+
+FLEXLAB = "https://example.org/flexlab-x3a#"
+
+
+def _fed_by(model, node: str, port: str) -> set[str]:
+    component = model.component_for_node(FLEXLAB + node).iri
+    return {model.components[c.source].node.removeprefix(FLEXLAB)
+            for c in model.connections if c.target == component and c.target_port == port}
+
+
+def test_coils_take_their_air_flow_from_the_fan_downstream_or_else_upstream():
+    """The FLEXLAB unit draws its air through the coils; moved to blow through them (mixed air →
+    fan → cooling coil → heating coil → supply air), its coils read the fan upstream."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    blow_through = (text.replace('"AHU: Mixed Air Temperature" ;\n    fso:suppliesFluidTo ex:cooling_coil .',
+                                 '"AHU: Mixed Air Temperature" ;\n    fso:suppliesFluidTo ex:supply_fan .')
+                    .replace("fso:suppliesFluidTo ex:supply_fan .\nex:heating_coil_valve",
+                             "fso:suppliesFluidTo ex:supply_air_temperature_sensor .\nex:heating_coil_valve")
+                    .replace("saref:hasProperty ex:supply_fan_speed ;\n    fso:suppliesFluidTo ex:supply_air_temperature_sensor .",
+                             "saref:hasProperty ex:supply_fan_speed ;\n    fso:suppliesFluidTo ex:cooling_coil ."))
+    assert blow_through.count("fso:suppliesFluidTo ex:supply_fan .") == 1  # every replacement took
+    store = GraphStore.embedded(None)
+    store.ensure_ontologies()
+    store.load_model("draw", text.encode())
+    store.load_model("blow", blow_through.encode())
+    draw, blow = assemble(store, "draw"), assemble(store, "blow")
+    for model in (draw, blow):
+        assert _fed_by(model, "heating_coil", "air_mass_flow") == {"supply_fan"}
+        assert _fed_by(model, "cooling_coil", "air_mass_flow") == {"supply_fan"}
+    assert _fed_by(blow, "cooling_coil", "inlet_air_temperature") == {"supply_fan"}
+    assert _fed_by(draw, "cooling_coil", "inlet_air_temperature") == {"mixed_air_temperature_sensor"}
+    # the effects that need the air flow apply to a draw-through coil too
+    with_gain = assemble(store, "draw", extra_effects=[EffectRequest("ConstantHeatGain", FLEXLAB + "heating_coil")])
+    assert len(with_gain.components) == len(draw.components) + 1
+
+
+def test_a_coil_without_a_fan_either_way_is_reported_with_both_directions_and_the_stops():
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    fanless = text.replace("fso:suppliesFluidTo ex:supply_fan .\nex:heating_coil_valve", ".\nex:heating_coil_valve")
+    store = GraphStore.embedded(None)
+    store.load_model("fanless", fanless.encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "fanless")
+    assert any(p.startswith(f"{FLEXLAB}heating_coil is not modelled by HeatingCoil: no Fan upstream or downstream of "
+                            f"{FLEXLAB}heating_coil along https://w3id.org/fso#suppliesFluidTo (the search stops at "
+                            "MixingBox instances, building spaces") for p in info.value.problems), info.value.problems
+
+
+def test_a_misspelt_class_and_a_command_nothing_reads_are_notes():
+    """A coil typed with a class no ontology declares matches no signature: the assembly says so and
+    which declared class the name is close to; the valve command that drove it is then read by no
+    component, and that is said too (before, the coil silently vanished from the model)."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    store = GraphStore.embedded(None)
+    store.load_model("typo", text.replace("ex:heating_coil a gt:HeatingCoil", "ex:heating_coil a gt:HeatingColi").encode())
+    model = assemble(store, "typo")
+    assert model.component_for_node(FLEXLAB + "heating_coil") is None
+    assert ("heating_coil: its class https://w3id.org/graphtwin/ontology#HeatingColi (https://example.org/flexlab-x3a#heating_coil) "
+            "is declared by no loaded ontology, and the node has no other type a signature matches: no component models it "
+            "(did you mean https://w3id.org/graphtwin/ontology#HeatingCoil?)") in model.notes
+    assert "heating_coil_valve_command: measured, but no component reads it (what it drives or sets is not in the model)" in model.notes
+    store.load_model("right", text.encode())
+    right = assemble(store, "right")
+    assert not any("declared by no loaded ontology" in n or "heating_coil_valve_command" in n for n in right.notes), right.notes
+
+
+def test_a_model_nothing_matches_is_an_error_not_an_empty_assembly():
+    store = GraphStore.embedded(None)
+    store.load_model("bare", b"<https://example.org/a> <https://example.org/b> <https://example.org/c> .", "nt")
+    with pytest.raises(AssemblyError, match="no signature of the library matches anything in model bare"):
+        assemble(store, "bare")
+
+
+def test_a_room_in_twin4builds_spelling_stops_a_traverse_like_a_building_space():
+    """``s4bldg:Space`` (no SAREF4BLDG version has it; Twin4Build writes it for BuildingSpace): the
+    supply air sensor before the room is no inlet of the fan after it (it was wired through the room)."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    assert "ex:test_cell a s4bldg:BuildingSpace" in text
+    store = GraphStore.embedded(None)
+    store.load_model("t4b", text.replace("ex:test_cell a s4bldg:BuildingSpace", "ex:test_cell a s4bldg:Space").encode())
+    store.load_model("saref", text.encode())
+    wiring = {name: {(c.source, c.source_port, c.target, c.target_port) for c in assemble(store, name).connections}
+              for name in ("t4b", "saref")}
+    assert {(s.rsplit("/", 1)[-1], sp, t.rsplit("/", 1)[-1], tp) for s, sp, t, tp in wiring["t4b"]} == {
+        (s.rsplit("/", 1)[-1], sp, t.rsplit("/", 1)[-1], tp) for s, sp, t, tp in wiring["saref"]}
+
+
+@pytest.mark.parametrize("value", ["-1.5", "NaN"])
+def test_a_mapped_value_outside_its_bounds_is_a_note_at_assembly(value):
+    """Said where the graph is read, not only when a calibration refuses it."""
+    text = CASE_STUDY.read_text().replace('saref:hasValue "1.5"^^xsd:double', f'saref:hasValue "{value}"^^xsd:double')
+    store = GraphStore.embedded(None)
+    store.load_model("odd", text.encode())
+    model = assemble(store, "odd")
+    assert any(n.startswith(f"nominal_air_flow of {EX}supply_fan is mapped from the graph to {float(value):g} m3/s, "
+                            "outside its bounds") and "a calibration refuses it" in n for n in model.notes), model.notes
+
+
+def test_a_room_whose_class_the_model_makes_equivalent_to_a_building_space_stops_a_traverse():
+    """``ex:Office owl:equivalentClass s4bldg:BuildingSpace`` in the model: an office is a building
+    space (it was wired through, and its class called undeclared)."""
+    from service.resources import examples_dir
+
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
+    office = text.replace("ex:test_cell a s4bldg:BuildingSpace", "ex:test_cell a ex:Office") + (
+        "\nex:Office <http://www.w3.org/2002/07/owl#equivalentClass> s4bldg:BuildingSpace .\n")
+    store = GraphStore.embedded(None)
+    store.load_model("office", office.encode())
+    store.load_model("saref", text.encode())
+    models = {name: assemble(store, name) for name in ("office", "saref")}
+    wiring = {name: {(c.source.rsplit("/", 1)[-1], c.source_port, c.target.rsplit("/", 1)[-1], c.target_port)
+                     for c in model.connections} for name, model in models.items()}
+    assert wiring["office"] == wiring["saref"]
+    assert not any("declared by no loaded ontology" in n for n in models["office"].notes), models["office"].notes
