@@ -29,8 +29,10 @@ from service.calibration.model_data import DEFAULT_GP_INPUTS
 from service.model.effect_recording import applied_effect_triples, record_effect_in_file
 from service.data.measurements import MeasurementError
 from service.graph.namespaces import local_name
-from service.resources import examples_dir, signatures_dir
-from service.matching.signature import SignatureError, load_signature_library
+from service.resources import examples_dir
+from service.matching.signature import SignatureError
+from service.components.library import SignatureLibrary
+from service.matching.library_triples import ensure_signature_library
 from service.matching.compiler import compile_signature
 from service.graph.store import GraphStore, ModelLoadError, StoreInUseError
 from service.graph.units import unit_label
@@ -77,7 +79,7 @@ def open_store(store: Path, memory: bool, *, reading: bool = False) -> GraphStor
     try:
         graph_store = GraphStore.embedded(None if memory else store)
         graph_store.ensure_ontologies()
-        graph_store.ensure_signature_library()
+        ensure_signature_library(graph_store, SignatureLibrary.load())
     except (*USER_ERRORS, StoreInUseError) as exc:
         raise fail(exc) from None
     return graph_store
@@ -180,7 +182,7 @@ def brick_report_command(
 @signature_app.command("list")
 def signature_list() -> None:
     """List the signatures of the library (components and effects)."""
-    for signature in load_signature_library(signatures_dir()).values():
+    for signature in SignatureLibrary.load().values():
         console.print(f"{signature.id:24s} {signature.kind:9s} {signature.label}")
 
 
@@ -188,7 +190,7 @@ def signature_list() -> None:
 def signature_explain(name: Annotated[str, typer.Argument(help="Signature id, e.g. Fan.")]) -> None:
     """Print the SPARQL query a signature compiles to (highlighted on a terminal; the text as it is
     when written to a file or a pipe, so ``explain Fan > fan.rq`` is a query any endpoint runs)."""
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     if name not in library:
         raise fail(f"no signature {name!r}; known: {', '.join(sorted(library))}")
     text = compile_signature(library[name]).text
@@ -510,7 +512,7 @@ def add_effect_command(
         "Where to write the new model, in the format of its suffix (.ttl, .nt, .rdf, .jsonld)."))],
 ) -> None:
     """Record EFFECT at TARGET in the semantic model (as triples); re-assembly picks it up."""
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     signature = library.get(effect)
     if signature is None or signature.kind != "effect":
         raise fail(f"no effect {effect!r}; the catalog has {', '.join(sorted(s.id for s in library.values() if s.kind == 'effect'))}")
@@ -564,7 +566,7 @@ def example_generate(
         truth = _medians(truth_from) if truth_from is not None else None
         model_name = _load(store, path, None if is_file else name)
         generated = generate_synthetic_data(
-            store, model_name, output, library=load_signature_library(signatures_dir()), hidden_effect=hidden_effect,
+            store, model_name, output, library=SignatureLibrary.load(), hidden_effect=hidden_effect,
             node=node, seed=seed, n_days=days, operation=operation, truth=truth)
     except USER_ERRORS as exc:
         raise fail(exc) from None
@@ -746,7 +748,7 @@ def demo_command(
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     output.mkdir(parents=True, exist_ok=True)
     graph_store = open_store(store, False)
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     base_name = "ventilation_case_study"
     model_path = examples_dir() / base_name / "model.ttl"
     graph_store.load_model(base_name, model_path)

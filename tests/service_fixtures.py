@@ -11,9 +11,8 @@ from fastapi.testclient import TestClient
 from oxigraph_server import endpoint_backend, oxigraph_server  # noqa: F401 (pytest fixtures, shared with every test here)
 
 from service.http.app import create_app
-from service.resources import signatures_dir
 from service.settings import Settings
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
 
@@ -35,7 +34,7 @@ def case_csv(tmp_path_factory):
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("data") / "case.csv"
-    generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()), n_days=1)
+    generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(), n_days=1)
     return path
 
 

@@ -67,6 +67,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from service.components.component import ComponentModel, Parameter, Params, Port, Signals, State
+from service.errors import InputError, SignatureError, UnitError
+from service.graph.units import unit_spec
+from service.matching.signature import QUANTITY_UNITS
 
 __all__ = ["FMUComponent", "fmu_model_class", "live_instance_count", "check_port_units"]
 
@@ -103,7 +106,7 @@ def fmu_model_class(path: Path) -> type[FMUComponent]:
     """The component class for the FMI 2.0 co-simulation FMU at ``path``, cached per resolved path
     and modification time.
 
-    :raises ValueError: naming the file when it is missing, not an FMU (no ZIP archive, no
+    :raises InputError: naming the file when it is missing, not an FMU (no ZIP archive, no
         ``modelDescription.xml``), not FMI 2.0, not co-simulation, or has no binary for this platform.
     """
     path = Path(path)
@@ -111,7 +114,7 @@ def fmu_model_class(path: Path) -> type[FMUComponent]:
         resolved = path.resolve(strict=True)
         mtime = resolved.stat().st_mtime_ns
     except OSError:
-        raise ValueError(f"{path}: FMU file not found") from None
+        raise InputError(f"{path}: FMU file not found") from None
     key = (str(resolved), mtime)
     with _LOCK:
         cls = _CACHE.get(key)
@@ -128,22 +131,22 @@ def _open_fmu(path: Path) -> _FMUFile:
     try:
         with zipfile.ZipFile(path) as archive:
             if "modelDescription.xml" not in archive.namelist():
-                raise ValueError(f"{path}: not an FMU: the archive has no modelDescription.xml")
+                raise InputError(f"{path}: not an FMU: the archive has no modelDescription.xml")
             root = ElementTree.fromstring(archive.read("modelDescription.xml"))
     except zipfile.BadZipFile:
-        raise ValueError(f"{path}: not an FMU: not a ZIP archive") from None
+        raise InputError(f"{path}: not an FMU: not a ZIP archive") from None
     except ElementTree.ParseError as exc:
-        raise ValueError(f"{path}: modelDescription.xml is not well-formed XML: {exc}") from None
+        raise InputError(f"{path}: modelDescription.xml is not well-formed XML: {exc}") from None
     version = root.get("fmiVersion")
     if version != "2.0":
-        raise ValueError(f"{path}: FMI version {version}; only FMI 2.0 co-simulation FMUs are supported")
+        raise InputError(f"{path}: FMI version {version}; only FMI 2.0 co-simulation FMUs are supported")
     try:
         description = fmpy.read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises bare Exception
-        raise ValueError(f"{path}: cannot read modelDescription.xml: {exc}") from None
+        raise InputError(f"{path}: cannot read modelDescription.xml: {exc}") from None
     cosim = description.coSimulation
     if cosim is None:
-        raise ValueError(
+        raise InputError(
             f"{path}: not a co-simulation FMU (model exchange only); export it for co-simulation"
         )
 
@@ -167,7 +170,7 @@ def _open_fmu(path: Path) -> _FMUFile:
     fmpy.extract(str(path), unzipdir=str(unzip_dir))
     binary = unzip_dir / "binaries" / fmpy.platform / (cosim.modelIdentifier + fmpy.sharedLibraryExtension)
     if not binary.is_file():
-        raise ValueError(
+        raise InputError(
             f"{path}: no binary for this platform ({fmpy.platform}): "
             f"binaries/{fmpy.platform}/{binary.name} is missing"
         )
@@ -175,7 +178,7 @@ def _open_fmu(path: Path) -> _FMUFile:
         library = FMU2Slave(guid=description.guid, unzipDirectory=str(unzip_dir),
                             modelIdentifier=cosim.modelIdentifier)
     except Exception as exc:
-        raise ValueError(f"{path}: cannot load the FMU's binary {binary.name}: {exc}") from None
+        raise InputError(f"{path}: cannot load the FMU's binary {binary.name}: {exc}") from None
     return _FMUFile(
         path=path, guid=description.guid, model_identifier=cosim.modelIdentifier, unzip_dir=unzip_dir,
         only_once_per_process=bool(cosim.canBeInstantiatedOnlyOncePerProcess),
@@ -187,7 +190,7 @@ def _open_fmu(path: Path) -> _FMUFile:
 def _parameter(path: Path, variable: Any, unit: str) -> Parameter:
     """A Parameter from an FMU variable; missing min/max → ``start ∓ |start|`` (``[0, 1]`` at 0)."""
     if variable.start is None:
-        raise ValueError(f"{path}: parameter {variable.name} has no start value")
+        raise InputError(f"{path}: parameter {variable.name} has no start value")
     start = float(variable.start)
     low = variable.min if variable.min is not None else getattr(variable.declaredType, "min", None)
     high = variable.max if variable.max is not None else getattr(variable.declaredType, "max", None)
@@ -202,7 +205,7 @@ def _parameter(path: Path, variable: Any, unit: str) -> Parameter:
     try:
         return Parameter(variable.name, unit, start, lower, upper, description)
     except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise InputError(f"{path}: {exc}") from None
 
 
 def _build_class(spec: _FMUFile) -> type[FMUComponent]:
@@ -275,7 +278,7 @@ class FMUComponent(ComponentModel):
         spec = self.fmu
         n_ens = _ensemble_size(params, inputs)
         if n_ens > 1 and spec.only_once_per_process:
-            raise ValueError(
+            raise InputError(
                 f"{spec.path}: the FMU can be instantiated only once per process, so it cannot run "
                 f"an ensemble of {n_ens}"
             )
@@ -346,13 +349,10 @@ def _instance_for(path: str) -> FMUComponent:
 
 def check_port_units(signature, model_class: type[ComponentModel]) -> None:
     """Every port of an FMU class that ``signature`` maps declares the unit the simulator passes for
-    the mapping's quantity (``service.calibration.model_data.QUANTITY_UNITS``), or no unit.
+    the mapping's quantity (:data:`~service.matching.signature.QUANTITY_UNITS`), or no unit.
 
     :raises SignatureError: naming the signature file, the port, the FMU's unit and the expected one.
     """
-    from service.calibration.model_data import QUANTITY_UNITS
-    from service.matching.signature import SignatureError
-    from service.graph.units import UnitError, unit_spec
 
     declared = {port.name: port.unit for port in (*model_class.inputs, *model_class.outputs)}
     for side, mappings in (("inputs", signature.inputs), ("outputs", signature.outputs)):

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from service.errors import MeasurementError
 from service.graph.namespaces import local_name
 from service.graph.units import UnitError, convert, unit_label
 
@@ -47,15 +48,6 @@ __all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements"
 _MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
 _BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S",
                 "%d.%m.%Y %H:%M", "%d.%m.%Y %H:%M:%S")
-
-
-class MeasurementError(ValueError):
-    """Measured data that cannot be used; ``problems`` lists every one (column, line)."""
-
-    def __init__(self, source: str, problems: list[str]):
-        self.source, self.problems = source, tuple(problems)
-        shown = problems[:25] + ([f"... and {len(problems) - 25} more"] if len(problems) > 25 else [])
-        super().__init__(f"{source}:\n  - " + "\n  - ".join(shown))
 
 
 @dataclass(frozen=True)

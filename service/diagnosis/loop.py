@@ -57,8 +57,8 @@ from service.graph.namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_na
 from service.runtime import exit_with_parent
 from service.calibration.point import PointCalibrator
 from service.diagnosis.residual_dependence import residual_dependence
-from service.matching.signature import Signature, load_signature_library
-from service.resources import signatures_dir
+from service.matching.signature import Signature
+from service.components.library import SignatureLibrary
 from service.matching.matcher import match_signature
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
@@ -426,7 +426,7 @@ def diagnose(
     compared only where all hold (:mod:`service.data.operating_filter`). ``start_from``: a model in the
     store whose latest calibration starts the base fit (:func:`service.calibration.run.calibrated_start`)."""
     say = on_progress or (lambda message: None)
-    library = library or load_signature_library(signatures_dir())
+    library = library or SignatureLibrary.load()
     say("calibrating the base model")
     base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps,
                      only_when=only_when, min_test_steps=MIN_TEST_STEPS, start_from=start_from)

@@ -56,12 +56,12 @@ from xml.parsers import expat
 
 import pyoxigraph as ox
 
+from service.errors import ModelLoadError, StoreInUseError
 from service.graph.alignment import alignment_rule_triples, inferred_ntriples, inferred_triples
 from service.graph.blank_nodes import skolemize
 from service.graph.namespaces import GTR, graph_iri
 from service.graph.ntriples import GraphTriples, ntriples_chunks
 from service.resources import ontologies_dir, queries_dir
-from service.matching.signature import Signature
 
 __all__ = [
     "drain",
@@ -81,15 +81,6 @@ _POSITION_PREFIX = re.compile(r"^Parser error (at|between) line [^:]*: ")
 _BOM = b"\xef\xbb\xbf"
 
 
-class ModelLoadError(ValueError):
-    """RDF that cannot be parsed: ``source``, ``line`` and ``column`` say where (1-based)."""
-
-    def __init__(self, source: str, message: str, line: int | None = None, column: int | None = None):
-        self.source, self.line, self.column = source, line, column
-        where = f"{source}, line {line}, column {column}" if line is not None else source
-        super().__init__(f"{where}: {message}")
-
-
 class ModelLoad(NamedTuple):
     """What :meth:`GraphStore.load_model` did: the triples the source holds, whether the store
     changed (False: it held that model already, triple for triple, and kept it as it was), and
@@ -98,11 +89,6 @@ class ModelLoad(NamedTuple):
     triples: int
     changed: bool
     replaced: bool
-
-
-class StoreInUseError(OSError):
-    """The on-disk store is open already: in another process (another graphtwin command, a running
-    ``graphtwin serve``) or, not closed yet, in this one."""
 
 
 _SUFFIXES = {
@@ -578,17 +564,6 @@ class GraphStore:
         self.write_graphs(held)
         for name in self.models():
             self.realign(name)
-        return True
-
-    def ensure_signature_library(self, library: Mapping[str, Signature] | None = None) -> bool:
-        """Make the signature graph describe ``library`` (default: ``signatures/``), see
-        :mod:`service.matching.library_triples`; writes only when it differs. :returns: whether it wrote."""
-        from service.matching.library_triples import library_triples
-
-        triples = library_triples(library)
-        if set(triples) == set(self.graph_triples(SIGNATURE_GRAPH)):
-            return False
-        self.write_graph(SIGNATURE_GRAPH, triples)
         return True
 
     def load_model(self, name: str, source: Path | bytes | str, format: str | None = None, *,

@@ -18,13 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from service.errors import UnitError
+
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
-
-
-class UnitError(ValueError):
-    """An unknown unit, or two units of different dimensions."""
 
 
 @dataclass(frozen=True)

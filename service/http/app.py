@@ -80,9 +80,9 @@ from service.jobs.runner import (
 )
 from service.data.measurements import MeasurementError
 from service.graph.namespaces import PREFIXES
-from service.resources import queries_dir, signatures_dir
+from service.resources import queries_dir
 from service.settings import Settings
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.graph.endpoint import SparqlEndpointError
 from service.graph.sparql_writes import written_graphs
 from service.graph.store import EmbeddedBackend, GraphStore, ModelLoadError, drain, query_bound, rdf_format
@@ -830,7 +830,7 @@ def submit_add_effect(body: AddEffectRequest, response: Response, service: Servi
     """Record an effect at a building node as a new model version (``version``, by default
     ``<model>+<effect>``); 409 when that version exists with other effects."""
     _require_model(service.store, body.model)
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     effects = sorted(s.id for s in library.values() if s.kind == "effect")
     if body.effect not in effects:
         raise ApiError(422, f"no effect {body.effect!r}; the catalog has {', '.join(effects)}")

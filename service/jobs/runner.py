@@ -72,9 +72,8 @@ from service.model.effect_recording import applied_effect_triples
 from service.graph.namespaces import GT
 from service.graph.ntriples import triple_list
 from service.runtime import exit_with_parent
-from service.resources import signatures_dir
 from service.settings import check_executor
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.graph.store import GraphStore, parse_rdf
 
 __all__ = [
@@ -798,7 +797,7 @@ def effect_version(store: GraphStore, params: dict) -> str:
     model, effect, target = params["model"], params["effect"], params["target"]
     version = store.check_name(effect_version_name(params))
     if store.has_model(version):
-        library = load_signature_library(signatures_dir())
+        library = SignatureLibrary.load()
         existing = recorded_effects(store, version, library)
         if set(existing) != {*recorded_effects(store, model, library), EffectRequest(effect, target)}:
             recorded = "; ".join(f"{r.effect} at {r.node}" for r in existing) or "no effect"
@@ -814,7 +813,7 @@ def add_effect_job(store: GraphStore, params: dict, context: JobContext) -> JobR
     with its ``inferred`` and ``assembly`` graphs. The model ``<model>`` itself is not changed; a
     version recorded with other effects is not overwritten."""
     model, effect, target = params["model"], params["effect"], params["target"]
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     signature = library.get(effect)
     if signature is None or signature.kind != "effect":
         known = ", ".join(sorted(s.id for s in library.values() if s.kind == "effect"))

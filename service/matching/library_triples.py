@@ -33,11 +33,11 @@ from pathlib import Path
 import pyoxigraph as ox
 
 from service.graph.namespaces import DCTERMS, GT, RDF, RDFS, XSD
-from service.resources import signatures_dir
-from service.matching.signature import Rule, Signature, load_signature_library
 from service.graph.store import SIGNATURE_GRAPH, GraphStore
+from service.resources import signatures_dir
+from service.matching.signature import Rule, Signature
 
-__all__ = ["signature_triples", "library_triples", "load_signature_library_into"]
+__all__ = ["signature_triples", "library_triples", "load_signature_library_into", "ensure_signature_library"]
 
 _RULES = {Rule.EXACT: GT.Exact, Rule.TRAVERSE: GT.Traverse, Rule.OPTIONAL: GT.Optional}
 
@@ -148,20 +148,26 @@ def signature_triples(signature: Signature) -> list[ox.Triple]:
     return triples
 
 
-def library_triples(library: Mapping[str, Signature] | None = None) -> list[ox.Triple]:
-    """Triples of every signature in ``library`` (default: the ``signatures/`` folder), by id.
-
-    :raises service.matching.signature.SignatureError: for an invalid signature file.
-    """
-    if library is None:
-        library = load_signature_library(signatures_dir())
+def library_triples(library: Mapping[str, Signature]) -> list[ox.Triple]:
+    """Triples of every signature in ``library``, by id."""
     return [t for key in sorted(library) for t in signature_triples(library[key])]
 
 
-def load_signature_library_into(store: GraphStore, library: Mapping[str, Signature] | None = None) -> int:
-    """Replace the signature graph of ``store`` with ``library`` (default: ``signatures/``) in one
-    transaction; returns the number of triples written. :meth:`GraphStore.ensure_signature_library`
-    does the same only when the graph differs."""
+def load_signature_library_into(store: GraphStore, library: Mapping[str, Signature]) -> int:
+    """Replace the signature graph of ``store`` with ``library`` in one transaction; returns the
+    number of triples written (:func:`ensure_signature_library` writes only when it differs)."""
     triples = library_triples(library)
     store.write_graph(SIGNATURE_GRAPH, triples)
     return len(triples)
+
+
+def ensure_signature_library(store: GraphStore, library: Mapping[str, Signature]) -> bool:
+    """Make the signature graph of ``store`` describe ``library``; writes only when it differs.
+
+    :returns: whether it wrote.
+    """
+    triples = library_triples(library)
+    if set(triples) == set(store.graph_triples(SIGNATURE_GRAPH)):
+        return False
+    store.write_graph(SIGNATURE_GRAPH, triples)
+    return True

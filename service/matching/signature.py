@@ -38,10 +38,9 @@ models using an ontology-based framework"). File format (every key documented in
     node = "nominal_flow"              # mapped from this literal node's value
     unit_node = "nominal_flow_unit"    # optional: node bound to the value's QUDT unit IRI
 
-Reading a file (:func:`load_signature`) also imports the ``model`` class and checks that every
-input, output and parameter the file maps is one the class declares (:func:`check_model_names`),
-and that a splice's port is one every ``host_models`` class declares; quantities are those of
-:data:`QUANTITIES`. Every problem raises :class:`SignatureError` naming the file and the key.
+:func:`read_signature` checks a file's content (quantities are those of :data:`QUANTITY_UNITS`);
+:class:`service.components.library.SignatureLibrary` checks it against the classes it names. Every
+problem raises :class:`SignatureError` naming the file and the key.
 
 Rules (the paper's Sec. 3.2): ``exact`` is one triple; ``optional`` triples may be absent from the
 graph (connected optional triples form one OPTIONAL block); ``traverse`` follows the predicate from
@@ -52,30 +51,27 @@ does not model (see :mod:`service.matching.compiler`; exact on recirculation loo
 
 from __future__ import annotations
 
-import importlib
 import tomllib
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from service.components.component import ComponentModel
+from service.errors import SignatureError
 from service.graph.namespaces import GTR, expand_curie
 
 __all__ = [
     "Rule", "PatternNode", "PatternTriple", "InputMapping", "OutputMapping", "ParameterMapping",
-    "EffectSplice", "Signature", "SignatureError", "QUANTITIES", "load_signature", "load_signature_library",
-    "check_model_names", "import_model_class", "signature_iri",
+    "EffectSplice", "Signature", "SignatureError", "QUANTITIES", "QUANTITY_UNITS", "read_signature",
+    "signature_from_dict", "signature_iri", "signature_error",
 ]
 
-#: What a port may carry (``signatures/README.md``, *Quantities*); the simulator's unit of each is
-#: ``service.calibration.model_data.QUANTITY_UNITS``.
-QUANTITIES = frozenset({"temperature", "mass_flow", "volume_flow", "power", "position", "heat_rate"})
-
-
-class SignatureError(ValueError):
-    """A signature file is malformed; the message names the file and the offending key."""
-
+#: What a port may carry (``signatures/README.md``, *Quantities*) and the simulator's unit of each.
+QUANTITY_UNITS = {
+    "temperature": "degC", "mass_flow": "kg/s", "volume_flow": "m3/s", "power": "W", "position": "1",
+    "heat_rate": "W",
+}
+QUANTITIES = frozenset(QUANTITY_UNITS)
 
 class Rule(str, Enum):
     EXACT = "exact"
@@ -153,10 +149,6 @@ class EffectSplice:
     side: str  # "input" or "output"
     host_models: tuple[str, ...] = ()
 
-    def host_ports(self, model_class: type[ComponentModel]) -> tuple[str, ...]:
-        """The ports of ``model_class`` on this splice's side (one of them must be :attr:`port`)."""
-        return model_class.input_names() if self.side == "input" else model_class.output_names()
-
 
 @dataclass(frozen=True)
 class Signature:
@@ -200,7 +192,8 @@ _TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_revers
 _SPLICE_KEYS = {"node", "input", "output", "host_models"}
 
 
-def _fail(path: Path | None, where: str, message: str) -> SignatureError:
+def signature_error(path: Path | None, where: str, message: str) -> SignatureError:
+    """The error for key ``where`` of signature file ``path``."""
     return SignatureError(f"{path or '<signature>'}: {where}: {message}")
 
 
@@ -220,33 +213,33 @@ def _kind_of(value: Any) -> str:
 def _table(path: Path | None, where: str, value: Any, expected: str) -> dict[str, Any]:
     """``value`` when it is a table; else an error saying it should be ``expected`` and what it is."""
     if not isinstance(value, dict):
-        raise _fail(path, where, f"expected {expected}, got {_kind_of(value)}")
+        raise signature_error(path, where, f"expected {expected}, got {_kind_of(value)}")
     return value
 
 
 def _array(path: Path | None, where: str, value: Any, expected: str, *, empty_ok: bool = True) -> list[Any]:
     """``value`` when it is an array (a non-empty one unless ``empty_ok``); else an error as :func:`_table`."""
     if not isinstance(value, list) or not (value or empty_ok):
-        raise _fail(path, where, f"expected {expected}, got {_kind_of(value)}")
+        raise signature_error(path, where, f"expected {expected}, got {_kind_of(value)}")
     return value
 
 
 def _text(path: Path | None, where: str, value: Any) -> str:
     if not isinstance(value, str) or not value:
-        raise _fail(path, where, f"expected a non-empty string, got {_kind_of(value)}")
+        raise signature_error(path, where, f"expected a non-empty string, got {_kind_of(value)}")
     return value
 
 
 def _only_keys(path: Path | None, where: str, spec: dict[str, Any], allowed: set[str]) -> None:
     unknown = set(spec) - allowed
     if unknown:
-        raise _fail(path, where, f"unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+        raise signature_error(path, where, f"unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
 
 
 def _quantity(path: Path | None, where: str, value: Any) -> str:
     quantity = _text(path, where, value)
     if quantity not in QUANTITIES:
-        raise _fail(path, where, f"{quantity!r} is not a quantity; known: {', '.join(sorted(QUANTITIES))}")
+        raise signature_error(path, where, f"{quantity!r} is not a quantity; known: {', '.join(sorted(QUANTITIES))}")
     return quantity
 
 
@@ -254,50 +247,50 @@ def _model_name(path: Path | None, where: str, value: Any) -> str:
     """``value`` when it reads ``module:Class``: a dotted module path, a colon, a class name."""
     module, sep, name = value.partition(":") if isinstance(value, str) else ("", "", "")
     if not (sep and name.isidentifier() and all(part.isidentifier() for part in module.split("."))):
-        raise _fail(path, where, f"{value!r} must read 'module:Class'")
+        raise signature_error(path, where, f"{value!r} must read 'module:Class'")
     return value
 
 
 def _curie(path: Path | None, where: str, text: Any) -> str:
     if not isinstance(text, str):
-        raise _fail(path, where, f"expected a CURIE or IRI string, got {_kind_of(text)}")
+        raise signature_error(path, where, f"expected a CURIE or IRI string, got {_kind_of(text)}")
     try:
         return expand_curie(text)
     except ValueError as exc:
-        raise _fail(path, where, str(exc)) from None
+        raise signature_error(path, where, str(exc)) from None
 
 
 def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signature:
     """Build and validate a :class:`Signature` from parsed TOML: every key is checked for its type
-    (table, array, string, …) where it is read. Model classes are not imported here (see
-    :func:`load_signature`).
+    (table, array, string, …) where it is read. Model classes are not imported here
+    (:class:`~service.components.library.SignatureLibrary` checks them).
 
     :raises SignatureError: naming the file and key of the first problem found.
     """
     _only_keys(path, "top level", data, _TOP_KEYS)
     for key in ("id", "nodes", "modeled_nodes"):
         if key not in data:
-            raise _fail(path, "top level", f"missing required key {key!r}")
+            raise signature_error(path, "top level", f"missing required key {key!r}")
     sig_id = data["id"]
     if not isinstance(sig_id, str) or not sig_id.isidentifier():
-        raise _fail(path, "id", f"{sig_id!r} must be an identifier (letters, digits, underscores)")
+        raise signature_error(path, "id", f"{sig_id!r} must be an identifier (letters, digits, underscores)")
     kind = data.get("kind", "component")
     if kind not in ("component", "effect"):
-        raise _fail(path, "kind", f"{kind!r} must be 'component' or 'effect'")
+        raise signature_error(path, "kind", f"{kind!r} must be 'component' or 'effect'")
     label, comment = data.get("label", sig_id), data.get("comment", "")
     for key, value in (("label", label), ("comment", comment)):
         if not isinstance(value, str):
-            raise _fail(path, key, f"expected a string, got {_kind_of(value)}")
+            raise signature_error(path, key, f"expected a string, got {_kind_of(value)}")
 
     nodes: dict[str, PatternNode] = {}
     for node_id, spec in _table(path, "nodes", data["nodes"], "a table of pattern nodes ([nodes])").items():
         where = f"nodes.{node_id}"
         if not node_id.isidentifier():
-            raise _fail(path, where, "node ids must be identifiers")
+            raise signature_error(path, where, "node ids must be identifiers")
         spec = _table(path, where, spec, "a table with one of 'classes', 'iri', 'literal = true', 'any = true'")
         chosen = [k for k in _NODE_KEYS if k in spec]
         if len(chosen) != 1 or set(spec) - set(_NODE_KEYS):
-            raise _fail(path, where, "give exactly one of 'classes', 'iri', 'literal = true', 'any = true'")
+            raise signature_error(path, where, "give exactly one of 'classes', 'iri', 'literal = true', 'any = true'")
         if "classes" in spec:
             classes = _array(path, where + ".classes", spec["classes"], "a non-empty array of classes", empty_ok=False)
             nodes[node_id] = PatternNode(node_id, classes=tuple(
@@ -307,14 +300,14 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         else:
             flag = chosen[0]
             if spec[flag] is not True:
-                raise _fail(path, f"{where}.{flag}", "must be true")
+                raise signature_error(path, f"{where}.{flag}", "must be true")
             nodes[node_id] = PatternNode(node_id, literal=flag == "literal", any=flag == "any")
 
     def known(node_id: Any, where: str) -> str:
         if not isinstance(node_id, str):
-            raise _fail(path, where, f"expected a node id (a string), got {_kind_of(node_id)}")
+            raise signature_error(path, where, f"expected a node id (a string), got {_kind_of(node_id)}")
         if node_id not in nodes:
-            raise _fail(path, where, f"names node {node_id!r}, which is not in [nodes]")
+            raise signature_error(path, where, f"names node {node_id!r}, which is not in [nodes]")
         return node_id
 
     triples = []
@@ -326,25 +319,25 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         try:
             rule = Rule(str(rule_text).lower())
         except ValueError:
-            raise _fail(path, where + ".rule", f"{rule_text!r} must be exact, traverse or optional") from None
+            raise signature_error(path, where + ".rule", f"{rule_text!r} must be exact, traverse or optional") from None
         subject = known(spec.get("subject"), where + ".subject")
         obj = known(spec.get("object"), where + ".object")
         if nodes[subject].literal:
-            raise _fail(path, where + ".subject", "a literal node cannot be a subject")
+            raise signature_error(path, where + ".subject", "a literal node cannot be a subject")
         if rule is Rule.TRAVERSE and not (nodes[subject].classes and nodes[obj].classes):
-            raise _fail(path, where, "traverse needs class-restricted nodes at both ends")
+            raise signature_error(path, where, "traverse needs class-restricted nodes at both ends")
         predicate = _curie(path, where + ".predicate", spec.get("predicate"))
         optional = spec.get("optional", False)
         or_reverse = spec.get("or_reverse", False)
         for key, flag in (("optional", optional), ("or_reverse", or_reverse)):
             if not isinstance(flag, bool):
-                raise _fail(path, f"{where}.{key}", "must be true or false")
+                raise signature_error(path, f"{where}.{key}", "must be true or false")
         if or_reverse and rule is not Rule.TRAVERSE:
-            raise _fail(path, where + ".or_reverse", "only a traverse can fall back to the reverse direction")
+            raise signature_error(path, where + ".or_reverse", "only a traverse can fall back to the reverse direction")
         stop_at = tuple(_curie(path, f"{where}.stop_at[{j}]", c) for j, c in enumerate(
             _array(path, f"{where}.stop_at", spec.get("stop_at", []), "an array of class CURIEs")))
         if stop_at and rule is not Rule.TRAVERSE:
-            raise _fail(path, where + ".stop_at", "only a traverse has places to stop at")
+            raise signature_error(path, where + ".stop_at", "only a traverse has places to stop at")
         triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL, or_reverse, stop_at))
 
     modeled = tuple(known(n, f"modeled_nodes[{i}]") for i, n in enumerate(_array(
@@ -384,7 +377,7 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         _only_keys(path, "splice", spec, _SPLICE_KEYS)
         sides = [side for side in ("input", "output") if side in spec]
         if len(sides) != 1 or kind != "effect":
-            raise _fail(path, "splice", "an effect's splice names node and one of 'input' or 'output'")
+            raise signature_error(path, "splice", "an effect's splice names node and one of 'input' or 'output'")
         side = sides[0]
         host_models = _array(path, "splice.host_models", spec.get("host_models", []), "an array of 'module:Class' names")
         splice = EffectSplice(
@@ -392,12 +385,12 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
             tuple(_model_name(path, f"splice.host_models[{i}]", m) for i, m in enumerate(host_models)),
         )
     elif kind == "effect":
-        raise _fail(path, "splice", "an effect must say where it enters the model ([splice])")
+        raise signature_error(path, "splice", "an effect must say where it enters the model ([splice])")
 
     model = data.get("model")
     fmu = data.get("fmu")
     if (model is None) == (fmu is None):
-        raise _fail(path, "model", "give exactly one of 'model' (module:Class) or 'fmu' (file)")
+        raise signature_error(path, "model", "give exactly one of 'model' (module:Class) or 'fmu' (file)")
     if model is not None:
         _model_name(path, "model", model)
     fmu_path = None
@@ -407,13 +400,13 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
 
     complexity = data.get("complexity", 1)
     if not isinstance(complexity, int) or isinstance(complexity, bool):
-        raise _fail(path, "complexity", "must be an integer")
+        raise signature_error(path, "complexity", "must be an integer")
     can_appear = data.get("can_appear", True)
     if not isinstance(can_appear, bool) or ("can_appear" in data and kind != "effect"):
-        raise _fail(path, "can_appear", "effects only, true or false")
+        raise signature_error(path, "can_appear", "effects only, true or false")
     holds_values = data.get("holds_values", False)
     if not isinstance(holds_values, bool) or ("holds_values" in data and kind != "component"):
-        raise _fail(path, "holds_values", "components only, true or false")
+        raise signature_error(path, "holds_values", "components only, true or false")
     extra = _table(path, "extra", data.get("extra", {}), "a table")
     return Signature(
         id=sig_id, label=label, kind=kind, nodes=nodes,
@@ -424,91 +417,13 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     )
 
 
-def import_model_class(path: Path | None, where: str, name: str) -> type[ComponentModel]:
-    """The :class:`~service.components.component.ComponentModel` subclass ``name`` (``module:Class``) names.
+def read_signature(path: Path) -> Signature:
+    """Read and validate one signature file (its content; not the classes it names).
 
-    :raises SignatureError: naming file ``path`` and key ``where`` when it cannot be imported or is
-        no component model.
-    """
-    module_name, _, class_name = name.partition(":")
-    try:
-        model_class = getattr(importlib.import_module(module_name), class_name)
-    except (ImportError, AttributeError) as exc:
-        raise _fail(path, where, f"model {name!r} cannot be imported: {exc}") from None
-    if not (isinstance(model_class, type) and issubclass(model_class, ComponentModel)):
-        raise _fail(path, where, f"{name!r} is not a ComponentModel")
-    return model_class
-
-
-def _undeclared(path: Path | None, where: str, model: str, what: str, name: str, declared: tuple[str, ...]) -> None:
-    """Refuses ``name`` unless it is one of the ``declared`` names of ``model``'s ``what`` (port, parameter)."""
-    if name not in declared:
-        raise _fail(path, where, f"{model} has no {what} {name!r}; its {what}s: {', '.join(declared) or 'none'}")
-
-
-#: Input ports the simulator feeds without a mapping: a measuring device's ``measured_value`` (its
-#: measurement, replayed when it is a boundary input) and an effect's ``value_in`` (what the spliced port carries).
-_FED_WITHOUT_MAPPING = {"component": ("measured_value",), "effect": ("value_in",)}
-
-
-def check_model_names(signature: Signature, model_class: type[ComponentModel]) -> None:
-    """Every input, output and parameter ``signature`` maps is one that ``model_class`` (the class
-    its ``model`` names, or the class built for its ``fmu``) declares, and every input port of the
-    class is mapped (but those the simulator feeds itself, :data:`_FED_WITHOUT_MAPPING`): an
-    unmapped input would run on NaN.
-
-    :raises SignatureError: naming the file, the key and the names the class declares.
-    """
-    path, model = signature.source_file, signature.model or str(signature.fmu)
-    parameter_names = tuple(p.name for p in model_class.parameters)
-    for mapping in signature.inputs:
-        _undeclared(path, f"inputs.{mapping.port}", model, "input port", mapping.port, model_class.input_names())
-    for mapping in signature.outputs:
-        _undeclared(path, f"outputs.{mapping.port}", model, "output port", mapping.port, model_class.output_names())
-    for parameter in signature.parameters:
-        _undeclared(path, f"parameters.{parameter.name}", model, "parameter", parameter.name, parameter_names)
-    mapped = {mapping.port for mapping in signature.inputs} | set(_FED_WITHOUT_MAPPING.get(signature.kind, ()))
-    unmapped = [name for name in model_class.input_names() if name not in mapped]
-    if unmapped:
-        raise _fail(path, f"inputs.{unmapped[0]}", f"{model} has input port(s) {', '.join(map(repr, unmapped))} the "
-                    "signature does not map: add [inputs.NAME] with its source node and quantity (an input left "
-                    "unfed would run on NaN)")
-
-
-def load_signature(path: Path) -> Signature:
-    """Read one signature file and check it against the Python classes it names: its ``model``
-    declares every port and parameter the file maps (:func:`check_model_names`; a signature with an
-    ``fmu`` is checked where the FMU's class is built) and every ``host_models`` class has the
-    splice's port on the splice's side.
-
-    :raises SignatureError: on TOML syntax errors (with line and column), invalid content, a model
-        that cannot be imported, or a port or parameter name its class does not declare.
+    :raises SignatureError: on TOML syntax errors (with line and column) or invalid content.
     """
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise SignatureError(f"{path}: {exc}") from None
-    signature = signature_from_dict(data, path)
-    if signature.model is not None:
-        check_model_names(signature, import_model_class(path, "model", signature.model))
-    if signature.splice is not None:
-        splice = signature.splice
-        for i, host in enumerate(splice.host_models):
-            host_class = import_model_class(path, f"splice.host_models[{i}]", host)
-            _undeclared(path, f"splice.{splice.side}", host, f"{splice.side} port", splice.port, splice.host_ports(host_class))
-    return signature
-
-
-def load_signature_library(folder: Path) -> dict[str, Signature]:
-    """Every ``*.toml`` signature under ``folder`` (recursively), keyed by id, each read and checked
-    by :func:`load_signature`.
-
-    :raises SignatureError: for an invalid file or two files with the same id.
-    """
-    library: dict[str, Signature] = {}
-    for path in sorted(folder.rglob("*.toml")):
-        sig = load_signature(path)
-        if sig.id in library:
-            raise SignatureError(f"{path}: id {sig.id!r} is already used by {library[sig.id].source_file}")
-        library[sig.id] = sig
-    return library
+    return signature_from_dict(data, path)

@@ -15,11 +15,12 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from service.components.component import ComponentModel, Parameter
-from service.matching.signature import Signature, check_model_names, import_model_class
+from service.components.library import load_model_class
+from service.matching.signature import Signature
 
 __all__ = [
     "MeasurementLink", "ComponentInstance", "Connection", "ParameterRef", "AssembledModel",
-    "load_model_class", "mapped_values_outside_bounds",
+    "mapped_values_outside_bounds",
 ]
 
 
@@ -113,29 +114,3 @@ def mapped_values_outside_bounds(mapped: Iterable[ParameterRef], components: Map
     return [f"{ref.spec.name} of {components[ref.component].node} is mapped from the graph to {ref.value:g} "
             f"{ref.spec.unit}, outside its bounds [{ref.spec.lower:g}, {ref.spec.upper:g}] {ref.spec.unit}"
             for ref in mapped if ref.value is not None and not ref.spec.lower <= ref.value <= ref.spec.upper]
-
-
-_MODEL_CACHE: dict[str, type[ComponentModel]] = {}
-
-
-def load_model_class(signature: Signature) -> type[ComponentModel]:
-    """The Python model a signature names (``"module:Class"``, imported once); FMU signatures get the
-    FMU wrapper class built for that file, checked against the ports and parameters the signature
-    maps (:func:`~service.matching.signature.check_model_names`; a Python model was checked when the library
-    was loaded).
-
-    :raises SignatureError: the model cannot be imported, or the FMU lacks a port or parameter, or
-        declares a mapped port in another unit than the simulator passes.
-    """
-    if signature.fmu is not None:
-        from service.components.fmu import check_port_units, fmu_model_class
-
-        model_class = fmu_model_class(signature.fmu)
-        check_model_names(signature, model_class)
-        check_port_units(signature, model_class)
-        return model_class
-    assert signature.model is not None
-    cached = _MODEL_CACHE.get(signature.model)
-    if cached is None:
-        cached = _MODEL_CACHE[signature.model] = import_model_class(signature.source_file, "model", signature.model)
-    return cached

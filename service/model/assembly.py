@@ -28,37 +28,25 @@ import re
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import pyoxigraph as ox
 
+from service.errors import AssemblyError, IncompleteModelError
 from service.model.assembled_model import (
-    AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef, load_model_class,
+    AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef,
     mapped_values_outside_bounds,
 )
 from service.runtime import cyclic_gc_paused
 from service.components.measuring_device import MeasuringDevice
 from service.graph.namespaces import BRICK, GTR, OWL, RDF, RDFS, distinct_local_names, local_name, namespace_of
-from service.resources import signatures_dir
-from service.matching.signature import PatternTriple, Rule, Signature, load_signature_library
+from service.components.library import SignatureLibrary, host_ports, load_model_class
+from service.matching.signature import PatternTriple, Rule, Signature
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 from service.graph.units import convert
 
 __all__ = ["AssemblyError", "IncompleteModelError", "assemble", "EffectRequest", "component_iri", "without_model",
            "recorded_effects"]
-
-
-class AssemblyError(ValueError):
-    """The building graph or the signature library cannot be assembled; the message says why."""
-
-
-class IncompleteModelError(AssemblyError):
-    """Inputs without a source: ``problems`` lists one sentence per missing connection."""
-
-    def __init__(self, problems: Sequence[str]):
-        self.problems = tuple(problems)
-        super().__init__("the model is incomplete:\n  - " + "\n  - ".join(self.problems))
 
 
 @dataclass(frozen=True)
@@ -99,7 +87,7 @@ def assemble(
     :raises IncompleteModelError: an input has no source (unless ``allow_incomplete``; the
         problems are then listed in ``notes`` and the input left unconnected).
     """
-    library = dict(library) if library is not None else load_signature_library(signatures_dir())
+    library = dict(library) if library is not None else SignatureLibrary.load()
     dataset = store.matching_dataset(model_name)
     problems = [p for sig in library.values() for p in missing_class_report(store, sig, dataset)]
     if problems:
@@ -445,7 +433,7 @@ def _splice_effect(store, model_name, library, request, instances, connections, 
             f"effect {signature.id} at {request.node}: it extends {', '.join(signature.splice.host_models)}, "
             f"but {request.node} is modelled by {host.signature.model}"
         )
-    ports = signature.splice.host_ports(host.model_class)
+    ports = host_ports(signature, host.model_class)
     if signature.splice.port not in ports:
         raise AssemblyError(
             f"effect {signature.id} at {request.node}: it splices {signature.splice.side} {signature.splice.port!r}, "
@@ -545,7 +533,3 @@ def _parameters(instances: Mapping[str, ComponentInstance]) -> tuple[tuple[Param
             else:
                 estimated.append(ParameterRef(iri, spec))
     return tuple(mapped), tuple(estimated)
-
-
-def default_library(folder: Path | None = None) -> dict[str, Signature]:
-    return load_signature_library(folder or signatures_dir())

@@ -36,8 +36,8 @@ from service.calibration.model_data import ModelData, read_model_data
 from service.calibration.problem import CalibrationProblem
 from service.calibration.koh_likelihood import KennedyOHaganLikelihood
 from service.calibration.point import PointCalibrator
-from service.resources import examples_dir, signatures_dir
-from service.matching.signature import load_signature_library
+from service.resources import examples_dir
+from service.components.library import SignatureLibrary
 from service.model.simulator import loop_substeps
 from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
@@ -51,7 +51,7 @@ def case_study_problem(folder: Path) -> tuple[CalibrationProblem, dict[str, floa
     store = GraphStore.embedded(None)
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
     path = folder / "case.csv"
-    truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
+    truth = generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(),
                                     seed=3, n_days=2.0)
     model = assemble(store, "case")
     data = read_model_data(model, path)

@@ -11,9 +11,8 @@ import time
 
 import numpy as np
 
-from service.model.assembled_model import load_model_class
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import load_model_class
+from service.components.library import SignatureLibrary
 
 _BY_NAME = {"supply_water_temperature": 65.0, "outdoor_air_temperature": 5.0, "return_air_temperature": 22.0,
             "inlet_air_temperature": 12.0, "setpoint": 21.0, "ambient_temperature": 15.0}
@@ -34,7 +33,7 @@ def _seconds_per_step(cls, n: int) -> float:
 
 
 def main() -> None:
-    classes = sorted({load_model_class(s) for s in load_signature_library(signatures_dir()).values() if s.model},
+    classes = sorted({load_model_class(s) for s in SignatureLibrary.load().values() if s.model},
                      key=lambda c: c.__name__)
     print(f"{STEPS} steps per model; rate = member-steps/s")
     print(f"{'model':22s} {'n=1 µs/step':>12s} {'n=256 µs/step':>14s} {'M steps/s':>10s} {'× per-member loop':>18s}")

@@ -17,8 +17,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from service.calibration.run import calibrate  # noqa: E402
 from service.diagnosis.loop import diagnose  # noqa: E402
-from service.resources import examples_dir, signatures_dir  # noqa: E402
-from service.matching.signature import load_signature_library  # noqa: E402
+from service.resources import examples_dir  # noqa: E402
+from service.components.library import SignatureLibrary  # noqa: E402
 from service.graph.store import GraphStore  # noqa: E402
 from service.data.synthetic import generate_synthetic_data  # noqa: E402
 
@@ -31,7 +31,7 @@ def main() -> None:
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
     with tempfile.TemporaryDirectory() as folder:
         data = Path(folder) / "week.csv"
-        generate_synthetic_data(store, "case", data, library=load_signature_library(signatures_dir()),
+        generate_synthetic_data(store, "case", data, library=SignatureLibrary.load(),
                                 hidden_effect=args.hidden_effect, seed=1)
         train, test = ("2026-01-12", "2026-01-15T23:59"), ("2026-01-16", None)
         start = time.perf_counter()

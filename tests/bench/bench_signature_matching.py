@@ -27,8 +27,7 @@ from pathlib import Path
 import pyoxigraph as ox
 
 from service.runtime import cyclic_gc_paused
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.matching.matcher import MatchSession, match_signature
 from service.matching.compiler import compile_signature
 from service.graph.store import GraphStore
@@ -100,7 +99,7 @@ def _rdflib_query(signature_id: str, data: Path, cap_s: float) -> None:
 
     graph = rdflib.Graph()
     graph.parse(data, format="nt")
-    text = compile_signature(load_signature_library(signatures_dir())[signature_id]).text
+    text = compile_signature(SignatureLibrary.load()[signature_id]).text
 
     def stop(*_):
         raise TimeoutError
@@ -126,7 +125,7 @@ def main() -> None:
     if args.rdflib_query:
         _rdflib_query(args.rdflib_query[0], Path(args.rdflib_query[1]), args.rdflib_cap)
         return
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
 
     store, n_units, n_triples, _ = load_campus(args.baseline)
     baseline_triples, baseline = rdflib_baseline(store, library, args.rdflib_cap)

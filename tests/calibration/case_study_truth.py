@@ -12,8 +12,7 @@ from service.calibration.bayesian import BayesianCalibrator
 from service.calibration.model_data import ModelData, read_model_data
 from service.calibration.run import continuation
 from service.calibration.metrics import target_metrics
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.model.simulator import loop_substeps
 from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
@@ -36,7 +35,7 @@ class CaseStudyTruth:
         self.store = store = GraphStore.embedded(None)
         store.load_model("case", CASE_STUDY)
         path = folder / f"case-{hidden_effect}-{seed}.csv"
-        self.truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
+        self.truth = generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(),
                                              seed=seed, n_days=2.0, hidden_effect=hidden_effect)
         model = assemble(store, "case")
         data = read_model_data(model, path)

@@ -8,8 +8,7 @@ from case_study import CASE_STUDY, EX, case_study_with_effect
 
 from service.report.calibration_plots import plot_calibration
 from service.calibration.run import calibrate, parse_window
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
 
@@ -22,7 +21,7 @@ def synthetic(tmp_path_factory):
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("data") / "case.csv"
-    truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
+    truth = generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(),
                                     seed=3, n_days=3.0)
     return store, path, truth
 
@@ -311,7 +310,7 @@ def test_metrics_of_two_sensors_sharing_a_local_name_stay_apart(point_run):
         per_metric.setdefault(t.subject, set()).add(t.object.value)
     assert all(len(sensors) == 1 for sensors in per_metric.values())
     assert {s for sensors in per_metric.values() for s in sensors} >= {sensor, twin}
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     assert applied_effect_iri(library["SensorOffset"], sensor) != applied_effect_iri(library["SensorOffset"], twin)
     # the names diagnosis candidates are minted with too: readable where unique, hashed where shared
     names = distinct_local_names([sensor, twin, EX + "fan_power_meter"])
@@ -352,7 +351,7 @@ def test_a_model_version_starts_from_the_latest_calibration_of_another(point_run
     store = GraphStore.embedded(None)  # the module's store gets more runs of "case" from other tests
     store.load_model("case", CASE_STUDY)
     store_run(store, point_run.model, "case", point_run.record)
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     store.load_model("case_with_heat", case_study_with_effect(library["FanMotorHeat"], EX + "supply_fan"))
     model = assemble(store, "case_with_heat")
     theta, runs, note = calibrated_start(store, "case", "case_with_heat", model)
@@ -371,7 +370,7 @@ def test_recalibrating_after_an_effect_from_the_base_fit_finds_the_truths_basin(
     from the base model's fit, the leak at its default, it reaches the truth's cost."""
     from service.model.assembly import without_model
 
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
     data = tmp_path / "leak.csv"

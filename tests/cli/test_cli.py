@@ -15,8 +15,7 @@ from typer.testing import CliRunner
 
 from service.model.assembly import assemble
 from service.cli import app
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.matching.compiler import compile_signature
 from service.graph.store import GraphStore
 
@@ -54,7 +53,7 @@ def test_signature_explain_prints_the_compiled_query():
     result = runner.invoke(app, ["signature", "explain", "Fan"])
     assert result.exit_code == 0 and "suppliesFluidTo+" in result.output
     # piped: the text as it is (no wrapping of long comment lines), a query any endpoint parses
-    assert result.output == compile_signature(load_signature_library(signatures_dir())["Fan"]).text
+    assert result.output == compile_signature(SignatureLibrary.load()["Fan"]).text
     assert list(ox.Store().query(result.output)) == []
     assert runner.invoke(app, ["signature", "explain", "Fann"]).exit_code == 2
 

@@ -18,10 +18,9 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pytest
 
-from service.model.assembled_model import load_model_class
+from service.components.library import load_model_class
 from service.components.component import ComponentModel, SplicedEffect
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 
 #: Representative input values by port name, then by unit (simulator units).
 _BY_NAME = {
@@ -34,7 +33,7 @@ _SCENARIO_UNITS = {"shut": {"1": 0.0, "kg/s": 0.0, "m3/s": 0.0, "W": 0.0}, "open
 
 def library_model_classes() -> list[type[ComponentModel]]:
     """Every Python model class the signature library names, once, sorted by name."""
-    classes = {load_model_class(s) for s in load_signature_library(signatures_dir()).values() if s.model}
+    classes = {load_model_class(s) for s in SignatureLibrary.load().values() if s.model}
     return sorted(classes, key=lambda c: (c.__module__, c.__name__))
 
 

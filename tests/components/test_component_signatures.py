@@ -2,15 +2,14 @@
 
 import pytest
 
-from service.model.assembled_model import load_model_class
+from service.components.library import load_model_class
 from service.components.measuring_device import MeasuringDevice
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 
 #: Simulator unit of each quantity (signatures/README.md).
 QUANTITY_UNITS = {"temperature": "degC", "mass_flow": "kg/s", "volume_flow": "m3/s", "power": "W",
                   "position": "1", "heat_rate": "W"}
-COMPONENTS = sorted((s for s in load_signature_library(signatures_dir()).values() if s.kind == "component"),
+COMPONENTS = sorted((s for s in SignatureLibrary.load().values() if s.kind == "component"),
                     key=lambda s: s.id)
 
 
@@ -33,7 +32,7 @@ def test_signature_wires_every_input_with_the_port_units(signature):
 
 
 def test_heating_cooling_and_unstated_coils_select_their_supply_water_priors():
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     gt = "https://w3id.org/graphtwin/ontology#"
     priors = {}
     for sid, coil_class in (("HeatingCoil", gt + "HeatingCoil"), ("CoolingCoil", gt + "CoolingCoil"),

@@ -8,12 +8,11 @@ import pytest
 from case_study import CASE_STUDY, EX, case_study_with_effect
 
 from service.diagnosis.loop import diagnose, noise_level
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.graph.store import GraphStore
 from service.data.synthetic import NOISE_STD, generate_synthetic_data
 
-LIBRARY = load_signature_library(signatures_dir())
+LIBRARY = SignatureLibrary.load()
 TRAIN = ("2026-01-12", "2026-01-13T23:59")
 TEST = ("2026-01-14", None)
 #: Where each effect is hidden: where the case study's sensors can see it.

@@ -12,8 +12,7 @@ from service.model.assembly import assemble
 from service.calibration.model_data import ModelData, read_model_data
 from service.calibration.problem import CalibrationProblem
 from service.calibration.regime_sensitivity import calibration_morris_by_regime, dominant_parameters_by_regime
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.model.simulator import loop_substeps
 from service.calibration.successive import (
     SuccessiveCalibrator, boundary_regimes, compare_strategies, contiguous_folds, cross_validate, restricted_problem,
@@ -126,7 +125,7 @@ def case(tmp_path_factory):
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("data") / "case.csv"
-    truth = generate_synthetic_data(store, "case", path, library=load_signature_library(signatures_dir()),
+    truth = generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(),
                                     seed=3, n_days=3.0)
     model = assemble(store, "case")
     data = read_model_data(model, path)
@@ -264,7 +263,7 @@ def test_impossible_folds_are_refused_before_any_fit(case_store, tmp_path):
     from service.calibration.successive import compare_calibration_strategies
 
     path = tmp_path / "case.csv"
-    generate_synthetic_data(case_store, "case", path, library=load_signature_library(signatures_dir()), seed=1,
+    generate_synthetic_data(case_store, "case", path, library=SignatureLibrary.load(), seed=1,
                             n_days=1.0)
     with pytest.raises(ValueError, match="n_folds ≥ 2"):
         compare_calibration_strategies(case_store, "case", path, train=(None, None), n_folds=1)

@@ -15,8 +15,7 @@ import pytest
 from case_study import CASE_STUDY
 from oxigraph_server import free_loopback_port
 
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
 
@@ -105,7 +104,7 @@ def test_a_server_killed_mid_job_restarts_with_finished_results_intact_and_the_j
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
     days = tmp_path / "four_days.csv"
-    generate_synthetic_data(store, "case", days, library=load_signature_library(signatures_dir()), n_days=4)
+    generate_synthetic_data(store, "case", days, library=SignatureLibrary.load(), n_days=4)
     long_upload = first.client.post("/models/case/measurements", content=days.read_bytes(),
                                     headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
     finished = first.wait_job(first.client.post("/jobs/calibrate", headers=AUTH, json={

@@ -246,15 +246,14 @@ def test_a_shipped_job_reads_the_model_it_starts_from_and_the_version_it_would_w
 
     from service.calibration.run import calibrate, parse_window
     from service.calibration.triples import run_iri
-    from service.resources import signatures_dir
-    from service.matching.signature import load_signature_library
+    from service.components.library import SignatureLibrary
 
     first = calibrate(case_store, "case", case_csv, train=parse_window("/2026-01-12T15:50"), seed=0)
     case_store.load_model("case_again", CASE_STUDY)
     params = {"model": "case_again", "measurements": "day", "train": "/2026-01-12T15:50", "start_from": "case"}
     outcome, *_ = run_shipped_job(calibrate_job, ship_job(case_store, "j1", params, {"day": case_csv}.__getitem__))
     assert outcome.result["settings"]["start_from"] == {"model": "case", "runs": [run_iri(first.record.run_id).value]}
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     case_store.load_model("v", case_study_with_effect(library["ValveLeakage"], EX + "heating_valve"))
     with pytest.raises(FileExistsError, match="model v exists with ValveLeakage at .*heating_valve: it is not overwritten"):
         run_shipped_job(add_effect_job, ship_job(case_store, "j2", {

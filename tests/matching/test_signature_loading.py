@@ -8,9 +8,8 @@ import pytest
 
 from service.calibration.model_data import QUANTITY_UNITS
 from service.components.component import ComponentModel, Port
-from service.matching.signature import (
-    QUANTITIES, SignatureError, check_model_names, load_signature, load_signature_library, signature_from_dict,
-)
+from service.matching.signature import QUANTITIES, SignatureError, signature_from_dict
+from service.components.library import SignatureLibrary, check_model_names, load_signature
 
 TOP = 'id = "T"\nmodel = "service.components.fan:Fan"\nmodeled_nodes = ["fan"]\n'
 NODES = '[nodes]\nfan = { classes = ["s4bldg:Fan"] }\n'
@@ -114,7 +113,7 @@ def test_the_library_refuses_a_broken_file_by_name(tmp_path):
     broken.write_text(TOP.replace('"T"', '"U"') + NODES + 'v = { literal = true }\n[parameters.nominal_pwr]\nnode = "v"\n',
                       encoding="utf-8")
     with pytest.raises(SignatureError, match=re.escape(f"{broken}: parameters.nominal_pwr: service.components.fan:Fan has no")):
-        load_signature_library(tmp_path)
+        SignatureLibrary.load(tmp_path)
 
 
 def test_check_model_names_takes_the_class_an_fmu_signature_builds(tmp_path):

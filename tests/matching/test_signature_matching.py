@@ -5,8 +5,9 @@ import pytest
 
 from service.matching import matcher as signature_matcher
 from service.resources import signatures_dir
-from service.matching.signature import load_signature, signature_from_dict
-from service.matching.signature import load_signature_library
+from service.matching.signature import signature_from_dict
+from service.components.library import load_signature
+from service.components.library import SignatureLibrary
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
 from service.matching.compiler import compile_signature
 from service.graph.store import GraphStore
@@ -110,7 +111,7 @@ def test_an_optional_block_with_a_traverse_binds_the_nearest_node_whole_or_not_a
 def test_campus_units_match_their_nearest_devices_round_the_return_loop():
     store = GraphStore.embedded(None)
     store.load_model("campus", campus_turtle(2, n_rooms=3).encode())
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     session = MatchSession(store, store.matching_dataset("campus"))
     matches = {sid: match_signature(store, sig, session=session) for sid, sig in library.items()}
     assert not [sid for sid, found in matches.items() if not found]  # the bench campus exercises every signature

@@ -8,12 +8,13 @@ from service.model.assembly import assemble
 from service.model.assembly_triples import assembly_triples
 from service.graph.namespaces import GT, RDF, S4BLDG
 from service.resources import signatures_dir
-from service.matching.signature import load_signature, load_signature_library, signature_from_dict
-from service.matching.library_triples import library_triples, load_signature_library_into, signature_triples
+from service.matching.signature import signature_from_dict
+from service.components.library import SignatureLibrary, load_signature
+from service.matching.library_triples import library_triples, load_signature_library_into, signature_triples, ensure_signature_library
 from service.graph.store import SIGNATURE_GRAPH, GraphStore
 
 SIG = "https://w3id.org/graphtwin/resource/signature/"
-LIBRARY = load_signature_library(signatures_dir())
+LIBRARY = SignatureLibrary.load()
 
 
 def _objects(triples, subject: str, predicate: ox.NamedNode) -> set[str]:
@@ -78,10 +79,10 @@ def test_every_signature_of_the_library_is_described_whole():
 
 def test_ensure_signature_library_writes_only_when_the_library_changed():
     store = GraphStore.embedded(None)
-    assert store.ensure_signature_library(LIBRARY) is True
-    assert store.ensure_signature_library(LIBRARY) is False
+    assert ensure_signature_library(store, LIBRARY) is True
+    assert ensure_signature_library(store, LIBRARY) is False
     only_fan = {"Fan": LIBRARY["Fan"]}
-    assert store.ensure_signature_library(only_fan) is True
+    assert ensure_signature_library(store, only_fan) is True
     assert {t.subject.value for t in store.graph_triples(SIGNATURE_GRAPH) if t.predicate == RDF.type} >= {SIG + "Fan"}
     assert load_signature_library_into(store, only_fan) == len(signature_triples(LIBRARY["Fan"]))
     assert store.backend.triple_count(SIGNATURE_GRAPH) == len(signature_triples(LIBRARY["Fan"]))
@@ -96,7 +97,7 @@ def _models_for(store: GraphStore, class_iri: str) -> dict[tuple[str, str], str]
 def library_store() -> GraphStore:
     store = GraphStore.embedded(None)
     store.ensure_ontologies()
-    store.ensure_signature_library(LIBRARY)
+    ensure_signature_library(store, LIBRARY)
     return store
 
 
@@ -118,7 +119,7 @@ def test_a_model_of_a_superclass_applies_to_the_subclass(library_store):
     })
     store = GraphStore.embedded(None)
     store.ensure_ontologies()
-    store.ensure_signature_library({"GenericConverter": generic, "WaterCoil": LIBRARY["WaterCoil"]})
+    ensure_signature_library(store, {"GenericConverter": generic, "WaterCoil": LIBRARY["WaterCoil"]})
     assert _models_for(store, S4BLDG.Coil.value) == {("GenericConverter", "device"): "superclass", ("WaterCoil", "coil"): "same"}
     assert _models_for(store, S4BLDG.Fan.value) == {}
 
@@ -135,7 +136,7 @@ def test_assembled_components_lists_nodes_signatures_and_roles(case_store):
     assert by_node[EX + "fan_power_meter"]["role"].value == "calibration target"
     assert by_node[EX + "supply_air_flow_meter"]["role"].value == "boundary input"
     assert by_node[EX + "check_valve"]["component"] == by_node[EX + "heating_valve"]["component"]  # one HotWaterLoop
-    case_store.ensure_signature_library(LIBRARY)
+    ensure_signature_library(case_store, LIBRARY)
     rows = case_store.run_named_query("assembled-components", model="case")
     assert {r["signature_label"].value for r in rows if r["node"].value == EX + "supply_fan"} == {LIBRARY["Fan"].label}
     assert case_store.run_named_query("assembled-components", model="other") == []

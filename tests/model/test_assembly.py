@@ -7,8 +7,7 @@ from case_study import CASE_STUDY, EX, case_study_with_effect
 
 from service.model.assembly import AssemblyError, EffectRequest, IncompleteModelError, assemble
 from service.model.assembly_triples import assembly_triples
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.graph.store import GraphStore
 
 
@@ -46,7 +45,7 @@ def test_assembly_triples_describe_every_component(case_store):
 
 
 def test_a_recorded_effect_is_spliced_on_reassembly(tmp_path):
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     store = GraphStore.embedded(None)
     store.load_model("with_heat", case_study_with_effect(library["FanMotorHeat"], EX + "supply_fan"))
     model = assemble(store, "with_heat")
@@ -173,7 +172,7 @@ def test_a_nominal_value_without_its_unit_is_estimated_with_a_note(case_store):
 def test_an_effect_splicing_a_port_its_host_lacks_is_refused_by_name(case_store):
     """The pattern matches, but the component modelling the node has no such port: an assembly
     error naming the port and the host's ports (before, the simulation failed with a KeyError)."""
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     offset = library["SensorOffset"]
     library["SensorOffset"] = dataclasses.replace(offset, splice=dataclasses.replace(offset.splice, port="inlet_value"))
     with pytest.raises(AssemblyError, match=r"splices input 'inlet_value', which service\.components\.measuring_device:MeasuringDevice "

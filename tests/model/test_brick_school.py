@@ -13,8 +13,7 @@ from service.report.brick import brick_report
 from service.calibration.run import calibrate
 from service.diagnosis.loop import diagnose
 from service.model.effect_recording import applied_effect_triples
-from service.resources import signatures_dir
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
 from service.data.synthetic import generate_synthetic_data
 from service.graph.store import GraphStore
 
@@ -165,7 +164,7 @@ def test_with_the_fan_off_left_out_the_supply_air_matches_and_the_mixed_air_erro
 @pytest.fixture(scope="module")
 def recirculation(store):
     """The model with ReturnFlowOffFanSpeed at the mixing section, calibrated on the fan-on steps."""
-    signature = load_signature_library(signatures_dir())["ReturnFlowOffFanSpeed"]
+    signature = SignatureLibrary.load()["ReturnFlowOffFanSpeed"]
     effect = ox.serialize(applied_effect_triples(signature, AHU7 + "ahu_7_mixing_section"), format=ox.RdfFormat.TURTLE)
     store.load_model("school-recirculation", (SCHOOL / "ahu7_brick_model.ttl").read_bytes() + FIXES.encode() + b"\n" + effect)
     return calibrate(store, "school-recirculation", SCHOOL / "AHU7.csv", **FAN_ON_WINDOW).record
@@ -194,7 +193,7 @@ def test_on_the_units_own_operation_a_hidden_recirculation_effect_is_found(store
     README)."""
     given = {e.key: e.median for e in recirculation.estimates}  # keys match without their model name
     data = tmp_path / "semi-synthetic.csv"
-    generate_synthetic_data(store, "school-fixed", data, library=load_signature_library(signatures_dir()),
+    generate_synthetic_data(store, "school-fixed", data, library=SignatureLibrary.load(),
                             hidden_effect="ReturnFlowOffFanSpeed", seed=1, operation=SCHOOL / "AHU7.csv", truth=given)
     report = diagnose(store, "school-fixed", data, seed=0, refit_max_nfev=20, **FAN_ON_WINDOW)
     assert report.sensors[AHU7 + "mat_sensor"]["fails"]

@@ -36,9 +36,9 @@ from service.report.page import (
     CONTENT_SECURITY_POLICY, INTERVAL_LEVEL, UnknownRunError, data_file_locator, read_diagnosis,
     read_run, recompute_series, report_html, topology_svg,
 )
-from service.resources import signatures_dir
 from service.settings import Settings
-from service.matching.signature import load_signature_library
+from service.components.library import SignatureLibrary
+from service.matching.library_triples import ensure_signature_library
 from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
 
@@ -64,11 +64,11 @@ class DiagnosedCase:
 @functools.cache
 def diagnosed_case(folder: Path) -> DiagnosedCase:
     """Built once per test session (both report test modules use it)."""
-    library = load_signature_library(signatures_dir())
+    library = SignatureLibrary.load()
     catalog = {k: s for k, s in library.items() if s.kind != "effect" or k in CATALOG}
     store = GraphStore.embedded(None)
     store.ensure_ontologies()
-    store.ensure_signature_library()
+    ensure_signature_library(store, SignatureLibrary.load())
     store.load_model("case", CASE_STUDY)
     folder.mkdir(parents=True, exist_ok=True)
     data = folder / f"{UPLOAD_ID}.csv"

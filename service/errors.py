@@ -1,0 +1,106 @@
+"""graphtwin's one error hierarchy: what a user gave or asked for that cannot be done.
+
+Every message names the problem where it is (file, line, column, column name, IRI). The HTTP service
+maps these classes to statuses in one handler (:mod:`service.http.errors`), the CLI to its exit code
+and one-line message in one place (:mod:`service.cli.output`). Any other exception is a defect.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+__all__ = [
+    "GraphtwinError", "InputError", "ModelLoadError", "SignatureError", "AssemblyError", "IncompleteModelError",
+    "MeasurementError", "UnitError", "CalibrationError", "UnknownEffectError", "NotFoundError", "ConflictError",
+    "StoreError", "StoreInUseError", "StoreUnavailableError", "StoreUnreachableError", "StoreRequestError",
+]
+
+
+class GraphtwinError(Exception):
+    """Base of every error a user can act on; the message says what is wrong and where."""
+
+
+class InputError(GraphtwinError, ValueError):
+    """Input that cannot be used: a file's content, an option, a window, a parameter value."""
+
+
+class ModelLoadError(InputError):
+    """RDF that cannot be parsed: ``source``, ``line`` and ``column`` say where (1-based)."""
+
+    def __init__(self, source: str, message: str, line: int | None = None, column: int | None = None):
+        self.source, self.line, self.column = source, line, column
+        where = f"{source}, line {line}, column {column}" if line is not None else source
+        super().__init__(f"{where}: {message}")
+
+
+class SignatureError(InputError):
+    """A signature file is malformed; the message names the file and the offending key."""
+
+
+class AssemblyError(InputError):
+    """The building graph or the signature library cannot be assembled; the message says why."""
+
+
+class IncompleteModelError(AssemblyError):
+    """Inputs without a source: ``problems`` lists one sentence per missing connection."""
+
+    def __init__(self, problems: Sequence[str]):
+        self.problems = tuple(problems)
+        super().__init__("the model is incomplete:\n  - " + "\n  - ".join(self.problems))
+
+
+class MeasurementError(InputError):
+    """Measured data that cannot be used; ``problems`` lists every one (column, line)."""
+
+    def __init__(self, source: str, problems: Sequence[str]):
+        self.source, self.problems = source, tuple(problems)
+        shown = list(problems[:25]) + ([f"... and {len(problems) - 25} more"] if len(problems) > 25 else [])
+        super().__init__(f"{source}:\n  - " + "\n  - ".join(shown))
+
+
+class UnitError(InputError):
+    """An unknown unit, or two units of different dimensions."""
+
+
+class CalibrationError(InputError):
+    """A calibration, comparison or diagnosis that cannot run on this model and data: a window, an
+    option, a simulation that gives no finite values."""
+
+
+class UnknownEffectError(InputError):
+    """An effect id the signature library does not hold; ``catalog`` lists the ids it does."""
+
+    def __init__(self, effect: str, catalog: Sequence[str]):
+        self.effect, self.catalog = effect, tuple(catalog)
+        super().__init__(f"no effect {effect!r}; the catalog has {', '.join(self.catalog)}")
+
+
+class NotFoundError(GraphtwinError, LookupError):
+    """No model, run, job, upload or query of that name."""
+
+
+class ConflictError(GraphtwinError):
+    """The request conflicts with what is stored: a name taken, a job in another state, a model
+    changed while a job ran on it."""
+
+
+class StoreError(GraphtwinError):
+    """The graph store cannot serve the request."""
+
+
+class StoreInUseError(StoreError, OSError):
+    """The on-disk store is open already: in another process (another graphtwin command, a running
+    ``graphtwin serve``) or, not closed yet, in this one."""
+
+
+class StoreUnavailableError(StoreError):
+    """An external SPARQL endpoint answered with an error status other than 400, or with something
+    that is not a SPARQL result; the message names the URL and the status."""
+
+
+class StoreUnreachableError(StoreUnavailableError, ConnectionError):
+    """No connection to the external endpoint, or no answer within the timeout; the message names the URL."""
+
+
+class StoreRequestError(StoreError, ValueError):
+    """An external endpoint rejected a query or update as invalid (its HTTP 400); the message carries its text."""
