@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 __all__ = [
     "GraphtwinError", "InputError", "ModelLoadError", "SignatureError", "AssemblyError", "IncompleteModelError",
-    "MeasurementError", "UnitError", "CalibrationError", "UnknownEffectError", "NotFoundError", "ConflictError",
+    "MeasurementError", "UnsupportedFormatError", "UnitError", "CalibrationError", "UnknownEffectError", "NotFoundError", "ConflictError",
     "StoreError", "StoreInUseError", "StoreUnavailableError", "StoreUnreachableError", "StoreRequestError",
 ]
 
@@ -42,11 +42,12 @@ class AssemblyError(InputError):
 
 
 class IncompleteModelError(AssemblyError):
-    """Inputs without a source: ``problems`` lists one sentence per missing connection."""
+    """Inputs without a source: ``problems`` lists one sentence per missing connection under
+    ``headline``."""
 
-    def __init__(self, problems: Sequence[str]):
-        self.problems = tuple(problems)
-        super().__init__("the model is incomplete:\n  - " + "\n  - ".join(self.problems))
+    def __init__(self, problems: Sequence[str], *, headline: str = "the model is incomplete"):
+        self.problems, self.headline = tuple(problems), headline
+        super().__init__(f"{headline}:\n  - " + "\n  - ".join(self.problems))
 
 
 class MeasurementError(InputError):
@@ -56,6 +57,10 @@ class MeasurementError(InputError):
         self.source, self.problems = source, tuple(problems)
         shown = list(problems[:25]) + ([f"... and {len(problems) - 25} more"] if len(problems) > 25 else [])
         super().__init__(f"{source}:\n  - " + "\n  - ".join(shown))
+
+
+class UnsupportedFormatError(InputError):
+    """A data format graphtwin does not read or write (an RDF media type, a file suffix)."""
 
 
 class UnitError(InputError):
@@ -93,9 +98,10 @@ class StoreInUseError(StoreError, OSError):
     ``graphtwin serve``) or, not closed yet, in this one."""
 
 
-class StoreUnavailableError(StoreError):
+class StoreUnavailableError(StoreError, RuntimeError):
     """An external SPARQL endpoint answered with an error status other than 400, or with something
-    that is not a SPARQL result; the message names the URL and the status."""
+    that is not a SPARQL result; the message names the URL and the status. A ``RuntimeError`` as
+    pyoxigraph raises for an update that fails as it runs (the endpoint's HTTP 500 for the same)."""
 
 
 class StoreUnreachableError(StoreUnavailableError, ConnectionError):

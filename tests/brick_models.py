@@ -4,7 +4,8 @@ campus, both with blank nodes as IRIs (as :meth:`service.graph.store.GraphStore.
 import pyoxigraph as ox
 
 from service.resources import ontologies_dir
-from service.graph.store import parse_rdf, skolemize
+from service.graph.blank_nodes import skolemize
+from service.graph.rdf_io import parse_rdf
 from tests.bench.brick_campus import campus_turtle
 
 

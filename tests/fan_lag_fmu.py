@@ -61,7 +61,8 @@ def build_fan_lag_fmu(folder: Path) -> Path:
 
 
 def _instance(iri: str, signature, measured: bool = False) -> ComponentInstance:
-    return ComponentInstance(iri, signature, {"n": iri}, (iri,), {}, MeasurementLink(iri, None, None) if measured else None)
+    return ComponentInstance(iri=iri, signature=signature, bindings={"n": iri}, modeled_nodes=(iri,), mapped_parameters={},
+                             measurement=MeasurementLink(iri, None, None) if measured else None)
 
 
 def fan_lag_model(fmu: Path, signature_file: Path | None = None) -> AssembledModel:
@@ -85,4 +86,5 @@ def fan_lag_model(fmu: Path, signature_file: Path | None = None) -> AssembledMod
     )
     mapped = tuple(ParameterRef("urn:fan", cls.parameter(name), value) for name, value in FAN_CURVE.items())
     estimated = (ParameterRef("urn:fan", cls.parameter("nominal_power")), ParameterRef("urn:fan", cls.parameter("time_constant")))
-    return AssembledModel(components, connections, ("urn:flow",), ("urn:meter",), mapped, estimated)
+    return AssembledModel(components=components, connections=connections, boundary_inputs=("urn:flow",),
+                          targets=("urn:meter",), mapped_parameters=mapped, estimated_parameters=estimated)

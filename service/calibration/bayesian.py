@@ -1,27 +1,12 @@
 """Bayesian calibration (Kennedy–O'Hagan) by parallel-tempering MCMC, and the posterior predictive.
 
-The paper's Sec. 4 (Bjørnskov, Jradi & Wetter): θ and the discrepancy hyperparameters of every target
-are sampled together from the posterior of :class:`~service.calibration.koh_likelihood.KennedyOHaganLikelihood`
-with :class:`~service.calibration.parallel_tempering.ParallelTemperingSampler` (differential-evolution and
-stretch moves, :func:`default_moves`), started around a
-:class:`~service.calibration.point.PointCalibrator` estimate with the shape of its Laplace covariance
-(:meth:`~service.calibration.koh_likelihood.KennedyOHaganLikelihood.initial_ensemble`; saves most of the burn-in).
-
-Prediction on another window (Eqs. 16–22): for each of ``n_draws`` posterior draws (θ, φ) the model
-is simulated on the training and the test window (one call each for all draws), the discrepancy GP is
-conditioned on that draw's training residuals, and a joint sample of δ at the test inputs plus white
-noise N(0, σ_n²) is added to the model output. Quantiles over the draws give the median and any
-central interval.
-
-GP inputs (``gp_inputs``): ``"auto"`` uses the problem's ``gp_inputs`` when it has them and the
-time index otherwise; ``"time"`` the time index; a sequence of ints the listed columns of the
-problem's ``gp_inputs``. With the time index, a test window is taken to follow the training window
-directly (index ``n_train … n_train + n_test − 1``); for any other placement give the problems
-``gp_inputs`` with a time column.
-
-Threads: sampling and prediction run under ``threadpoolctl.threadpool_limits(1)`` (the equivalent of
-``OPENBLAS_NUM_THREADS=1``): small batched factorisations gain nothing from BLAS threads, and threaded
-BLAS collapses when the other core is busy.
+θ and every target's discrepancy hyperparameters are sampled together from the posterior of
+:class:`~service.calibration.koh_likelihood.KennedyOHaganLikelihood` by
+:class:`~service.calibration.parallel_tempering.ParallelTemperingSampler`, started around a
+:class:`~service.calibration.point.PointCalibrator` estimate. Prediction (Eqs. 16–22): per posterior
+draw (θ, φ), the model output + the discrepancy GP conditioned on that draw's training residuals +
+white noise N(0, σ_n²); quantiles over the draws give the median and intervals. Source: Bjørnskov,
+Jradi & Wetter, Sec. 4. GP inputs, moves, threads: ``docs/calibration.md``, *Bayesian calibration*.
 """
 
 from __future__ import annotations
@@ -36,6 +21,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
+from service.errors import CalibrationError
 from service.calibration.problem import CalibrationProblem
 from service.calibration.koh_likelihood import HyperparameterBounds, KennedyOHaganLikelihood
 from service.calibration.matern_gp import InputDistances, conditional
@@ -71,7 +57,7 @@ class PosteriorPredictive:
     def interval(self, target: str, level: float) -> tuple[np.ndarray, np.ndarray]:
         """Central ``level`` interval (e.g. 0.9) of the predictive at every step: ``(lower, upper)``."""
         if not 0.0 < level < 1.0:
-            raise ValueError(f"interval level {level} must lie in (0, 1)")
+            raise CalibrationError(f"interval level {level} must lie in (0, 1)")
         if target not in self.draws:
             raise KeyError(f"no prediction for target {target!r}; have {', '.join(self.draws)}")
         lower, upper = np.quantile(self.draws[target], [(1 - level) / 2, (1 + level) / 2], axis=0)
@@ -94,11 +80,8 @@ class PosteriorPredictive:
 
 def default_moves() -> list[tuple[emcee.moves.RedBlueMove, float]]:
     """Differential evolution (Ter Braak 2006; Nelson et al. 2013) 80 % of the steps, the stretch
-    move 20 %. The KOH posterior of a building model is long and narrow along the directions the
-    data confound (a PI loop's gain and integral time, a coil's two conductances), where the stretch
-    move, scaling along a line through another walker, mixes slowly: on the case study's acceptance
-    run (29 dimensions, 60 walkers) the chain's IAT fell from 507 steps (stretch alone, not
-    converged in 6,000 steps) to 82 (converged in 1,800 steps, 6× less wall time)."""
+    move 20 %: the KOH posterior is long and narrow along the directions the data confound, where
+    the stretch move alone mixes slowly (``docs/calibration.md``, *Proposal moves*)."""
     return [(emcee.moves.DEMove(), 0.8), (emcee.moves.StretchMove(), 0.2)]
 
 
@@ -114,7 +97,8 @@ class BayesianCalibrator(BaseEstimator):
     :param iat_multiple: the chain must be this many IATs long (20).
     :param iat_rtol: and the IAT estimate must have changed less than this since the last check.
     :param random_state: seed, RandomState or None; a seeded fit is reproducible.
-    :param gp_inputs: ``"auto"``, ``"time"`` or column indices (module docstring).
+    :param gp_inputs: ``"auto"`` (the problem's ``gp_inputs``, else the time index), ``"time"`` (the time
+        index) or indices of the problem's ``gp_inputs`` columns.
     :param hyperparameter_bounds: priors of the GP hyperparameters (default :class:`HyperparameterBounds`).
     :param max_points_per_target: measured points per target in the GP.
     :param adapt_ladder: adapt the temperatures (Vousden et al. 2016).
@@ -171,16 +155,16 @@ class BayesianCalibrator(BaseEstimator):
         choice = self.gp_inputs
         if isinstance(choice, str):
             if choice not in ("auto", "time"):
-                raise ValueError(f"gp_inputs={choice!r}: expected 'auto', 'time' or column indices")
+                raise CalibrationError(f"gp_inputs={choice!r}: expected 'auto', 'time' or column indices")
             if choice == "time" or problem.gp_inputs is None:
                 return np.arange(time_offset, time_offset + problem.n_steps, dtype=float)[:, None], ("time",)
             return problem.gp_inputs, problem.gp_input_names
         if problem.gp_inputs is None:
-            raise ValueError(f"gp_inputs={list(choice)} selects columns, but the problem has no gp_inputs")
+            raise CalibrationError(f"gp_inputs={list(choice)} selects columns, but the problem has no gp_inputs")
         columns = [int(c) for c in choice]
         n_features = problem.gp_inputs.shape[1]
         if not columns or min(columns) < -n_features or max(columns) >= n_features:
-            raise ValueError(f"gp_inputs columns {columns} out of range for {n_features} problem gp_inputs")
+            raise CalibrationError(f"gp_inputs columns {columns} out of range for {n_features} problem gp_inputs")
         names = problem.gp_input_names or tuple(f"gp_input{c}" for c in range(n_features))
         return problem.gp_inputs[:, columns], tuple(names[c] for c in columns)
 

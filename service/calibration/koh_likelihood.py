@@ -2,31 +2,12 @@
 
 For every target ``k`` (Kennedy & O'Hagan 2001; Bjørnskov, Jradi & Wetter, Sec. 4)::
 
-    y_k(t) = η_k(t; θ) + δ_k(x_t) + ε_k(t),   δ_k ~ GP(0, σ_f,k² · matern32(x, x'; ℓ_k)),
-                                               ε_k ~ N(0, σ_n,k²)
+    y_k(t) = η_k(t; θ) + δ_k(x_t) + ε_k(t),   δ_k ~ GP(0, σ_f,k² · matern32(x, x'; ℓ_k)),   ε_k ~ N(0, σ_n,k²)
 
-so the residuals ``y_k − η_k(θ)`` are jointly normal with covariance ``K_k + σ_n,k² I`` and the
-log-likelihood is the sum over targets of their GP log marginal likelihoods
-(:func:`service.calibration.matern_gp.log_marginal_likelihood`); targets are independent given θ.
-
-Sampled vector (one row per walker), ``n_parameters + n_targets · (d + 2)`` entries::
-
-    θ (physical units) | per target: log(σ_f / s_k), log ℓ_k,1 … log ℓ_k,d, log(σ_n / s_k)
-
-``s_k`` the target scale of the problem, so the same hyperparameter bounds suit a temperature and a
-power. GP inputs are rescaled to [0, 1] per column over the training window (time index by default),
-so the length scales are in units of the training window's span.
-
-Priors (proper, independent):
-  * θ uniform on the physical bounds ``[lower, upper]`` of the problem;
-  * log-uniform (uniform in the log) on :class:`HyperparameterBounds`: by default
-    σ_f / s ∈ [1e-3, 10], ℓ ∈ [0.02, 10] (2 % of the window: about three 10-min steps of a day,
-    up to ten windows: a nearly linear trend), σ_n / s ∈ [1e-3, 2].
-
-A member outside the prior support gets −inf and is not simulated; the members inside are simulated
-in ONE call to ``problem.run``; targets measured at the same steps share one batched GP call
-(all their hyperparameter sets stacked). Per target at most ``max_points_per_target`` measured points enter
-the GP (an evenly spaced subset when there are more; the dense GP is O(n³)).
+Targets are independent given θ: the log-likelihood sums their GP log marginal likelihoods. Sampled
+vector: ``θ (physical units) | per target: log(σ_f / s_k), log ℓ_k,1 … log ℓ_k,d, log(σ_n / s_k)``,
+``s_k`` the target scale, GP inputs scaled to [0, 1] over the training window. Priors: θ uniform on
+its bounds, the hyperparameters log-uniform on :class:`HyperparameterBounds` (``docs/calibration.md``).
 """
 
 from __future__ import annotations
@@ -35,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from service.errors import CalibrationError
 from service.calibration.problem import CalibrationProblem
 from service.calibration.matern_gp import InputDistances, log_marginal_likelihood
 
@@ -54,7 +36,7 @@ class HyperparameterBounds:
         for label in ("amplitude", "length_scale", "noise"):
             lo, hi = getattr(self, label)
             if not 0.0 < lo < hi:
-                raise ValueError(f"hyperparameter bounds {label}=({lo}, {hi}): need 0 < lower < upper")
+                raise CalibrationError(f"hyperparameter bounds {label}=({lo}, {hi}): need 0 < lower < upper")
 
 
 @dataclass(frozen=True)
@@ -86,7 +68,7 @@ class KennedyOHaganLikelihood:
         max_points_per_target: int = 144,
     ) -> None:
         if max_points_per_target < 2:
-            raise ValueError(f"max_points_per_target={max_points_per_target}: need at least 2")
+            raise CalibrationError(f"max_points_per_target={max_points_per_target}: need at least 2")
         self.problem = problem
         self.bounds = bounds
         raw = np.arange(problem.n_steps, dtype=float)[:, None] if gp_inputs is None else np.asarray(gp_inputs, float)
@@ -97,7 +79,7 @@ class KennedyOHaganLikelihood:
         self.input_span = raw.max(axis=0) - self.input_offset
         constant = np.flatnonzero(self.input_span <= 0.0)
         if constant.size:
-            raise ValueError(f"gp input column {constant[0]} is constant over the training window")
+            raise CalibrationError(f"gp input column {constant[0]} is constant over the training window")
         self.n_inputs = raw.shape[1]
         if input_names is None:
             input_names = ("time",) if gp_inputs is None else tuple(f"gp_input{j}" for j in range(self.n_inputs))
@@ -207,17 +189,14 @@ class KennedyOHaganLikelihood:
         self, theta: np.ndarray, residual_std: dict[str, float], n_walkers: int, random_state: np.random.RandomState,
         theta_covariance: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Walkers around a point estimate, for the start of a sampler.
+        """Walkers around a point estimate, for the start of a sampler (``docs/calibration.md``).
 
         θ: ``theta`` + N(0, (1 % of the prior width)²), or with ``theta_covariance`` (the point
-        fit's Laplace covariance, physical units) ``theta`` + D·z with z ~ N(0, R), R its correlation
-        matrix and D its standard errors capped at 10 % of the prior width (the plain ball when a
-        standard error is zero: the point fit's residuals were exact): the ensemble starts with
-        the posterior's shape (a ridge of confounded parameters included), not as a ball that must
-        first stretch along the ridge, which is most of the burn-in (flat directions start spread
-        over 10 % of their prior, not over the huge linearised variance). Per target log σ_n and
-        log σ_f near the residual standard deviation of the point fit, log ℓ near log 0.1, each with
-        N(0, 0.1²) jitter; everything clipped a hair inside the prior bounds.
+        fit's Laplace covariance, physical units) ``theta`` + D·z, z ~ N(0, R), R its correlation
+        matrix and D its standard errors capped at 10 % of the prior width (the plain ball where a
+        standard error is zero). Per target log σ_n and log σ_f near the point fit's residual
+        standard deviation, log ℓ near log 0.1, each with N(0, 0.1²) jitter; all clipped a hair
+        inside the prior bounds.
 
         :returns: ``ndarray[n_walkers, n_dim]``.
         """

@@ -1,38 +1,13 @@
-"""Matérn 3/2 Gaussian process: covariance, log marginal likelihood and conditional, batched.
-
-Kernel with one length scale per input (automatic relevance determination; Bjørnskov, Jradi &
-Wetter, Sec. 4, Eqs. 4–13; Rasmussen & Williams 2006, Eq. 4.17)::
+"""Matérn 3/2 Gaussian process: covariance, log marginal likelihood and conditional, batched::
 
     k(x, x') = σ_f² (1 + √3 r) exp(−√3 r),    r = sqrt(Σ_i ((x_i − x'_i) / ℓ_i)²)
-
-Observations of a residual vector ``y = δ + ε``, ``δ ~ GP(0, k)``, ``ε ~ N(0, σ_n² I)`` have the log
-marginal likelihood (Rasmussen & Williams, Eq. 2.30 / Algorithm 2.1, with ``K + σ_n² I = L Lᵀ``)::
-
-    log p(y) = −½ yᵀ (K + σ_n² I)⁻¹ y − Σ log L_ii − (n/2) log 2π
-
-and, at test inputs ``X*``, the conditional of δ (the paper's Eqs. 16–22)::
-
+    log p(y) = −½ yᵀ (K + σ_n² I)⁻¹ y − Σ log L_ii − (n/2) log 2π,    K + σ_n² I = L Lᵀ
     μ* = K*ᵀ (K + σ_n² I)⁻¹ y,    Σ* = K** − K*ᵀ (K + σ_n² I)⁻¹ K*
 
-Every function takes a *batch* of ``s`` hyperparameter sets (and residual vectors). The dense path
-works on stacks of matrices: one batched Cholesky (numpy) and one batched triangular solve (scipy)
-per chunk of :data:`CHUNK_SIZE` sets, so memory stays ``CHUNK_SIZE · n²`` floats; with 1-D inputs the
-kernel is evaluated only on the distinct distances (a regular grid has ``n`` of them) and gathered.
-
-One input (time, the default of the calibrators): the log marginal likelihood is computed exactly in
-O(n) by the state-space form of the Matérn 3/2 process (Hartikainen & Särkkä 2010, "Kalman filtering
-and smoothing solutions to temporal Gaussian process regression models"; Särkkä & Solin 2019,
-*Applied Stochastic Differential Equations*, Sec. 12.3): state ``(δ, dδ/dx)``, ``λ = √3 / ℓ``,
-stationary covariance ``P∞ = diag(σ_f², λ²σ_f²)``, transition over a gap Δ between sorted inputs
-``Φ(Δ) = e^{−λΔ} [[1 + λΔ, Δ], [−λ²Δ, 1 − λΔ]]``, predicted covariance ``Φ (P − P∞) Φᵀ + P∞``, and a
-Kalman filter whose prediction-error decomposition is the same Gaussian density as the dense formula
-(agreement to ~1e-10 relative is tested). The filter loops over the n points with all ``s`` sets as
-numpy vectors.
-
-Cost (one core, n = 144, 10-min data of a day): dense ≈0.15 ms per set (the Cholesky, O(n³/3);
-≈50 ms at n = 1,440); state space ≈0.02 ms per set in batches of a few hundred. Long series should be
-thinned before they get here when the inputs are multi-dimensional
-(:class:`service.calibration.koh_likelihood.KennedyOHaganLikelihood` keeps an evenly spaced subset).
+Every function takes a batch of ``s`` hyperparameter sets: a batched Cholesky per chunk of
+:data:`CHUNK_SIZE` sets, or for one input the exact O(n) state-space (Kalman) form of the process
+(Hartikainen & Särkkä 2010). Sources: Rasmussen & Williams 2006, Eqs. 2.30, 4.17; Bjørnskov, Jradi &
+Wetter, Sec. 4, Eqs. 4–22. The state-space equations and the costs: ``docs/calibration.md``.
 """
 
 from __future__ import annotations
@@ -46,8 +21,8 @@ __all__ = [
 
 #: Hyperparameter sets handled per batched factorisation.
 CHUNK_SIZE = 32
-#: ``s · n²`` above which the state-space path is faster than the dense one ("auto"): the filter costs
-#: ≈30 µs per point whatever ``s`` (a Python loop over numpy vectors), the dense path ≈5e-11 s · s · n³.
+#: ``s · n²`` from which ``method="auto"`` takes the state-space path, faster there than the dense one
+#: (the costs: ``docs/calibration.md``, *The Matérn-3/2 GP discrepancy*).
 STATE_SPACE_MIN_WORK = 4e5
 _SQRT3 = np.sqrt(3.0)
 
@@ -177,7 +152,7 @@ def log_marginal_likelihood(
 
 
 def _state_space_log_likelihood(residuals, sorted_inputs, amplitude, length_scale, noise_std) -> np.ndarray:
-    """Kalman-filter log marginal likelihood of a 1-D Matérn 3/2 GP (module docstring), ``ndarray[s]``."""
+    """Kalman-filter log marginal likelihood of a 1-D Matérn 3/2 GP (``docs/calibration.md``), ``ndarray[s]``."""
     order, gaps = sorted_inputs
     y = residuals[:, order].T  # n, s: one contiguous row per step
     lam = _SQRT3 / np.asarray(length_scale, dtype=float)

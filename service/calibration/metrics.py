@@ -1,34 +1,12 @@
 """Goodness-of-fit and interval metrics of one target on one window.
 
-With ``y`` the measured and ``ŷ`` the predicted (median) series over the ``n`` measured steps, ``p``
-the number of estimated parameters and ``ȳ`` the mean of ``y``:
-
-* ``RMSE = sqrt(Σ(y − ŷ)² / n)``, ``MAE = Σ|y − ŷ| / n`` (target's unit);
-* ``R² = 1 − Σ(y − ŷ)² / Σ(y − ȳ)²`` (coefficient of determination; negative when the prediction is
-  worse than the mean);
-* ASHRAE Guideline 14-2014, with ``n − p`` degrees of freedom::
-
-      CV(RMSE) = sqrt(Σ(y − ŷ)² / (n − p)) / |ȳ| · 100 %
-      NMBE     = Σ(y − ŷ) / ((n − p) · |ȳ|) · 100 %    (sign kept: > 0 means the model under-predicts)
-
-  (Guideline 14 writes ``ȳ``, for energy use, which is positive; ``|ȳ|`` keeps a signal whose mean
-  is negative — a cooling coil's heat rate — from a negative CV(RMSE) that passes any threshold,
-  and keeps NMBE's sign meaning the same)
-  and its hourly calibration criteria ``CV(RMSE) ≤ 30 %`` and ``|NMBE| ≤ 10 %``. They are computed
-  at the resolution of the data given (pass hourly means for a literal Guideline-14 check). Both are
-  ratios to ȳ, which only means something on a ratio scale, so the criteria are *not applied*
-  (``guideline14_applies = False`` with the reason; the numbers are still reported) when the unit is
-  an interval scale (°C, °F: ȳ moves with the zero of the scale), when ``|ȳ|`` is below 5 % of
-  ``max |y|`` (a mostly-zero signal such as a valve shut most of the day, or signs that cancel:
-  the ratio explodes), or when ``n ≤ p`` (CV(RMSE) and NMBE are then NaN);
-* lag-1 autocorrelation of the residuals ``e = y − ŷ`` (consecutive measured pairs over the variance
-  of all measured residuals): near 0 for white residuals, near 1 when the model misses slow
-  structure;
-* per central prediction interval of nominal level ``1 − α``: empirical coverage
-  ``c = #{lower ≤ y ≤ upper} / n``, average coverage error ``ACE = c − (1 − α)`` (the paper's
-  Table 5; > 0: intervals too wide, < 0: too narrow) and the mean interval width.
-
-NaN in ``y`` marks a step without a measurement: it is left out of every sum.
+Over the ``n`` measured steps (NaN in ``y`` is left out), ``p`` estimated parameters: ``RMSE``,
+``MAE``, ``R² = 1 − Σ(y − ŷ)² / Σ(y − ȳ)²``; ASHRAE Guideline 14-2014
+``CV(RMSE) = sqrt(Σ(y − ŷ)² / (n − p)) / |ȳ| · 100 %`` and ``NMBE = Σ(y − ŷ) / ((n − p) · |ȳ|) · 100 %``
+(> 0: the model under-predicts) with the hourly criteria CV(RMSE) ≤ 30 %, |NMBE| ≤ 10 % (not applied
+on an interval scale such as °C, a mean near zero, or ``n ≤ p``); the residuals' lag-1
+autocorrelation; per central interval of level ``1 − α`` the coverage ``c``, ``ACE = c − (1 − α)``
+(the paper's Table 5) and the mean width. Definitions and reasons: ``docs/calibration.md``, *Metrics*.
 """
 
 from __future__ import annotations
@@ -37,6 +15,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from service.errors import CalibrationError
 
 __all__ = [
     "TargetMetrics", "IntervalCoverage", "target_metrics", "INTERVAL_SCALE_UNITS",
@@ -64,7 +44,7 @@ class IntervalCoverage:
 
 @dataclass(frozen=True)
 class TargetMetrics:
-    """Metrics of one target on one window (see the module docstring for the definitions)."""
+    """Metrics of one target on one window (definitions: the module docstring, ``docs/calibration.md``)."""
 
     target: str
     unit: str
@@ -122,8 +102,9 @@ def target_metrics(
     :param n_parameters: p, the number of estimated parameters (Guideline 14's n − p).
     :param intervals: ``{level: (lower, upper)}`` central prediction intervals, each ``ndarray[n_steps]``.
     :param unit: the target's unit (decides whether Guideline 14's criteria apply).
-    :raises ValueError: for mismatched shapes, no measured step, or a non-finite prediction at a
-        measured step (the message names the row).
+    :raises ValueError: for mismatched shapes.
+    :raises CalibrationError: no measured step, or a non-finite prediction at a measured step (the
+        message names the row).
     """
     y_all = np.asarray(observed, dtype=float)
     y_hat_all = np.asarray(predicted, dtype=float)
@@ -132,10 +113,10 @@ def target_metrics(
         raise ValueError(f"{label}observed {y_all.shape} and predicted {y_hat_all.shape}: expected equal (n_steps,)")
     measured = np.isfinite(y_all)
     if not measured.any():
-        raise ValueError(f"{label}no measured step in the window")
+        raise CalibrationError(f"{label}no measured step in the window")
     bad = np.flatnonzero(measured & ~np.isfinite(y_hat_all))
     if bad.size:
-        raise ValueError(f"{label}prediction is not finite at row {bad[0]}")
+        raise CalibrationError(f"{label}prediction is not finite at row {bad[0]}")
     y, y_hat = y_all[measured], y_hat_all[measured]
     n, p = y.size, int(n_parameters)
     error = y - y_hat

@@ -1,108 +1,32 @@
 """An assembled model bound to its measured data: windows, simulation and calibration problems.
 
-:class:`ModelData` is where the graph world (device IRIs, QUDT units) meets the numeric one: it says
-which series each measuring device needs and in which unit (the quantity of the device's output:
-temperature in °C, volume flow in m³/s, power in W, position in 1), reads them, and turns a time
-window into a :class:`~service.calibration.problem.CalibrationProblem` whose targets are keyed by
-the sensors' building-node IRIs, the names users see in every report.
+:class:`ModelData` is where the graph world (device IRIs, QUDT units) meets the numeric one: it
+turns a time window into a :class:`~service.calibration.problem.CalibrationProblem` whose targets
+are keyed by the sensors' building-node IRIs, the names users see in every report. The series and
+their units come from :mod:`service.data.model_series`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from service.model.assembled_model import AssembledModel, mapped_values_outside_bounds
 from service.calibration.problem import CalibrationProblem
-from service.data.measurements import MeasuredData, SeriesSpec, read_measurements
+from service.data.measurements import MeasuredData
+from service.data.model_series import (
+    GAP_RECOVERY_S, SETTLING_S, check_mapped_parameters, model_start_memory_s, model_warmup_s, warmup_period_steps,
+)
+from service.errors import CalibrationError
 from service.graph.namespaces import local_name
+from service.model.assembled_model import AssembledModel
 from service.model.simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
 
-__all__ = ["DEFAULT_GP_INPUTS", "GAP_RECOVERY_S", "SETTLING_S", "WARMUP_PERIOD_S", "model_warmup_s",
-           "model_start_memory_s", "warmup_period_steps",
-           "QUANTITY_UNITS", "ModelData", "series_specs", "read_model_data", "check_mapped_parameters"]
+__all__ = ["DEFAULT_GP_INPUTS", "ModelData"]
 
 #: The discrepancy GP's inputs unless the user names others: time alone (hours since the data's start).
 DEFAULT_GP_INPUTS: tuple[str, ...] = ("time",)
-
-#: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
-#: the model's states come out of the gap off (as at a window's start: ``ModelData.problem``'s settling).
-GAP_RECOVERY_S = 3600.0
-
-#: Unscored start of every window, s: the warm-up settles the model's states to the model's own
-#: trajectory, not to the building's (longer where the warm-up is a guess: ``ModelData.unscored_start_s``).
-SETTLING_S = 3600.0
-
-#: Period repeated before the data's first step in a warm-up, s (the first value held in data
-#: shorter than this).
-WARMUP_PERIOD_S = 86400.0
-
-#: Simulator unit of each quantity a signature output may carry (``signatures/README.md``).
-QUANTITY_UNITS = {
-    "temperature": "degC", "mass_flow": "kg/s", "volume_flow": "m3/s", "power": "W", "position": "1",
-    "heat_rate": "W",
-}
-
-
-def _device_unit(model: AssembledModel, component: str) -> str:
-    instance = model.components[component]
-    quantity = next((o.quantity for o in instance.signature.outputs if o.port == "measured_value"), None)
-    if quantity not in QUANTITY_UNITS:
-        raise ValueError(f"{instance.signature.source_file}: measured_value output has no known quantity ({quantity!r})")
-    return QUANTITY_UNITS[quantity]
-
-
-def series_specs(model: AssembledModel) -> dict[str, SeriesSpec]:
-    """Building-node IRI → what the model needs from its column (boundary inputs are required,
-    targets too: a target without a column cannot be calibrated against)."""
-    specs = {}
-    for component in model.boundary_inputs + model.targets:
-        link = model.measurement(component)
-        specs[link.node] = SeriesSpec(link.node, link.series_id, link.unit, _device_unit(model, component),
-                                      holds_values=model.components[component].signature.holds_values)
-    return specs
-
-
-def check_mapped_parameters(model: AssembledModel) -> None:
-    """Refuse a model whose graph maps a parameter to a value outside that parameter's physical bounds
-    (a nominal power of 80 kW for a fan whose signature allows 50 W – 50 kW is a typo or a wrong unit,
-    and calibrating the other parameters around it would hide the mistake).
-
-    :raises ValueError: naming every such parameter, its node, the value and the bounds, in the
-        parameter's unit.
-    """
-    problems = mapped_values_outside_bounds(model.mapped_parameters, model.components)
-    if problems:
-        raise ValueError("; ".join(problems) + ": fix the value (or its unit) in the model graph")
-
-
-def model_warmup_s(model: AssembledModel) -> float:
-    """Warm-up simulated before every window of ``model`` [s]: its slowest component's settling time
-    (:meth:`~service.components.component.ComponentModel.settling_time_s`: a day with a PI loop, none for static
-    components). Over the measured time before the window (before the data's first step, its first
-    day repeated) controllers' integrals and thermal masses come from their cold start to the state
-    the operation leaves."""
-    return max((c.model_class.settling_time_s() for c in model.components.values()), default=0.0)
-
-
-def model_start_memory_s(model: AssembledModel) -> float:
-    """How long ``model``'s outputs remember a wrong start state [s]: its components' longest
-    :attr:`~service.components.component.ComponentModel.start_memory_s` (six hours with a PI loop)."""
-    return max((c.model_class.start_memory_s for c in model.components.values()), default=0.0)
-
-
-def warmup_period_steps(n_steps: int, step_s: float) -> int:
-    """Steps of :data:`WARMUP_PERIOD_S` when data of ``n_steps`` cover it, else 1 (hold the first value)."""
-    period = int(round(WARMUP_PERIOD_S / step_s))
-    return period if n_steps >= period else 1
-
-
-def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5) -> MeasuredData:
-    """Read the CSV at ``path`` for ``model`` (:func:`service.data.measurements.read_measurements`)."""
-    return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps)
 
 
 @dataclass
@@ -125,7 +49,7 @@ class ModelData:
         nodes = {self.model.measurement(c).node: c for c in self.model.boundary_inputs + self.model.targets}
         missing = sorted(n for n in nodes if n not in self.data.series)
         if missing:
-            raise ValueError(f"{self.data.source} has no series for {', '.join(missing)}")
+            raise CalibrationError(f"{self.data.source} has no series for {', '.join(missing)}")
         self.node_of = {c: self.model.measurement(c).node for c in nodes.values()}
         self.target_nodes = tuple(self.node_of[c] for c in self.model.targets)
         self.simulator = Simulator(self.model, self.data.step_s, self.substeps)
@@ -200,7 +124,7 @@ class ModelData:
         """The discrepancy GP's inputs named by the user: ``"time"``, or a boundary input's node IRI,
         local name or CSV column, each → ``"time"`` or the node IRI.
 
-        :raises ValueError: naming what is not one, with the names that are.
+        :raises CalibrationError: naming what is not one, with the names that are.
         """
         boundary = [self.node_of[c] for c in self.model.boundary_inputs]
         known = {"time": "time"} | {n: n for n in boundary} | {local_name(n): n for n in boundary} | {
@@ -208,9 +132,9 @@ class ModelData:
         unknown = [name for name in names if name not in known]
         if unknown:
             offered = ", ".join(["time"] + sorted(local_name(n) for n in boundary))
-            raise ValueError(f"GP input(s) {', '.join(map(repr, unknown))} are no boundary input of the model "
-                             f"(a target's measurements would feed the discrepancy of what it measures): "
-                             f"use {offered}, a node IRI or its CSV column")
+            raise CalibrationError(f"GP input(s) {', '.join(map(repr, unknown))} are no boundary input of the model "
+                                   f"(a target's measurements would feed the discrepancy of what it measures): "
+                                   f"use {offered}, a node IRI or its CSV column")
         return tuple(dict.fromkeys(known[name] for name in names))
 
     def _gp_input_series(self, name: str, window: slice) -> np.ndarray:
@@ -220,7 +144,7 @@ class ModelData:
             return np.arange(window.start, window.stop) * self.data.step_s / 3600.0
         values = self.data.series[name][window]
         if not np.isfinite(values).any():
-            raise ValueError(f"GP input {name} has no measured value in the window")
+            raise CalibrationError(f"GP input {name} has no measured value in the window")
         return held_over_gaps(values)
 
     def unscored_start_s(self, window: slice) -> float:
@@ -266,7 +190,7 @@ class ModelData:
             compared: the warm-up settles the model's states, it cannot give them the building's.
             None: :meth:`unscored_start_s` of each window (an hour; six with a PI loop at the
             data's start).
-        :raises ValueError: a GP input that is neither time nor a boundary input (named, with those
+        :raises CalibrationError: a GP input that is neither time nor a boundary input (named, with those
             that are).
         """
         gp_inputs = self.gp_input_nodes(gp_inputs)

@@ -1,30 +1,12 @@
 """Parallel-tempering ensemble MCMC, every temperature evaluated in one batch, stopped by the IAT rule.
 
-emcee 3 has no parallel tempering and ptemcee / eryn do not run on numpy 2.4, so this module stacks
-``n_temperatures`` affine-invariant ensembles (Goodman & Weare 2010) and exchanges walkers between
-neighbouring temperatures (Earl & Deem 2005). What emcee gives is kept: its red–blue proposals
-(:meth:`emcee.moves.RedBlueMove.get_proposal`: the stretch move by default, or a weighted mixture as
-emcee's ``moves=[(move, weight), …]``, e.g. differential evolution for correlated posteriors), the
-chain storage of the β = 1 ensemble
-(:class:`emcee.backends.Backend` with :class:`emcee.State`) and the integrated autocorrelation time
-(:func:`emcee.autocorr.integrated_time`). The red–blue update is written here instead of calling
-``EnsembleSampler`` per temperature, so that each half-step evaluates the proposals of *all*
-temperatures in ONE call of ``log_prior_and_likelihood`` (two calls per step; an ensemble step needs
-the first half's result before the second half's proposal).
-
-Tempering: the chain at inverse temperature β targets ``p(θ) L(θ)^β``; a swap of walker ``i`` at β_c
-with walker ``j`` at β_h < β_c is accepted with ``min(1, exp((β_c − β_h)(log L_j − log L_i)))``.
-Ladder: geometric, ``T_{i+1}/T_i = 1 + 2 √(ln 4 / n_dim)`` (the spacing ptemcee uses, optimal for
-Gaussian targets) unless ``max_temperature`` is given; optionally adapted so neighbouring pairs swap
-equally often (Vousden, Farr & Mandel 2016, MNRAS 455, 1919): ``log(T_{i+1} − T_i) += κ(t)(A_i −
-A_{i+1})``, ``κ(t) = t₀ / (ν (t + t₀))``, β = 1 and the hottest temperature fixed; the decaying κ keeps
-the cold chain's stationary distribution asymptotically exact.
-
-Convergence (emcee's guidance): every ``check_interval`` steps the integrated autocorrelation time
-τ of the β = 1 chain (the largest over all dimensions, whole chain) is estimated; the run stops when
-the chain is at least ``iat_multiple`` (20) × τ long and τ changed by less than ``iat_rtol`` since the
-last check. Burn-in ``2τ`` is discarded and the chain thinned by ``τ/2``. A run that hits ``max_steps``
-is reported with ``converged = False``.
+``n_temperatures`` affine-invariant ensembles (Goodman & Weare 2010) with emcee's red–blue proposals,
+chain storage and IAT; walkers swap between neighbouring temperatures (Earl & Deem 2005): the chain
+at β targets ``p(θ) L(θ)^β``; a swap of β_c with β_h < β_c is accepted with
+``min(1, exp((β_c − β_h)(log L_j − log L_i)))``. Ladder: geometric, ``T_{i+1}/T_i = 1 + 2 √(ln 4 /
+n_dim)``, optionally adapted (Vousden, Farr & Mandel 2016). The run stops when the β = 1 chain is
+``iat_multiple`` (20) × its IAT τ long and τ changed by less than ``iat_rtol``; burn-in 2τ, thinning
+τ/2. Why and how: ``docs/calibration.md``, *Parallel tempering* and *Convergence and the IAT*.
 """
 
 from __future__ import annotations
@@ -37,6 +19,8 @@ import numpy as np
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from sklearn.utils import check_random_state
 
+from service.errors import CalibrationError
+
 __all__ = ["ParallelTemperingSampler", "Convergence", "geometric_betas"]
 
 LogPriorAndLikelihood = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -45,12 +29,12 @@ LogPriorAndLikelihood = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 def geometric_betas(n_temperatures: int, n_dim: int, max_temperature: float | None = None) -> np.ndarray:
     """Inverse temperatures, β = 1 first, geometrically spaced in T up to ``max_temperature``."""
     if n_temperatures < 1:
-        raise ValueError(f"n_temperatures={n_temperatures}: need at least 1")
+        raise CalibrationError(f"n_temperatures={n_temperatures}: need at least 1")
     if max_temperature is None:
         ratio = 1.0 + 2.0 * np.sqrt(np.log(4.0) / n_dim)
         return ratio ** -np.arange(n_temperatures, dtype=float)
     if n_temperatures > 1 and not max_temperature > 1.0:
-        raise ValueError(f"max_temperature={max_temperature}: must exceed 1")
+        raise CalibrationError(f"max_temperature={max_temperature}: must exceed 1")
     return max_temperature ** -(np.arange(n_temperatures) / max(n_temperatures - 1, 1))
 
 
@@ -105,13 +89,13 @@ class ParallelTemperingSampler:
         random_state: int | np.random.RandomState | None = None,
     ) -> None:
         if n_walkers % 2 or n_walkers < 2 * n_dim:
-            raise ValueError(f"n_walkers={n_walkers}: need an even number of at least 2 · n_dim = {2 * n_dim}")
+            raise CalibrationError(f"n_walkers={n_walkers}: need an even number of at least 2 · n_dim = {2 * n_dim}")
         self.log_prior_and_likelihood = log_prior_and_likelihood
         self.n_walkers = n_walkers
         self.n_dim = n_dim
         self.betas = geometric_betas(4, n_dim) if betas is None else np.array(betas, dtype=float)
         if self.betas[0] != 1.0 or np.any(np.diff(self.betas) >= 0.0) or self.betas[-1] <= 0.0:
-            raise ValueError(f"betas {self.betas}: need 1 first, strictly decreasing, positive")
+            raise CalibrationError(f"betas {self.betas}: need 1 first, strictly decreasing, positive")
         self.adapt_ladder = adapt_ladder
         self.adaptation_lag = adaptation_lag
         self.adaptation_time = adaptation_time
@@ -203,7 +187,8 @@ class ParallelTemperingSampler:
 
         :param initial: ``ndarray[n_walkers, n_dim]`` (all temperatures start alike) or
             ``ndarray[n_temperatures, n_walkers, n_dim]``; every walker with finite posterior.
-        :raises ValueError: for a wrong shape or a walker with zero posterior probability.
+        :raises ValueError: for a wrong shape.
+        :raises CalibrationError: bad moves, or a walker with zero posterior probability.
         """
         self._random = check_random_state(self.random_state)
         moves = self.moves if self.moves is not None else emcee.moves.StretchMove(a=self.stretch_scale)
@@ -211,11 +196,11 @@ class ParallelTemperingSampler:
         self._moves = [move for move, _ in pairs]
         weights = np.array([weight for _, weight in pairs], dtype=float)
         if not self._moves or np.any(weights <= 0.0):
-            raise ValueError(f"moves {moves!r}: need at least one move and positive weights")
+            raise CalibrationError(f"moves {moves!r}: need at least one move and positive weights")
         split_in_more = [type(m).__name__ for m in self._moves if getattr(m, "nsplits", 2) != 2]
         if split_in_more:
-            raise ValueError(f"moves {', '.join(split_in_more)} split the ensemble in more than two; "
-                             "this sampler's red–blue update takes two-way moves (stretch, DE, walk)")
+            raise CalibrationError(f"moves {', '.join(split_in_more)} split the ensemble in more than two; "
+                                   "this sampler's red–blue update takes two-way moves (stretch, DE, walk)")
         self._move_weights = weights / weights.sum()
         initial = np.asarray(initial, dtype=float)
         shape = (self.n_temperatures, self.n_walkers, self.n_dim)
@@ -228,7 +213,7 @@ class ParallelTemperingSampler:
         bad = np.argwhere(~np.isfinite(self._tempered(self.log_prior, self.log_likelihood)))
         if bad.size:
             t, w = bad[0]
-            raise ValueError(f"initial walker {w} at temperature index {t} has zero posterior probability")
+            raise CalibrationError(f"initial walker {w} at temperature index {t} has zero posterior probability")
         self.backend = emcee.backends.Backend()
         self.backend.reset(self.n_walkers, self.n_dim)
         accepted_total = np.zeros(self.n_temperatures)

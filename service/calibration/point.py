@@ -1,48 +1,12 @@
 """Point calibration: bounded weighted least squares from several starts, with an identifiability verdict.
 
-The cost is ``½ Σ_targets Σ_t ((y_t − ŷ_t(θ)) / s_target)²`` over the measured points, ``s`` the
-problem's target scales. It is minimised by :func:`scipy.optimize.least_squares` (trust-region
-reflective) in parameters scaled to the unit cube, so every parameter moves on the same scale.
-
-Vectorisation (the contract of :class:`~service.calibration.problem.CalibrationProblem`): the start
-candidates (a seeded Latin hypercube plus the problem's default) are screened in ONE simulate call,
-and the forward-difference Jacobian ``J`` is ONE simulate call with ``n_parameters + 1`` members.
-With ``jacobian_with_residuals`` (the default for a ``vectorised_simulate`` problem) every residual evaluation is that call: the trial
-point and its Jacobian are simulated together, so an accepted trust-region step costs one call, not
-two. That is right when a call's cost is the per-step work of the vectorised simulator (an ensemble
-of 20 costs what one member costs); a simulator whose cost grows with the members (an FMU per
-member) wants it off, and pays p extra members only where it needs a Jacobian.
-
-Uncertainty from the linearisation at the optimum θ̂ (Gauss–Newton / Laplace), with each target's
-own noise: the weights ``1/s²`` make temperatures, positions and powers count comparably, but they
-are not the inverse noise variances (a valve position sensor's residuals were 1/35 of the coil
-outlet air temperature's in the case study's scaled units), so one pooled ``σ̂²`` would overstate the
-uncertainty of parameters the quiet targets pin and understate that of the noisy targets'. The
-covariance is the sandwich ``Cov(θ̂) = (JᵀJ)⁻¹ Jᵀ D J (JᵀJ)⁻¹``, ``J`` the Jacobian of the weighted
-residuals in physical units and ``D`` diagonal with each residual's target variance
-``σ̂²_k = Σ_k r² / (n_k (1 − p/n))`` (``n_k`` of the ``n`` measured values are target ``k``'s, each
-target carrying its share of the ``p`` parameters' degrees of freedom); with equal variances it is
-the textbook ``σ̂² (JᵀJ)⁻¹``, ``σ̂² = Σ r² / (n − p)``. On 30 synthetic truths (103 identified
-parameters; tests/calibration/case_study_truth.py, seeds 9–38) the offsets from the truth in these
-standard errors have a root mean square of 1.09, 71 % within one and 93 % within two (normal: 1,
-68 %, 95 %), where the pooled variance gave 1.31, 66 % and 91 %. Through the singular value
-decomposition ``J = U S Vᵀ`` of the unit-scaled Jacobian it is ``V S⁻¹ (Uᵀ D U) S⁻¹ Vᵀ``, so a flat
-direction gives huge, not infinite or NaN, variances. The bounds are ignored by this
-approximation; an interval that crosses a bound is one of the verdicts below.
-
-A parameter is *poorly identified*, with every reason that applies, when
-  * it takes part (|loading| > :attr:`PointCalibrator.flat_loading`) in a flat direction: a right
-    singular vector of the unit-scaled Jacobian whose singular value is below
-    ``flat_ratio × `` the largest (the data cannot tell apart the combinations along it);
-  * |correlation| with another parameter exceeds ``correlation_threshold`` (the partner is named);
-  * its standard error exceeds ``relative_error_threshold`` of |θ̂| (of 1 % of the prior width
-    when |θ̂| is smaller than that, so a parameter near 0 is judged against its range);
-  * its 95 % interval θ̂ ± 1.96·SE crosses a prior bound;
-  * the cost jumps there: θ̂ moved by ±2·SE in that parameter alone (the 2p points in one simulate
-    call) gives a cost off the linearisation's ``C(θ̂) + r̂·Jδ + ½‖Jδ‖²`` by more than
-    ``jump_threshold ×`` the rise ``½‖Jδ‖²`` it predicts. A PI loop whose response switches within a
-    fraction of a second of integral time does that (seed 8 of the coverage study: 7.7×; smooth
-    parameters stay below 1.6), and its Jacobian's standard error then means nothing, however small.
+Cost ``C(θ) = ½ Σ_targets Σ_t ((y_t − ŷ_t(θ)) / s_target)²`` over the measured points (``s`` the
+problem's target scales), minimised by :func:`scipy.optimize.least_squares` (trust-region
+reflective) in the unit cube. Uncertainty: the sandwich ``Cov(θ̂) = (JᵀJ)⁻¹ Jᵀ D J (JᵀJ)⁻¹`` at θ̂,
+``D`` each residual's target variance ``σ̂²_k = Σ_k r² / (n_k (1 − p/n))``. A parameter is poorly
+identified when it lies in a flat direction, is confounded with another, has a large relative
+error, a 95 % interval across a bound, or a cost that jumps at ±2 SE. Method, rationale and
+coverage: ``docs/calibration.md``, *Point calibration and identifiability*.
 """
 
 from __future__ import annotations
@@ -56,6 +20,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
+from service.errors import CalibrationError
 from service.calibration.problem import CalibrationProblem
 
 __all__ = ["PointCalibrator", "ParameterIdentifiability", "NonFiniteSimulationError"]
@@ -73,7 +38,7 @@ class ParameterIdentifiability:
         return {"name": self.name, "identified": self.identified, "reasons": list(self.reasons)}
 
 
-class NonFiniteSimulationError(ValueError):
+class NonFiniteSimulationError(CalibrationError):
     """Every start candidate's simulation gave NaN or infinite values where targets are compared."""
 
 
@@ -86,13 +51,14 @@ class PointCalibrator(BaseEstimator):
     :param max_nfev: residual evaluations per start (each Jacobian is one more simulate call).
     :param diff_step: forward-difference step in the unit-scaled parameters.
     :param jacobian_with_residuals: simulate each trial point's Jacobian members in the same call as
-        the point (module docstring); None follows the problem's ``vectorised_simulate``.
+        the point (one call per accepted step: right for a vectorised simulator, not for an FMU per
+        member); None follows the problem's ``vectorised_simulate``.
     :param flat_ratio: singular value ratio below which a direction counts as flat.
     :param flat_loading: |component| of a flat direction's vector that implicates a parameter.
     :param correlation_threshold: |ρ| above which two parameters are reported as confounded.
     :param relative_error_threshold: SE / |θ̂| above which a parameter is poorly identified.
     :param jump_threshold: |C(θ̂ ± 2·SE) − its linearised value| / the predicted rise above which the
-        standard error is not trusted (module docstring).
+        standard error is not trusted (``docs/calibration.md``).
 
     Results after :meth:`fit`: ``theta_`` (ndarray[n_parameters], physical units), ``covariance_``,
     ``standard_errors_``, ``correlation_``, ``singular_values_`` (of the unit-scaled Jacobian, largest
@@ -135,7 +101,7 @@ class PointCalibrator(BaseEstimator):
             screened with the Latin hypercube and the problem's default (e.g. a probe's best points).
         """
         if self.n_starts < 1 or self.n_candidates < self.n_starts:
-            raise ValueError(
+            raise CalibrationError(
                 f"need 1 ≤ n_starts ≤ n_candidates, got n_starts={self.n_starts}, "
                 f"n_candidates={self.n_candidates}"
             )
@@ -226,7 +192,7 @@ class PointCalibrator(BaseEstimator):
     def _set_uncertainty(self, problem: CalibrationProblem, jacobian: np.ndarray, residuals: np.ndarray) -> None:
         n, p = residuals.size, problem.n_parameters
         if n <= p:
-            raise ValueError(f"{n} measured values cannot determine {p} parameters (need n > p)")
+            raise CalibrationError(f"{n} measured values cannot determine {p} parameters (need n > p)")
         counts = np.array([mask.sum() for mask in problem.masks.values()])
         target_of = np.repeat(np.arange(counts.size), counts)
         noise_variance = np.divide(np.bincount(target_of, weights=residuals**2, minlength=counts.size), counts * (1 - p / n),
@@ -276,7 +242,7 @@ class PointCalibrator(BaseEstimator):
 
     def _check_linearisation(self, problem: CalibrationProblem, unit_theta: np.ndarray, residuals: np.ndarray,
                              jacobian: np.ndarray) -> None:
-        """Add the jump reason (module docstring) to the parameters still called identified;
+        """Add the jump reason (``docs/calibration.md``) to the parameters still called identified;
         ``jacobian`` is that of the weighted residuals in the unit cube at ``unit_theta``."""
         names = problem.parameter_names
         checked = [j for j, name in enumerate(names) if self.identifiability_[name].identified]

@@ -1,22 +1,12 @@
 """The calibration problem: the one contract between a simulation model and the calibrators.
 
-A :class:`CalibrationProblem` holds what every estimator in graphtwin needs and nothing of the graph
-or the simulator's internals: the names and physical prior bounds of the parameters to estimate
-(the columns of θ), a vectorised ``simulate`` callable, the measured series of the calibration
-targets (NaN where a sensor did not report: masked out everywhere), the scale that makes targets of
-different units count comparably, and optionally the inputs of the Kennedy–O'Hagan discrepancy GP.
-
-``simulate(theta)`` maps θ of shape ``(n_ensemble, n_parameters)`` to ``{target: ndarray[n_ensemble,
-n_steps]}`` in ONE call for the whole ensemble (see :class:`service.model.simulator.Simulator`); the
-calibrators lean on that: a finite-difference Jacobian, a batch of start candidates or every walker
-of every temperature of an MCMC step are one call each.
-
-Target scales (residuals are divided by them, so a temperature in K, a valve position in 1 and a
-power in W weigh alike): unless given, the robust standard deviation of the observations,
-``1.4826 · MAD`` (the standard deviation for normal data, insensitive to spikes); the plain standard
-deviation when the MAD is 0 (a valve shut most of the window); never below the instrument-accuracy
-floor of the target's unit (:data:`INSTRUMENT_ACCURACY_FLOOR`, else 1 % of the mean magnitude), so a
-flat series does not get an absurd weight.
+A :class:`CalibrationProblem` holds the names and physical prior bounds of θ, a vectorised
+``simulate``: θ ``ndarray[n_ensemble, n_parameters]`` → ``{target: ndarray[n_ensemble, n_steps]}`` in
+ONE call, the targets' measured series (NaN: not measured, masked out), their scales and optionally
+the discrepancy GP's inputs. Residuals are divided by the target scale: unless given, ``1.4826 ·
+MAD`` of the observations (the standard deviation when the MAD is 0), never below the unit's
+instrument accuracy (:data:`INSTRUMENT_ACCURACY_FLOOR`, else 1 % of the mean magnitude).
+Why: ``docs/calibration.md``, *The problem and its weights*.
 """
 
 from __future__ import annotations
@@ -25,6 +15,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from service.errors import CalibrationError
 
 __all__ = [
     "CalibrationProblem", "INSTRUMENT_ACCURACY_FLOOR", "RELATIVE_ACCURACY_FLOOR",
@@ -42,11 +34,11 @@ Simulate = Callable[[np.ndarray], Mapping[str, np.ndarray]]
 
 
 def default_target_scale(values: np.ndarray, unit: str = "", target: str = "") -> float:
-    """Typical magnitude of a target's variation, used to weight its residuals (see module docstring).
+    """Typical magnitude of a target's variation, used to weight its residuals (module docstring).
 
     :param values: the observed series, NaN where not measured.
     :param unit: the target's unit (``"degC"``, ``"1"``, ``"W"``, …), chooses the accuracy floor.
-    :raises ValueError: when the series is constant at zero in a unit without an absolute floor.
+    :raises CalibrationError: when the series is constant at zero in a unit without an absolute floor.
     """
     finite = np.asarray(values, dtype=float)
     finite = finite[np.isfinite(finite)]
@@ -57,7 +49,7 @@ def default_target_scale(values: np.ndarray, unit: str = "", target: str = "") -
     floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.mean(np.abs(finite))))
     scale = max(spread, floor)
     if not scale > 0.0:
-        raise ValueError(
+        raise CalibrationError(
             f"target {target} is constant at 0 in the window and its unit {unit!r} has no accuracy "
             "floor, so its errors cannot be weighed: choose a window in which it reads something "
             "(calling the library: give its target_scales entry)"
@@ -92,6 +84,7 @@ class CalibrationProblem:
     :param vectorised_simulate: a simulate call with a few dozen members costs about what one
         member costs (numpy over the ensemble); False when it steps each member on its own (an FMU).
     :raises ValueError: naming the parameter, target or array and the expected shape.
+    :raises CalibrationError: no parameter, or a target without measurements in the window.
     """
 
     parameter_names: tuple[str, ...]
@@ -109,7 +102,7 @@ class CalibrationProblem:
     def __post_init__(self) -> None:
         names = tuple(self.parameter_names)
         if not names:
-            raise ValueError("a calibration problem needs at least one parameter to estimate")
+            raise CalibrationError("a calibration problem needs at least one parameter to estimate")
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
             raise ValueError(f"duplicate parameter names: {', '.join(duplicates)}")
@@ -154,7 +147,7 @@ class CalibrationProblem:
                     f"observed[{key!r}] has shape {values.shape}, expected ({n_steps},) like the first target"
                 )
             if not np.isfinite(values).any():
-                raise ValueError(f"target {key} has no measurements in the window")
+                raise CalibrationError(f"target {key} has no measurements in the window")
             observed[key] = values
         object.__setattr__(self, "observed", observed)
 

@@ -14,7 +14,7 @@ from datetime import datetime
 
 from service.calibration.metrics import TargetMetrics
 
-__all__ = ["ParameterEstimate", "CalibrationRecord"]
+__all__ = ["ParameterEstimate", "SamplerConvergence", "CalibrationDiagnostics", "CalibrationRecord"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,43 @@ class ParameterEstimate:
         }
 
 
+@dataclass(frozen=True)
+class SamplerConvergence:
+    """How the Bayesian sampler's β = 1 chain ended: ``converged`` by the 20 × IAT rule, ``iat`` the
+    integrated autocorrelation time [steps], ``n_steps`` sampled, ``acceptance`` the fraction of
+    proposals accepted."""
+
+    converged: bool
+    iat: float
+    n_steps: int
+    acceptance: float
+
+
+@dataclass
+class CalibrationDiagnostics:
+    """What a run noticed beside its estimates: data, model and window ``warnings`` (sentences), the
+    ``start`` note of a fit started from another model's calibration, the point fit's least-squares
+    ``cost`` (½ Σ weighted r²), and the Bayesian ``sampler``'s convergence; None: not of this run."""
+
+    warnings: list[str] = field(default_factory=list)
+    start: str | None = None
+    cost: float | None = None
+    sampler: SamplerConvergence | None = None
+
+    def to_dict(self) -> dict:
+        """``{"warnings", "start"?, "cost"?, "converged"?, "iat"?, "n_steps"?, "acceptance"?}``: a key
+        only where the run has the value."""
+        result: dict = {"warnings": list(self.warnings)}
+        if self.start is not None:
+            result["start"] = self.start
+        if self.cost is not None:
+            result["cost"] = self.cost
+        if self.sampler is not None:
+            result.update(converged=self.sampler.converged, iat=self.sampler.iat,
+                          n_steps=self.sampler.n_steps, acceptance=self.sampler.acceptance)
+        return result
+
+
 @dataclass
 class CalibrationRecord:
     """A finished calibration: provenance, estimates and metrics (``metrics[window][target node]``)."""
@@ -63,7 +100,7 @@ class CalibrationRecord:
     settings: dict
     estimates: list[ParameterEstimate]
     metrics: dict[str, dict[str, TargetMetrics]] = field(default_factory=dict)
-    diagnostics: dict = field(default_factory=dict)
+    diagnostics: CalibrationDiagnostics = field(default_factory=CalibrationDiagnostics)
     #: Test-window error per operating regime (:meth:`service.calibration.regime_breakdown.RegimeBreakdown.rows`).
     regimes: list[dict] = field(default_factory=list)
     regime_rule_accuracy: float = float("nan")
@@ -78,6 +115,6 @@ class CalibrationRecord:
             "settings": self.settings,
             "parameters": {e.key: e.to_dict() for e in self.estimates},
             "metrics": {w: {t: m.to_dict() for t, m in per.items()} for w, per in self.metrics.items()},
-            "diagnostics": self.diagnostics,
+            "diagnostics": self.diagnostics.to_dict(),
             "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
         }

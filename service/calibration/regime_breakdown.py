@@ -1,16 +1,12 @@
 """The test-window error of a calibrated model per operating regime.
 
-The regimes are those of :class:`~service.calibration.regimes.OperatingRegimes` fitted on the model's
-boundary inputs over the whole data file (their rules then do not depend on where the test window
-was cut, and the versions of a model calibrated on the same data, ``model`` and ``model+Effect``,
-get the same regimes), and applied to the test window by the decision tree's rules. Per regime: its
-rule, its share of the test window's labelled steps, and the RMSE of every target on the regime's
-measured steps (NaN where the regime holds none).
-
-Every calibration with a test window computes it (:func:`service.calibration.run.calibrate`) and
-writes it with the run (``gt:OperatingRegime`` nodes, ``gt:Metric`` with ``gt:inRegime``), so
-``graphtwin history`` compares the error per regime across model versions, and ``diagnose`` names
-the worst regime from it.
+:class:`~service.calibration.regimes.OperatingRegimes` fitted on the model's boundary inputs over the
+whole data file (so the rules do not depend on where the test window was cut, and the versions of a
+model calibrated on the same data get the same regimes), applied to the test window by the rule
+tree. Per regime: its rule, its share of the test window's labelled steps, and every target's RMSE
+on its measured steps (NaN where none). Every calibration with a test window writes it with the run
+(``gt:OperatingRegime``, ``gt:Metric`` with ``gt:inRegime``): ``graphtwin history`` compares it
+across model versions, ``diagnose`` names the worst regime.
 """
 
 from __future__ import annotations

@@ -1,34 +1,12 @@
 """Morris elementary-effects sensitivity per operating regime, and the successive calibration plan.
 
-Method (RWTH Aachen): which parameters matter depends on the operating state (a heating-coil
-parameter does nothing while the coil is shut), so the screening is done per regime and the
-parameters are then calibrated regime by regime.
-
-SALib's split is kept: the ``problem`` dict ``{"num_vars", "names", "bounds"}`` is the one contract;
-``SALib.sample.morris.sample(problem, N, num_levels)`` gives ``X`` (``ndarray[N·(D+1), D]``), the
-caller's *vectorised* ``simulate(X) -> ndarray[n_samples, n_t]`` is called **once** for all
-trajectories (one ensemble run), and ``SALib.analyze.morris.analyze(problem, X, Y_r)`` is run per
-regime r with the regime's scalar measure
-
-* ``Y_r = sqrt(mean_{t ∈ r} (y(t) − y_obs(t))²)`` (RMSE over the regime's measured steps) when
-  ``observed`` is given, or
-* ``Y_r = mean_{t ∈ r} y(t)`` (mean output) when it is None.
-
-Elementary effects are ``(Y(x + Δ e_i) − Y(x)) / Δ`` with Δ the step in the unit hypercube
-(SALib's unscaled convention), so for a linear ``Y = c·θ_i`` with ``θ_i ∈ [lo, hi]``,
-``μ* = |c|·(hi − lo)``. Reference: Morris (1991), Technometrics 33(2):161–174,
-doi:10.1080/00401706.1991.10484804; Campolongo, Cariboni & Saltelli (2007) for μ*.
-
-Several targets (:func:`calibration_morris_by_regime`): the targets of a
-:class:`~service.calibration.problem.CalibrationProblem` are divided by their target scales and
-stacked along time, so ``Y_r`` is the root mean square *weighted* residual over every measured value
-of every target in regime r, ``Y_r = sqrt(mean_{k, t ∈ r} ((y_k(t) − ŷ_k(t)) / s_k)²)``: the
-calibration cost restricted to the regime (dimensionless). The problem's warm-up steps are NaN in
-its observations and so left out.
-
-Comparing regimes: the measures of different regimes have different sizes, so each regime's μ* is
-normalised to its share of the regime's total, ``s[r, i] = μ*[r, i] / Σ_j μ*[r, j]`` (0 where the
-regime's measure does not move at all).
+One SALib Morris design (``problem = {"num_vars", "names", "bounds"}``), ONE vectorised simulate
+call for all trajectories, then ``SALib.analyze.morris.analyze`` per regime r on its scalar measure
+``Y_r``: the RMSE ``sqrt(mean_{t ∈ r} (y(t) − y_obs(t))²)`` over its measured steps, or the mean
+output; for a calibration problem the RMS weighted residual of all targets,
+``sqrt(mean_{k, t ∈ r} ((y_k(t) − ŷ_k(t)) / s_k)²)``. Regimes compare by each μ*'s share of the
+regime's total, ``s[r, i] = μ*[r, i] / Σ_j μ*[r, j]``. Sources: Morris (1991), Technometrics
+33(2):161–174; Campolongo, Cariboni & Saltelli (2007). Method: ``docs/calibration.md``.
 """
 
 from __future__ import annotations
@@ -40,6 +18,7 @@ import numpy as np
 from SALib.analyze import morris as morris_analyze
 from SALib.sample import morris as morris_sample
 
+from service.errors import CalibrationError
 from service.calibration.model_data import ModelData
 from service.calibration.problem import CalibrationProblem
 
@@ -181,8 +160,8 @@ def morris_by_regime(
         else:
             measure = np.sqrt(np.mean((Y[:, steps] - observed[steps]) ** 2, axis=1))
         if not np.isfinite(measure).all():
-            raise ValueError(f"the simulation gives non-finite values in regime {regime}: "
-                             f"{int((~np.isfinite(measure)).sum())} of {len(measure)} parameter sets")
+            raise CalibrationError(f"the simulation gives non-finite values in regime {regime}: "
+                                   f"{int((~np.isfinite(measure)).sum())} of {len(measure)} parameter sets")
         result = morris_analyze.analyze(dict(problem), X, measure, num_levels=num_levels, seed=seed)
         for key in stats:
             stats[key][row] = np.asarray(result[key], dtype=float)

@@ -1,42 +1,12 @@
 """Operating regimes: clusters of operating states with rules an engineer can read.
 
-Method (RWTH Aachen): cluster the operating states with mini-batch k-means, describe each cluster by
-the paths of a shallow decision tree, then evaluate (and calibrate, and run Morris) per regime; a
-regime where the model is much worse than elsewhere points at missing model detail.
-
-Features. The caller passes the boundary inputs and commands, ``x[t, j]`` (``ndarray[n_t, n_f]``,
-engineering units). :meth:`OperatingRegimes.fit` appends their smoothed first derivatives
-(:func:`smoothed_rate`): a centred moving average over ``smoothing_steps`` steps, then the central
-difference, per hour when the step length is given (``rate = Δx̄ / Δt · 3600 s/h``), so ramps
-separate from steady states. Steps where any feature or rate is not finite (or ``valid`` is False)
-are left out and labelled ``-1``.
-
-Scaling. Each input is robustly standardised, ``z = (x − median) / s`` with the robust spread
-``s = (q95 − q5) / 3.29`` (:func:`robust_spread`: the standard deviation for a normal variable; the
-standard deviation where that range is 0, 1 for a constant input). Its rate is put on the same
-scale as the change over the smoothing window, ``z_rate = rate · T_w / s`` with ``T_w`` =
-``smoothing_steps`` steps (zero stays zero: steady means 0): a ramp that crosses the input's
-operating range within the window weighs like a jump across that range, while the rate of noise
-stays small. All coordinates are clipped to ``±Z_CLIP`` = ±5. The 5–95 % range rather than the MAD,
-because a command that sits at one value most of the time (a valve shut 70 % of the day) has a MAD
-of its noise only, which would blow up its steps; rates are not standardised by their own spread
-because most of the time they are noise, so their own spread is the noise's and every fluctuation
-would weigh like a change of state.
-
-Number of regimes. Unless ``n_regimes`` is given, k = 2 … ``max_regimes`` are clustered and the k
-with the highest mean silhouette (on a seeded subsample of at most 2,000 steps) is kept; the scores
-are ``selection_scores_``. Regimes are numbered by decreasing share of time (regime 0 is the most
-common). The clustering runs single-threaded (a few thousand steps: OpenMP start-up costs more than
-it saves, and the machine is shared with the simulator's workers).
-
-Rules. A :class:`~sklearn.tree.DecisionTreeClassifier` of depth ≤ ``tree_depth`` is trained on the
-*unscaled* features to reproduce the cluster labels; its 5-fold stratified cross-validated accuracy
-is ``rule_accuracy_``. Sibling leaves of the same regime are merged, the conditions of each path are
-reduced to one interval per feature, and the paths of one regime are joined with "or"
-(``rules_``; the conditions themselves are ``rule_conditions_``). Thresholds are rounded to the
-power of ten at or below 2 % of the feature's 5–95 % range, and to at most 3 significant digits.
-:meth:`OperatingRegimes.predict` maps new data by the *tree*, not by the nearest cluster centre:
-the rule a user reads is the rule that is applied.
+Method (RWTH Aachen): mini-batch k-means on the boundary inputs and commands and their smoothed
+rates (:func:`smoothed_rate`), robustly standardised (:func:`robust_spread`) and clipped to
+±:data:`Z_CLIP`; k by the mean silhouette unless given; regimes numbered by decreasing share of
+time. A shallow decision tree on the unscaled features reproduces the labels: its paths are the
+rules (``rules_``), and :meth:`OperatingRegimes.predict` applies the tree, so the rule a user reads
+is the rule applied. Steps with a non-finite input or rate are labelled −1. Scaling, selection and
+rule text: ``docs/calibration.md``, *Operating regimes*.
 """
 
 from __future__ import annotations
@@ -54,6 +24,8 @@ from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
+
+from service.errors import CalibrationError
 
 __all__ = [
     "OperatingRegimes", "RuleCondition", "smoothed_rate", "per_regime_metrics", "worst_regime",
@@ -83,7 +55,7 @@ def smoothed_rate(values: np.ndarray, smoothing_steps: int, step_s: float | None
     if values.ndim != 2:
         raise ValueError(f"values have shape {values.shape}, expected (n_steps, n_features)")
     if smoothing_steps < 1 or smoothing_steps % 2 == 0:
-        raise ValueError(f"smoothing_steps must be an odd positive integer, got {smoothing_steps}")
+        raise CalibrationError(f"smoothing_steps must be an odd positive integer, got {smoothing_steps}")
     n = len(values)
     if n < 2:
         return np.zeros_like(values)
@@ -231,7 +203,7 @@ class OperatingRegimes(BaseEstimator):
         if len(units) != len(self.signal_names_):
             raise ValueError(f"{len(units)} feature_units for {len(self.signal_names_)} feature_names")
         if self.max_regimes < 2 or (self.n_regimes is not None and self.n_regimes < 1):
-            raise ValueError(
+            raise CalibrationError(
                 f"max_regimes must be ≥ 2 and n_regimes ≥ 1, got {self.max_regimes}, {self.n_regimes}")
         self.step_s_ = step_s
         augmented, usable = self._augment(features)
@@ -245,8 +217,8 @@ class OperatingRegimes(BaseEstimator):
         data = augmented[usable]
         fewest = self.n_regimes if self.n_regimes is not None else 2
         if len(data) <= fewest:
-            raise ValueError(f"only {len(data)} usable steps (finite inputs and rates, valid): "
-                             f"too few to find {fewest} operating regimes")
+            raise CalibrationError(f"only {len(data)} usable steps (finite inputs and rates, valid): "
+                                   f"too few to find {fewest} operating regimes")
         k_max = min(self.max_regimes, len(data) - 1)
 
         rng = check_random_state(self.random_state)
@@ -287,7 +259,7 @@ class OperatingRegimes(BaseEstimator):
         return self
 
     def _standardise(self, data: np.ndarray) -> np.ndarray:
-        """Clustering coordinates of ``[inputs, rates]`` (module docstring, Scaling)."""
+        """Clustering coordinates of ``[inputs, rates]`` (``docs/calibration.md``, *Operating regimes*, Scaling)."""
         n_signals = len(self.signal_names_)
         levels, rates = data[:, :n_signals], data[:, n_signals:]
         spread = robust_spread(levels)
@@ -392,6 +364,6 @@ def worst_regime(rows: Sequence[dict], metric: str, *, higher_is_worse: bool = T
     ``min_share`` of the time (NaN metrics ignored)."""
     eligible = [r for r in rows if r["share"] >= min_share and np.isfinite(r[metric])]
     if not eligible:
-        raise ValueError(f"no regime with a finite {metric!r} and a share of time ≥ {min_share}")
+        raise CalibrationError(f"no regime with a finite {metric!r} and a share of time ≥ {min_share}")
     key = (lambda r: r[metric]) if higher_is_worse else (lambda r: -r[metric])
     return max(eligible, key=key)

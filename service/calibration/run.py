@@ -1,22 +1,12 @@
 """A calibration run end to end: assemble, read the data, fit, evaluate, write every result as triples.
 
-``calibrate`` is what ``graphtwin calibrate`` and the HTTP job run. Point (``method="point"``):
-multi-start bounded least squares; the 16–84 % interval is θ̂ ± one standard error of the Jacobian
-covariance, clipped to the prior. Bayesian (``method="bayes"``): Kennedy–O'Hagan with the Matérn-3/2
-discrepancy GP, parallel-tempering MCMC to 20 integrated autocorrelation times, posterior
-predictive intervals on the test window. The test window is simulated as the continuation of the
-training window (one run from the training start), so it carries no start-up transient. With a test
-window the run also records the error per operating regime (:mod:`service.calibration.regime_breakdown`).
-
-``start_from`` names another model in the store (the version before an effect was added, say): the
-latest calibrated values of the parameters the two share replace the component defaults as the
-plausible start screened with the Latin-hypercube candidates (:func:`calibrated_start`), so
-re-calibrating after ``add-effect`` starts where the base model's fit ended (the diagnosis's refit
-starts there too), with the effect's parameters at their defaults, instead of searching the whole
-prior again.
-
-Everything a run produced goes into its named graph in ONE transaction after the fit: a reader
-sees the whole run or none of it; a failed run writes nothing.
+:func:`calibrate` is what ``graphtwin calibrate`` and the HTTP job run: point (multi-start least
+squares; the 16–84 % interval θ̂ ± one standard error, clipped to the prior) or Bayesian
+(Kennedy–O'Hagan, PT-MCMC to 20 IATs, posterior predictive intervals on the test window). The test
+window is simulated as the continuation of the training run; with one, the error per operating
+regime is recorded. ``start_from`` starts from another model's latest calibration
+(:func:`calibrated_start`). A run is written in ONE transaction after the fit: a reader sees all of
+it or none; a failed run writes nothing. More: ``docs/calibration.md``, *The calibration run*.
 """
 
 from __future__ import annotations
@@ -33,13 +23,16 @@ from pathlib import Path
 import numpy as np
 import pyoxigraph as ox
 
+from service.errors import CalibrationError
 from service.model.assembled_model import AssembledModel
-from service.model.assembly import assemble, without_model
+from service.model.assembly import assemble
+from service.model.wiring import without_model
 from service.model.assembly_triples import assembly_iri, assembly_triples
-from service.calibration.model_data import DEFAULT_GP_INPUTS, SETTLING_S, ModelData, read_model_data
-from service.calibration.record import CalibrationRecord, ParameterEstimate
+from service.calibration.model_data import DEFAULT_GP_INPUTS, ModelData
+from service.data.model_series import SETTLING_S, read_model_data
+from service.calibration.record import CalibrationDiagnostics, CalibrationRecord, ParameterEstimate, SamplerConvergence
 from service.calibration.triples import calibration_triples
-from service.data.measurements import parse_timestamp
+from service.data.windows import Window
 from service.graph.namespaces import local_name
 from service.calibration.metrics import target_metrics
 from service.data.operating_filter import operating_mask
@@ -49,34 +42,8 @@ from service.model.simulator import loop_substeps
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
 
-__all__ = ["Window", "parse_window", "CalibrationOutcome", "calibrate", "calibrated_start", "model_version",
+__all__ = ["CalibrationOutcome", "calibrate", "calibrated_start", "model_version",
            "fit_point", "continuation", "predict_test", "store_run"]
-
-Window = tuple[str | None, str | None]
-
-
-def parse_window(text: str | None) -> Window:
-    """``"START/END"`` (time stamps :func:`~service.data.measurements.parse_timestamp` reads, either side
-    may be empty) → (start, end), checked before any data is read.
-
-    :raises ValueError: without exactly one ``/``, naming the side whose time stamp is unreadable,
-        or when the end is before the start.
-    """
-    if text is None:
-        return (None, None)
-    if text.count("/") != 1:
-        raise ValueError(f"window {text!r}: write START/END, e.g. 2026-01-12/2026-01-15T23:50")
-    start, end = (part.strip() or None for part in text.split("/"))
-    parsed = {}
-    for side, stamp in (("start", start), ("end", end)):
-        if stamp is not None:
-            try:
-                parsed[side] = parse_timestamp(stamp)
-            except ValueError as exc:
-                raise ValueError(f"window {text!r}, its {side}: {exc}") from None
-    if len(parsed) == 2 and parsed["end"] < parsed["start"]:
-        raise ValueError(f"window {text!r}: the end is before the start")
-    return start, end
 
 
 def model_version(store: GraphStore, model_name: str) -> str:
@@ -200,18 +167,18 @@ def calibrated_start(store: GraphStore, start_from: str, model_name: str,
     (keys matched without the model name, :func:`without_model`), clipped to this model's bounds; the
     component default where ``start_from`` has none (the parameters of an effect just added).
 
-    :raises ValueError: ``start_from`` is not in the store, has no calibration run, or shares no
+    :raises CalibrationError: ``start_from`` is not in the store, has no calibration run, or shares no
         estimated parameter with ``model``.
     """
     if not store.has_model(start_from):
-        raise ValueError(f"start from {start_from!r}: no such model in the store; it holds "
-                         f"{', '.join(store.models()) or 'none'}")
+        raise CalibrationError(f"start from {start_from!r}: no such model in the store; it holds "
+                               f"{', '.join(store.models()) or 'none'}")
     latest = {without_model(f"{row['component'].value}#{row['name'].value}"):
               (float((row.get("map") or row["median"]).value), row["run"].value)
               for row in store.run_named_query("calibrated-parameters", model=start_from)}
     if not latest:
-        raise ValueError(f"start from {start_from!r}: the model has no calibration run in the store; "
-                         "calibrate it first")
+        raise CalibrationError(f"start from {start_from!r}: the model has no calibration run in the store; "
+                               "calibrate it first")
     theta = np.array([ref.spec.default for ref in model.estimated_parameters])
     at_default, runs = [], set()
     for j, ref in enumerate(model.estimated_parameters):
@@ -223,8 +190,8 @@ def calibrated_start(store: GraphStore, start_from: str, model_name: str,
         else:
             at_default.append(key)
     if not runs:
-        raise ValueError(f"start from {start_from!r}: its calibrated parameters ({', '.join(sorted(latest))}) include "
-                         f"none that model {model_name} estimates")
+        raise CalibrationError(f"start from {start_from!r}: its calibrated parameters ({', '.join(sorted(latest))}) include "
+                               f"none that model {model_name} estimates")
     note = (f"started from the latest calibration of {start_from}: {len(theta) - len(at_default)} of {len(theta)} "
             "parameters" + (f"; at their defaults: {', '.join(at_default)}" if at_default else ""))
     return theta, sorted(runs), note
@@ -260,11 +227,11 @@ def calibrate(
     :param start_from: a model in the store whose latest calibrated values start this fit
         (:func:`calibrated_start`); None: the component defaults.
 
-    :raises ValueError: a bad window, a target without measurements, NaN-only series, an unknown
+    :raises InputError: a bad window, a target without measurements, NaN-only series, an unknown
         method, a ``start_from`` with nothing to start from; nothing is written to the store then.
     """
     if method not in ("point", "bayes"):
-        raise ValueError(f"unknown method {method!r}: use point or bayes")
+        raise CalibrationError(f"unknown method {method!r}: use point or bayes")
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     started = datetime.now(timezone.utc)
     version = model_version(store, model_name)  # of the model calibrated, read before anything else
@@ -277,8 +244,8 @@ def calibrate(
     window_notes = []
     if test_slice is not None:
         if test_slice.stop - test_slice.start < min_test_steps:
-            raise ValueError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "
-                             f"steps of data: at least {min_test_steps} are needed")
+            raise CalibrationError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "
+                                   f"steps of data: at least {min_test_steps} are needed")
         overlap = min(train_slice.stop, test_slice.stop) - max(train_slice.start, test_slice.start)
         if overlap > 0:
             window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
@@ -287,17 +254,17 @@ def calibrate(
     unscored_s = md.unscored_start_s(train_slice)
     train_s = (train_slice.stop - train_slice.start) * data.step_s
     if train_s <= unscored_s:
-        raise ValueError(f"the training window {train[0] or ''}/{train[1] or ''} holds {train_s / 3600:.3g} h of data, and "
-                         f"its first {unscored_s / 3600:g} h are simulated, not scored (the model's start state "
-                         f"settles): give a window longer than {unscored_s / 3600:g} h, or one starting later in the data")
+        raise CalibrationError(f"the training window {train[0] or ''}/{train[1] or ''} holds {train_s / 3600:.3g} h of data, and "
+                               f"its first {unscored_s / 3600:g} h are simulated, not scored (the model's start state "
+                               f"settles): give a window longer than {unscored_s / 3600:g} h, or one starting later in the data")
     if unscored_s > SETTLING_S:
         window_notes.append(f"the training window's first {unscored_s / 3600:g} h are simulated, not scored: before the "
                             "data's first step the model's start state is a guess, and its slowest loop carries it that "
                             "long; data from before the window would let the fit use them")
     gp_nodes = md.gp_input_nodes(gp_inputs)
     if method == "point" and gp_nodes != DEFAULT_GP_INPUTS:
-        raise ValueError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
-                         "a point calibration has no discrepancy")
+        raise CalibrationError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
+                               "a point calibration has no discrepancy")
     start = start_runs = start_note = None
     if start_from is not None:
         start, start_runs, start_note = calibrated_start(store, start_from, model_name, model)
@@ -311,9 +278,9 @@ def calibrate(
         settings["only_when"] = list(only_when)
     if method == "bayes":
         settings["gp_inputs"] = list(gp_nodes)
-    diagnostics: dict = {"warnings": list(data.warnings) + list(model.notes) + list(md.simulator.notes) + window_notes}
-    if start_note:
-        diagnostics["start"] = start_note
+    diagnostics = CalibrationDiagnostics(
+        warnings=list(data.warnings) + list(model.notes) + list(md.simulator.notes) + window_notes,
+        start=start_note or None)
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None
     if method == "point":
@@ -325,7 +292,7 @@ def calibrate(
         q16, q84 = np.clip(theta - se, lower, upper), np.clip(theta + se, lower, upper)
         theta_map, verdicts = theta, calibrator.identifiability_
         settings.update({"n_starts": 2, "n_candidates": 32, "max_nfev": 40})
-        diagnostics["cost"] = calibrator.cost_
+        diagnostics.cost = calibrator.cost_
     else:
         from service.calibration.bayesian import BayesianCalibrator
 
@@ -338,8 +305,9 @@ def calibrate(
         se = calibrator.samples_.std(axis=0)
         verdicts = calibrator.point_calibrator_.identifiability_
         settings.update({k: v for k, v in options.items() if k != "progress"})
-        diagnostics.update({"converged": bool(calibrator.converged_), "iat": np.asarray(calibrator.iat_).tolist(),
-                            "n_steps": int(calibrator.n_steps_), "acceptance": calibrator.acceptance_})
+        diagnostics.sampler = SamplerConvergence(
+            converged=bool(calibrator.converged_), iat=float(calibrator.iat_),
+            n_steps=int(calibrator.n_steps_), acceptance=calibrator.acceptance_)
     predictions = {"train": {k: v[0] for k, v in problem.run(theta[None, :]).items()}}
     metrics = {"train": {
         node: target_metrics(problem.observed[node], predictions["train"][node], n_parameters=n_par,

@@ -1,33 +1,12 @@
 """Successive (regime-by-regime) point calibration, and its comparison with the joint fit.
 
-Method (RWTH Aachen, the seed method's "calibration classes"): which parameters the data can
-determine depends on the operating state (a coil's conductances do nothing while its valve is
-shut), so
-
-1. **screen**: Morris μ* per operating regime of the weighted RMS residual
-   (:func:`service.calibration.regime_sensitivity.calibration_morris_by_regime`, one ensemble run);
-2. **plan**: each parameter goes to the regime where its share of μ* is highest; regimes with the
-   most parameters first (:func:`service.calibration.regime_sensitivity.successive_calibration_plan`);
-3. **successive stages**: in plan order, the regime's parameters are fitted by
-   :class:`~service.calibration.point.PointCalibrator` on the regime's measured steps only
-   (the simulation still runs over the whole window, so the dynamics stay continuous), every other
-   parameter held at its current value (estimated in an earlier stage, or its default);
-4. **joint fine-tuning**: all parameters on all data, one local least-squares run from the
-   successive estimate (screened, as :class:`PointCalibrator` always does, against
-   ``fine_tune_candidates`` Latin-hypercube points).
-
-:func:`compare_strategies` fits this and the joint fit (:class:`PointCalibrator` on all parameters
-and all data at once, the settings of ``graphtwin calibrate``) on the same window and reports, for
-each: RMSE and R² per target and regime on the training window (and the test window when given),
-the cost, the number of simulate calls, the estimates with standard errors, and a blocked
-cross-validation on held-out periods (:func:`contiguous_folds`): the training window is cut into
-``n_folds`` contiguous blocks; each block in turn is held out, both strategies are fitted (Morris
-and plan included) on the remaining blocks, and the held-out block is simulated on its own (its
-unscored start not scored: the warm-up settles the model's states, not to the building's) and
-scored by the weighted RMSE ``sqrt(mean_{k,t} ((y_k(t) − ŷ_k(t)) / s_k)²)`` with the training
-window's target scales ``s_k``.
-The regimes come from the boundary inputs only (:class:`~service.calibration.regimes.OperatingRegimes`,
-no target enters them), so labelling the held-out block does not leak its measurements.
+Method (RWTH Aachen, "calibration classes"): 1. screen: Morris μ* per operating regime of the
+weighted RMS residual; 2. plan: each parameter to the regime where its μ* share is highest, regimes
+with the most parameters first; 3. successive stages: per regime, its parameters fitted on its
+measured steps only, the others held; 4. a joint fine-tuning of all parameters from that estimate.
+:func:`compare_strategies` scores it against the joint fit per target and regime and by blocked
+cross-validation (the weighted RMSE ``sqrt(mean_{k,t} ((y_k(t) − ŷ_k(t)) / s_k)²)`` of held-out
+blocks, the training window's ``s_k``). Details: ``docs/calibration.md``, *Successive calibration*.
 """
 
 from __future__ import annotations
@@ -40,10 +19,13 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 
+from service.errors import CalibrationError
 from service.model.assembly import assemble
-from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.model_data import ModelData
+from service.data.model_series import read_model_data
 from service.calibration.problem import CalibrationProblem
-from service.calibration.run import Window, predict_test
+from service.calibration.run import predict_test
+from service.data.windows import Window
 from service.calibration.metrics import target_metrics
 from service.calibration.regimes import OperatingRegimes, per_regime_metrics
 from service.calibration.point import PointCalibrator
@@ -71,14 +53,14 @@ def restricted_problem(problem: CalibrationProblem, columns: Sequence[int], thet
     (``bool[n_steps]``) is given, only those steps compared; targets without a measured step left
     there are dropped. The target scales stay those of ``problem``, so costs remain comparable.
 
-    :raises ValueError: when no target has a measured step in ``steps``.
+    :raises CalibrationError: when no target has a measured step in ``steps``.
     """
     columns = np.asarray(columns, dtype=int)
     held = np.array(theta, dtype=float)
     observed = {k: (v if steps is None else np.where(steps, v, np.nan)) for k, v in problem.observed.items()}
     observed = {k: v for k, v in observed.items() if np.isfinite(v).any()}
     if not observed:
-        raise ValueError("the restricted problem has no measured step: every target is NaN on the chosen steps")
+        raise CalibrationError("the restricted problem has no measured step: every target is NaN on the chosen steps")
 
     def simulate(free: np.ndarray) -> dict[str, np.ndarray]:
         full = np.repeat(held[None, :], len(free), axis=0)
@@ -205,15 +187,15 @@ def contiguous_folds(window: slice, n_folds: int, *, min_steps: int = 1) -> list
     each simulated on its own). Returns ``[(fit windows, held-out block)]``.
 
     :param min_steps: the shortest block allowed (e.g. the warm-up plus a few compared steps).
-    :raises ValueError: for fewer than 2 folds or blocks shorter than ``min_steps``.
+    :raises CalibrationError: for fewer than 2 folds or blocks shorter than ``min_steps``.
     """
     start, stop = window.start or 0, window.stop
     if n_folds < 2:
-        raise ValueError(f"cross-validation needs n_folds ≥ 2, got {n_folds}")
+        raise CalibrationError(f"cross-validation needs n_folds ≥ 2, got {n_folds}")
     edges = np.linspace(start, stop, n_folds + 1).round().astype(int)
     if np.diff(edges).min() < min_steps:
-        raise ValueError(f"{n_folds} folds of a {stop - start}-step window give blocks of {np.diff(edges).min()} "
-                         f"steps, fewer than the {min_steps} needed (warm-up plus compared steps)")
+        raise CalibrationError(f"{n_folds} folds of a {stop - start}-step window give blocks of {np.diff(edges).min()} "
+                               f"steps, fewer than the {min_steps} needed (warm-up plus compared steps)")
     folds = []
     for i in range(n_folds):
         held_out = slice(int(edges[i]), int(edges[i + 1]))
@@ -275,7 +257,7 @@ def cross_validate(
         :func:`compare_strategies`.
     """
     if strategy not in STRATEGIES:
-        raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
+        raise CalibrationError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
     settings = {"n_starts": n_starts, "n_candidates": n_candidates, "max_nfev": max_nfev}
     scales = dict(target_scales or model_data.problem(window, settling_s=settling_s).target_scales)
     scores = []
@@ -476,7 +458,7 @@ def compare_calibration_strategies(
     ``graphtwin compare-strategies`` runs): the regimes are those of the boundary inputs on the
     training window (:func:`boundary_regimes`). Nothing is written to the store.
 
-    :raises ValueError: a bad window, a target without measurements, too short a window for the folds.
+    :raises InputError: a bad window, a target without measurements, too short a window for the folds.
     """
     model = assemble(store, model_name)
     data = read_model_data(model, data_path)

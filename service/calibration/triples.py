@@ -1,27 +1,12 @@
-"""A calibration run written back as triples (PROV-O provenance, estimates, metrics).
+"""A calibration run written back as triples (PROV-O provenance, estimates, metrics, regimes).
 
-Shape (vocabulary in ``ontologies/graphtwin.ttl``), all in the run's named graph ``gtr:graph/run/<id>``::
-
-    <run> a gt:CalibrationRun, prov:Activity ;
-        prov:used <building model graph>, <assembly> ; gt:forModel "name" ; gt:modelVersion "…" ;
-        gt:method "point" | "bayes" ; gt:seed 3 ; gt:dataSource "data.csv" ;
-        gt:trainStart / gt:trainEnd / gt:testStart / gt:testEnd xsd:dateTime ;
-        prov:startedAtTime / prov:endedAtTime xsd:dateTime ; gt:settings "{json}" ;
-        prov:wasAssociatedWith <software agent "graphtwin x.y.z"> .
-    <estimate> a gt:Estimate ; prov:wasGeneratedBy <run> ; gt:ofParameter <parameter> ;
-        gt:onComponent <component> ; gt:onNode <building node> ; gt:parameterName "…" ; gt:unit "…" ;
-        gt:median ; gt:quantile16 ; gt:quantile84 ; gt:map ; gt:standardError ;
-        gt:lowerBound ; gt:upperBound ; gt:identified true|false ; rdfs:comment "why not identified" .
-    <metric> a gt:Metric ; prov:wasGeneratedBy <run> ; gt:onSensor <sensor node> ;
-        gt:window "train" | "test" ; gt:metricName "rmse" ; gt:value 0.21 ; gt:unit "degC" .
-    <metric> … gt:metricName "coverage" | "ace" | "mean_interval_width" ; gt:intervalLevel 0.9 .
-                                            (per prediction interval of a Bayesian run)
-    <regime> a gt:OperatingRegime ; prov:wasGeneratedBy <run> ; gt:regimeRule "fan speed > 0.6 …" ;
-        gt:share 0.4 ; gt:ruleAccuracy 0.97 .
-    <metric> … gt:window "test" ; gt:metricName "rmse" ; gt:inRegime <regime> .   (the RMSE per regime)
-
-Parameter IRIs are those of the assembly (:func:`service.model.assembly_triples.parameter_iri`), so an
-estimate joins the assembled model's parameter, its component and the building node.
+All in the run's named graph ``gtr:graph/run/<id>`` (vocabulary in ``ontologies/graphtwin.ttl``):
+the ``gt:CalibrationRun`` (``prov:Activity``: model, version, method, seed, data, windows, times,
+settings, software agent), a ``gt:Estimate`` per parameter (median, 16/84 % quantiles, MAP,
+standard error, bounds, identified), a ``gt:Metric`` per sensor, window and metric (and interval
+level), a ``gt:OperatingRegime`` per regime with the test RMSE ``gt:inRegime`` it. Parameter IRIs
+are the assembly's (:func:`service.model.assembly_triples.parameter_iri`). The full shape:
+``docs/calibration.md``, *Results as triples*.
 """
 
 from __future__ import annotations

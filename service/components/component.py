@@ -1,21 +1,12 @@
 """The contract every component model (and every effect) of the library fulfils.
 
-A component model steps a whole ensemble of parameter sets at once: every parameter, input, state
-and output is a 1-D ``numpy`` array of length ``n_ensemble``. A single parameter set is the case
-``n_ensemble == 1``; there is no other code path.
-
-Time stepping (see :mod:`service.model.simulator`): at step ``k`` the simulator calls
-``outputs = model.step(params, inputs, state, dt_s)`` with the inputs at time ``t_k`` and the state
-at ``t_k``; the model returns its outputs at ``t_k`` and updates ``state`` in place to ``t_{k+1}``.
-Dynamic models therefore report their state (a lag shows a step change one step later), and first-
-order lags use the exact discretisation ``x ← x + (1 − e^{−Δt/τ})·(x∞ − x)``, stable for any step.
-
-Units: SI inside the simulator, temperatures in °C (``"degC"``); the unit of every port and
-parameter is declared so that graph values and measured series are converted at the edge.
-
-Effects (:class:`SplicedEffect`) are component models that the assembly splices into one port of an
-existing component: they receive what the port carried (``value_in``) and return the changed value
-(``value_out``), so adding an effect never edits the base model's code.
+A model steps a whole ensemble of parameter sets at once: every parameter, input, state and output
+is a 1-D ``numpy`` array of length ``n_ensemble`` (one parameter set: ``n_ensemble == 1``). At step
+``k`` the simulator calls ``outputs = model.step(params, inputs, state, dt_s)`` with inputs and state
+at ``t_k``; the model returns its outputs at ``t_k`` and advances ``state`` to ``t_{k+1}``. First-order
+lags use the exact discretisation ``x ← x + (1 − e^{−Δt/τ})·(x∞ − x)``. Units: SI, temperatures in °C
+(``"degC"``), declared on every port and parameter. An effect (:class:`SplicedEffect`) maps what a
+spliced port carries (``value_in``) to ``value_out``. Details: ``docs/components.md``.
 """
 
 from __future__ import annotations
@@ -101,7 +92,7 @@ class ComponentModel:
     #: when each member is stepped on its own, an FMU instance per member).
     vectorised: ClassVar[bool] = True
     #: How long the states take to forget their start [s], at the slowest the priors allow: the
-    #: warm-up a simulated window needs (:func:`service.calibration.model_data.model_warmup_s`). None: a
+    #: warm-up a simulated window needs (:func:`service.data.model_series.model_warmup_s`). None: a
     #: day for a model with states (:data:`DEFAULT_SETTLING_S`), nothing for a memoryless one.
     settling_s: ClassVar[float | None] = None
     #: How long the outputs remember a wrong start state at typical parameters [s]: when the warm-up

@@ -9,7 +9,8 @@ from service.components.component import AIR_DENSITY_KG_PER_M3, ComponentModel, 
 __all__ = ["Fan", "part_load_power_fraction"]
 
 
-def part_load_power_fraction(flow_fraction, c1, c2, c3, c4):
+def part_load_power_fraction(flow_fraction: np.ndarray, *, c1: np.ndarray, c2: np.ndarray, c3: np.ndarray,
+                             c4: np.ndarray) -> np.ndarray:
     """c1 + c2·f + c3·f² + c4·f³ (Horner), clipped at 0, and 0 where f ≤ 0 (the fan is off: c1 is the
     curve's constant term while it runs, not a stand-by draw) [1]."""
     fraction = np.maximum(c1 + flow_fraction * (c2 + flow_fraction * (c3 + flow_fraction * c4)), 0.0)
@@ -47,7 +48,7 @@ class Fan(ComponentModel):
         flow = np.maximum(inputs["air_volume_flow"], 0.0)
         fraction = flow / params["nominal_air_flow"]
         power = params["nominal_power"] * part_load_power_fraction(
-            fraction, params["c1"], params["c2"], params["c3"], params["c4"])
+            fraction, c1=params["c1"], c2=params["c2"], c3=params["c3"], c4=params["c4"])
         return {
             "outlet_air_temperature": inputs["inlet_air_temperature"],
             "outlet_air_mass_flow": AIR_DENSITY_KG_PER_M3 * flow,

@@ -1,52 +1,12 @@
-"""FMU components: an FMI 2.0 co-simulation FMU behind the :class:`~service.components.component.ComponentModel`
-contract, so a signature can say ``fmu = "file.fmu"`` instead of ``model = "module:Class"``.
+"""FMU components: an FMI 2.0 co-simulation FMU behind the :class:`~service.components.component.ComponentModel` contract.
 
-:func:`fmu_model_class` reads the FMU's ``modelDescription.xml`` (``fmpy``) and builds a component
-class from it:
-
-* **ports**: every ``Real`` variable with causality ``input`` / ``output`` becomes a
-  :class:`~service.components.component.Port` with the variable's unit (or its declared type's unit, else ``""``).
-  A port the signature maps must declare the unit the simulator passes for its quantity (or none):
-  :func:`check_port_units` refuses an FMU whose flow input is in m³/h or whose temperatures are in
-  absolute K where the library passes °C (it would read the values unconverted); such an FMU needs a wrapper.
-* **parameters**: every ``Real`` variable with causality ``parameter`` and variability ``fixed`` or
-  ``tunable`` becomes a :class:`~service.components.component.Parameter` with ``default = start`` and bounds
-  ``[min, max]`` from the modelDescription. **When ``min`` or ``max`` is missing the bound is
-  invented**: ``start − |start|`` and ``start + |start|`` (so ``[0, 2·start]`` for a positive
-  start), or ``0`` and ``1`` when ``start`` is 0. These are placeholders, not physical priors:
-  give real bounds in the FMU (``min``/``max``) before estimating such a parameter.
-* Integer, Boolean, String and enumeration variables are not exposed (the FMU's start values apply).
-
-**One FMU instance per ensemble member, kept alive through the run** (measured against reset &
-re-run, below). The contract steps the whole ensemble at once, but an FMU instance holds *one* state
-(a lag, an integrator, a controller's memory), so each member needs its own instance for the whole
-run: :meth:`FMUComponent.initial_state` instantiates ``n_ensemble`` instances (``fmi2Instantiate``;
-the shared library is loaded once per FMU file), sets the parameters (instantiated state), the
-first inputs (initialization mode) and leaves initialization mode; the instances live in the state
-dict under ``"fmu"``. :meth:`FMUComponent.step` sets the inputs at ``t_k``, reads the outputs at
-``t_k`` and calls ``fmi2DoStep(t_k, Δt)`` on every instance — exactly the contract's "outputs at
-``t_k`` from state at ``t_k``, advance the state to ``t_{k+1}``". The instances are freed
-(``fmi2Terminate`` + ``fmi2FreeInstance``) by ``weakref.finalize`` when the state is garbage
-collected, so thousands of calibration runs do not accumulate instances
-(:func:`live_instance_count` reports how many are alive).
-
-**Cost** (test FMU, x86-64, CPython 3.11; ``tests/bench/bench_simulator.py`` prints the run
-figures). This module calls the FMI functions directly on preallocated buffers: ~2.7–3 µs per
-member-step plus ~3 µs per component call, and ~20 µs per member to instantiate and initialise;
-fmpy's convenience API (``FMU2Slave.setReal`` / ``getReal`` / ``doStep``) takes ~7.7 µs per step.
-The shared library and its function table are loaded once per FMU file (an ``fmpy.fmi2.FMU2Slave``,
-~1.5 ms to build); members are ``fmi2Instantiate`` handles of that library, not one ``FMU2Slave``
-each. The alternative, one instance reset (``fmi2Reset``, ~13 µs with re-initialisation) and re-run
-for each member, has to run the *whole model* member by member, since the FMU's inputs at each step
-come from the other components: 3.5× slower for flow sensor → FMU → meter at ensemble 64, and it
-gives up the vectorisation of every Python component (50–500× in the case study). A vectorised
-Python model steps the whole ensemble in a few µs (``service.components.fan.Fan``: 6.6 µs for 100 members
-against ~270 µs for the FMU), so **prefer Python models for calibration**; use an FMU where the
-physics exists only as an FMU, and keep its ensemble small.
-
-The FMU is extracted once per file (and again when the file's modification time changes) into a
-temporary folder removed at interpreter exit. Instances of the generated class pickle by FMU path,
-so an assembled model can still be shipped to worker processes.
+A signature says ``fmu = "file.fmu"`` instead of ``model = "module:Class"``; :func:`fmu_model_class`
+builds a component class from the FMU's ``modelDescription.xml`` (``fmpy``): ``Real`` inputs and
+outputs become ports with their units (:func:`check_port_units`), ``Real`` fixed or tunable
+parameters become parameters bounded by ``[min, max]`` (invented as ``start ∓ |start|`` when
+missing: placeholders, not priors). Each ensemble member has its own FMU instance for the whole run,
+freed when the state is collected. Far slower than a vectorised Python model: prefer those for
+calibration. Details and measured costs: ``docs/components.md``.
 """
 
 from __future__ import annotations
@@ -68,8 +28,8 @@ import numpy as np
 
 from service.components.component import ComponentModel, Parameter, Params, Port, Signals, State
 from service.errors import InputError, SignatureError, UnitError
-from service.graph.units import unit_spec
-from service.matching.signature import QUANTITY_UNITS
+from service.graph.units import UnitSpec, unit_spec
+from service.matching.signature import QUANTITY_UNITS, Signature
 
 __all__ = ["FMUComponent", "fmu_model_class", "live_instance_count", "check_port_units"]
 
@@ -88,7 +48,9 @@ class _FMUFile:
     input_vrs: tuple[int, ...]
     output_vrs: tuple[int, ...]
     parameter_vrs: dict[str, int]
-    ports: tuple[tuple[Port, ...], tuple[Port, ...], tuple[Parameter, ...]]  # inputs, outputs, parameters
+    inputs: tuple[Port, ...]
+    outputs: tuple[Port, ...]
+    parameters: tuple[Parameter, ...]
     library: Any  # fmpy.fmi2.FMU2Slave: the shared library and its FMI function table
 
 
@@ -183,7 +145,7 @@ def _open_fmu(path: Path) -> _FMUFile:
         path=path, guid=description.guid, model_identifier=cosim.modelIdentifier, unzip_dir=unzip_dir,
         only_once_per_process=bool(cosim.canBeInstantiatedOnlyOncePerProcess),
         input_vrs=tuple(input_vrs), output_vrs=tuple(output_vrs), parameter_vrs=parameter_vrs,
-        ports=(tuple(inputs), tuple(outputs), tuple(parameters)), library=library,
+        inputs=tuple(inputs), outputs=tuple(outputs), parameters=tuple(parameters), library=library,
     )
 
 
@@ -209,12 +171,11 @@ def _parameter(path: Path, variable: Any, unit: str) -> Parameter:
 
 
 def _build_class(spec: _FMUFile) -> type[FMUComponent]:
-    inputs, outputs, parameters = spec.ports
     name = "FMU_" + "".join(ch if ch.isalnum() else "_" for ch in spec.model_identifier)
     return type(name, (FMUComponent,), {
         "__doc__": f"FMI 2.0 co-simulation FMU {spec.path.name} (model {spec.model_identifier}).",
         "__module__": __name__,
-        "inputs": inputs, "outputs": outputs, "parameters": parameters, "fmu": spec,
+        "inputs": spec.inputs, "outputs": spec.outputs, "parameters": spec.parameters, "fmu": spec,
     })
 
 
@@ -347,13 +308,12 @@ def _instance_for(path: str) -> FMUComponent:
     return fmu_model_class(Path(path))()
 
 
-def check_port_units(signature, model_class: type[ComponentModel]) -> None:
+def check_port_units(signature: Signature, model_class: type[ComponentModel]) -> None:
     """Every port of an FMU class that ``signature`` maps declares the unit the simulator passes for
     the mapping's quantity (:data:`~service.matching.signature.QUANTITY_UNITS`), or no unit.
 
     :raises SignatureError: naming the signature file, the port, the FMU's unit and the expected one.
     """
-
     declared = {port.name: port.unit for port in (*model_class.inputs, *model_class.outputs)}
     for side, mappings in (("inputs", signature.inputs), ("outputs", signature.outputs)):
         for mapping in mappings:
@@ -369,6 +329,6 @@ def check_port_units(signature, model_class: type[ComponentModel]) -> None:
                     f"would read the values unconverted (declare the variable in {expected!r}, or wrap the FMU)")
 
 
-def _conversion(spec) -> tuple:
+def _conversion(spec: UnitSpec) -> tuple:
     """What makes two unit specs the same unit (their label aside)."""
     return spec.dimension, spec.multiplier, spec.offset, spec.difference

@@ -1,14 +1,10 @@
 """ε-NTU relations shared by the water-to-air coils: counter-flow effectiveness, flow-dependent UA.
 
-Heat capacity rates C = ṁ·c_p [W/K], NTU = UA/C_min, C_r = C_min/C_max; the heat rate from the
-water to the air is (Incropera & DeWitt, *Fundamentals of Heat and Mass Transfer*, Sec. 11.4)::
-
-    Q = ε(NTU, C_r) · C_min · (T_w,in − T_a,in)                                      [W]
-
-A finned water-to-air coil with several tube rows in counter-flow arrangement is modelled as a pure
-counter-flow exchanger (ASHRAE Handbook – HVAC Systems and Equipment, Ch. 23). Its UA is the series
-of the water-side and air-side film conductances, each ∝ ṁ^0.8 (Dittus–Boelter, turbulent flow);
-the tube wall's resistance is neglected::
+C = ṁ·c_p [W/K], NTU = UA/C_min, C_r = C_min/C_max; the heat rate from the water to the air is
+Q = ε(NTU, C_r)·C_min·(T_w,in − T_a,in) [W] (Incropera & DeWitt, *Fundamentals of Heat and Mass
+Transfer*, Sec. 11.4). A finned multi-row coil is a pure counter-flow exchanger (ASHRAE Handbook –
+HVAC Systems and Equipment, Ch. 23) whose UA is the series of the two film conductances, each
+∝ ṁ^0.8 (Dittus–Boelter; the tube wall's resistance neglected)::
 
     1/UA = 1/(hA_w · (ṁ_w/ṁ_w,ref)^0.8) + 1/(hA_a · (ṁ_a/ṁ_a,ref)^0.8)            [K/W]
 """
@@ -45,7 +41,7 @@ def counterflow_effectiveness(ntu: np.ndarray, capacity_ratio: np.ndarray) -> np
 
 
 def series_film_ua_w_per_k(
-    water_conductance_w_per_k: np.ndarray, water_flow_ratio: np.ndarray,
+    *, water_conductance_w_per_k: np.ndarray, water_flow_ratio: np.ndarray,
     air_conductance_w_per_k: np.ndarray, air_flow_ratio: np.ndarray,
 ) -> np.ndarray:
     """UA [W/K] of the two film conductances in series (module docstring).
@@ -59,7 +55,7 @@ def series_film_ua_w_per_k(
 
 
 def coil_heat_rate_w(
-    ua_w_per_k: np.ndarray, water_capacity_w_per_k: np.ndarray, air_capacity_w_per_k: np.ndarray,
+    ua_w_per_k: np.ndarray, *, water_capacity_w_per_k: np.ndarray, air_capacity_w_per_k: np.ndarray,
     water_inlet_temperature: np.ndarray, air_inlet_temperature: np.ndarray,
 ) -> np.ndarray:
     """Q = ε·C_min·(T_w,in − T_a,in) [W], positive when the water heats the air.

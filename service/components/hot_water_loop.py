@@ -1,55 +1,12 @@
-"""Hot-water heating coil with its motorised valve, check valve and pump (the paper's Sec. 5.1).
+"""Hot-water heating coil with its motorised valve, check valve and pump (Bjørnskov, Jradi & Wetter, Sec. 5.1).
 
-One component represents the coil's air and water sides, the motorised valve, the pump and the
-check valve, because the water flow is a property of the whole loop.
-
-**Hydraulics** (series resistances in flow-coefficient form, V̇ in m³/h, Δp in bar)::
-
-    V̇ = sqrt(Δp_loop / (1/(K_v·u)² + 1/K_v,loop²))
-
-a linear valve characteristic K_v·u (u = 0: no flow), ṁ_w = ρ_w·V̇/3600 [kg/s]. Δp_loop is the
-pump's pressure rise plus the source–sink pressure difference, K_v,loop the check valve, pipes and
-coil in series (1/K_v,loop² = 1/K_v,check² + 1/K_v,fixed²): the paper's four hydraulic parameters
-enter only through these two groups, so graphtwin estimates the groups (four would leave two flat
-directions that no measurement can resolve).
-
-**Heat transfer** (:mod:`service.components.heat_exchanger`): counter-flow ε-NTU with C = ṁ·c_p,
-NTU = UA/C_min, C_r = C_min/C_max::
-
-    ε = (1 − e^{−NTU(1−C_r)}) / (1 − C_r·e^{−NTU(1−C_r)})     (ε = NTU/(1+NTU) at C_r = 1)
-    Q_static = ε · C_min · (T_w,in − T_a,in)                                    [W]
-
-with UA varying with both flows (film conductances ∝ ṁ^0.8, Dittus–Boelter)::
-
-    1/UA = 1/(hA_w·(ṁ_w/ṁ_w,ref)^0.8) + 1/(hA_a·(ṁ_a/ṁ_a,ref)^0.8),   ṁ_w,ref = 0.5, ṁ_a,ref = 2 kg/s
-
-hA_w and hA_a are the water- and air-side conductances at the reference flows. (A UA_nom with two
-nominal flows, three parameters, has one flat direction; the two conductances have none.)
-
-**Dynamics.** The static ε-NTU solution is the coil's steady state for the present flows and inlet
-temperatures; exact first-order lags stand for the storage a static model lacks:
-* the coil inlet water temperature follows the supply water temperature with the supply-pipe time
-  constant, stretched when the flow is small (transport: τ_pipe·ṁ_w,ref/max(ṁ_w, 0.05 kg/s));
-* the heat rate follows Q_static with the metal time constant (the coil's fins and tubes);
-* the outlet air and water temperatures, T_a,in + Q/C_a and T_w,in − Q/C_w (bounded by the two
-  inlet temperatures), follow with the air-side and water-side time constants (the fluid volumes).
-Lags in series along one path (pipe → metal → outlet) approximate the coil's distributed, S-shaped
-step response with four parameters; they are not a conserving thermal network (outlet temperatures
-and Q agree only in steady state, so the steady-state energy balance is the checked invariant).
-Each lag is advanced with the present input before it is reported (output x_{k+1}, not x_k as the
-contract's default): the loop answers the valve position of the same step, so the controller's
-one-step feedback delay is the only sampling delay in the closed loop.
-With the valve shut there is no flow and no heat; the stagnant water side drifts to the air
-temperature through the water-side lag.
-
-Bounds are those of a hot-water coil of a 1–2 m³/s air handling unit (10–60 kW): hA up to 6 kW/K per
-side (UA up to 3 kW/K), a metal time constant of one to fifteen minutes. Together with the
-controller's bounds they keep the closed loop free of the sampling limit cycle at the default
-simulation step (checked on 200 random draws from the prior, ``tests/components``).
-
-**Parameters (9)**: the valve's K_v (mapped from ``s4bldg:flowCoefficient``), Δp_loop, K_v,loop,
-hA_w, hA_a and four time constants. With the fan's six and the controller's two the case study has
-17 parameters (3 mapped, 14 estimated) where the paper lists 23: the difference is the groups above.
+Hydraulics: V̇ = sqrt(Δp_loop / (1/(K_v·u)² + 1/K_v,loop²)) [m³/h, bar], ṁ_w = ρ_w·V̇/3600 [kg/s].
+Heat: counter-flow ε-NTU, Q_static = ε·C_min·(T_w,in − T_a,in) [W], with
+1/UA = 1/(hA_w·(ṁ_w/0.5)^0.8) + 1/(hA_a·(ṁ_a/2)^0.8) [K/W] (:mod:`service.components.heat_exchanger`).
+Dynamics: exact first-order lags for the supply pipe (stretched at low flow), the coil metal and the
+air- and water-side outlet temperatures, each advanced before it is reported. Parameters (9): K_v
+(mapped from ``s4bldg:flowCoefficient``), Δp_loop, K_v,loop, hA_w, hA_a and four time constants.
+Equations, bounds and why these parameter groups: ``docs/components.md``.
 """
 
 from __future__ import annotations
@@ -69,8 +26,10 @@ _TINY = 1e-9
 REFERENCE_WATER_MASS_FLOW = 0.5
 
 
-def loop_water_flow_m3_per_h(position, kv_valve, kv_loop, pressure_bar) -> np.ndarray:
-    """V̇ [m³/h] of the series loop for valve position ``position`` (0–1, linear characteristic)."""
+def loop_water_flow_m3_per_h(position: np.ndarray, *, kv_valve: np.ndarray, kv_loop: np.ndarray,
+                             pressure_bar: np.ndarray) -> np.ndarray:
+    """V̇ [m³/h] of the series loop for valve position ``position`` (0–1, linear characteristic): the
+    valve's K_v·u [m³/h] in series with ``kv_loop`` [m³/h] under ``pressure_bar`` [bar]."""
     opening = np.minimum(np.maximum(position, 0.0), 1.0) * kv_valve
     resistance = 1.0 / np.maximum(opening, _TINY) ** 2 + 1.0 / kv_loop**2
     return np.sqrt(np.maximum(pressure_bar, 0.0) / resistance) * (opening > 1e-6)
@@ -110,20 +69,22 @@ class HotWaterLoop(ComponentModel):
 
     def _water_flow(self, params, position):
         flow_m3_per_h = loop_water_flow_m3_per_h(
-            position, params["valve_flow_coefficient"], params["loop_flow_coefficient"],
-            params["loop_pressure_difference"],
+            position, kv_valve=params["valve_flow_coefficient"], kv_loop=params["loop_flow_coefficient"],
+            pressure_bar=params["loop_pressure_difference"],
         )
         return WATER_DENSITY_KG_PER_M3 * flow_m3_per_h / 3600.0
 
     def _static_heat(self, params, air_in, air_flow, water_flow, water_in):
         """Q_static [W], C_w and C_a [W/K], the capacity rates floored at 10⁻⁹ W/K (module docstring)."""
         ua = series_film_ua_w_per_k(
-            params["water_side_conductance"], water_flow / REFERENCE_WATER_MASS_FLOW,
-            params["air_side_conductance"], air_flow / REFERENCE_AIR_MASS_FLOW,
+            water_conductance_w_per_k=params["water_side_conductance"],
+            water_flow_ratio=water_flow / REFERENCE_WATER_MASS_FLOW,
+            air_conductance_w_per_k=params["air_side_conductance"], air_flow_ratio=air_flow / REFERENCE_AIR_MASS_FLOW,
         )
         c_water = np.maximum(water_flow * WATER_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
         c_air = np.maximum(air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
-        heat = coil_heat_rate_w(ua, c_water, c_air, water_in, air_in) * (water_flow > 0.0)
+        heat = coil_heat_rate_w(ua, water_capacity_w_per_k=c_water, air_capacity_w_per_k=c_air,
+                                water_inlet_temperature=water_in, air_inlet_temperature=air_in) * (water_flow > 0.0)
         return heat, c_water, c_air
 
     def _pipe_factor(self, params, water_flow, dt_s):

@@ -81,8 +81,8 @@ def load_signature(path: Path) -> Signature:
         splice = signature.splice
         for i, host in enumerate(splice.host_models):
             host_class = import_model_class(path, f"splice.host_models[{i}]", host)
-            _undeclared(path, f"splice.{splice.side}", host, f"{splice.side} port", splice.port,
-                        host_ports(signature, host_class))
+            _undeclared(path, f"splice.{splice.side}", model=host, what=f"{splice.side} port", name=splice.port,
+                        declared=host_ports(signature, host_class))
     return signature
 
 
@@ -108,7 +108,7 @@ def import_model_class(path: Path | None, where: str, name: str) -> type[Compone
     return model_class
 
 
-def _undeclared(path: Path | None, where: str, model: str, what: str, name: str, declared: tuple[str, ...]) -> None:
+def _undeclared(path: Path | None, where: str, *, model: str, what: str, name: str, declared: tuple[str, ...]) -> None:
     """Refuses ``name`` unless it is one of the ``declared`` names of ``model``'s ``what`` (port, parameter)."""
     if name not in declared:
         raise signature_error(path, where, f"{model} has no {what} {name!r}; its {what}s: {', '.join(declared) or 'none'}")
@@ -124,11 +124,14 @@ def check_model_names(signature: Signature, model_class: type[ComponentModel]) -
     path, model = signature.source_file, signature.model or str(signature.fmu)
     parameter_names = tuple(p.name for p in model_class.parameters)
     for mapping in signature.inputs:
-        _undeclared(path, f"inputs.{mapping.port}", model, "input port", mapping.port, model_class.input_names())
+        _undeclared(path, f"inputs.{mapping.port}", model=model, what="input port", name=mapping.port,
+                    declared=model_class.input_names())
     for mapping in signature.outputs:
-        _undeclared(path, f"outputs.{mapping.port}", model, "output port", mapping.port, model_class.output_names())
+        _undeclared(path, f"outputs.{mapping.port}", model=model, what="output port", name=mapping.port,
+                    declared=model_class.output_names())
     for parameter in signature.parameters:
-        _undeclared(path, f"parameters.{parameter.name}", model, "parameter", parameter.name, parameter_names)
+        _undeclared(path, f"parameters.{parameter.name}", model=model, what="parameter", name=parameter.name,
+                    declared=parameter_names)
     mapped = {mapping.port for mapping in signature.inputs} | set(_FED_WITHOUT_MAPPING.get(signature.kind, ()))
     unmapped = [name for name in model_class.input_names() if name not in mapped]
     if unmapped:

@@ -12,17 +12,10 @@ __all__ = ["MixingBox"]
 class MixingBox(ComponentModel):
     """T_mix = T_ra + x·(T_oa − T_ra),   x = x_min + (x_max − x_min)·d^γ   [°C, 1]
 
-    An adiabatic mixing of two dry-air streams (equal c_p), so the mixed temperature is the mass
-    weighted mean with the outdoor-air fraction x = ṁ_oa/ṁ_supply. d is the outdoor-air damper
-    command (0–1, clipped: BMS commands drift slightly below 0); the return and exhaust dampers move
-    opposite to it (FLEXLAB: RA ≈ 1 − OA), so one command sets the fraction:
-
-    * x_min: the fraction with the damper shut (its leakage and any minimum-outdoor-air path);
-    * x_max: with it fully open (the return damper rarely seals, so x_max < 1);
-    * γ: the installed damper characteristic (damper in series with the duct resistance): 1 linear,
-      < 1 quick-opening (a damper of low authority), > 1 slow-opening (opposed blades, high authority).
-
-    Static: the plenum's volume is mixed within seconds.
+    Adiabatic mixing of two dry-air streams, x = ṁ_oa/ṁ_supply the outdoor-air fraction, d the
+    outdoor-air damper command (0–1, clipped; the return damper moves opposite to it). x_min: the
+    fraction with the damper shut, x_max: fully open, γ: the installed damper characteristic (1
+    linear, < 1 quick-opening, > 1 slow-opening). Static: the plenum is mixed within seconds.
     """
 
     inputs = (

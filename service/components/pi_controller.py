@@ -16,24 +16,11 @@ class PIController(ComponentModel):
     I ← I + Δt · (e + (u − v) · T_i / (K_p · T_t)),  T_t = max(T_i, Δt)   [K·s]
 
     Reverse acting, a = +1 (heating: the output rises while the measured value y is below the
-    setpoint w); :class:`DirectActingPIController` has a = −1 (cooling: it rises while y is above w).
-    Back-calculation anti-windup (Åström & Hägglund): while the output is unsaturated u = v and the
-    integral I [K·s] advances by e·Δt; while it is saturated the term (u − v) pulls the integral
-    part K_p·I/T_i back to the limit with the tracking time T_t, so after a long saturation the
-    controller leaves the limit as soon as the error changes sign (at a fixed point at the limit,
-    K_p·I/T_i equals the limit exactly), without unwinding a huge integral. T_t ≥ Δt keeps the
-    sampled tracking from overshooting. Unlike conditional integration, which switches the integral's
-    increment on or off by whether v is past a limit, the simulated trajectory is a continuous function
-    of the gains: with that switch the calibration cost along a line to the truth was a sawtooth
-    (0.3–2.8, jumps where one step's increment flipped) that stopped the point fit in a false minimum.
-    Sampled at the simulation step. Starts with I such that u equals its proportional part (I = 0);
-    a simulated window starts after a day's warm-up (:attr:`settling_s`): a low-gain loop takes
-    hours to build the integral a running unit has.
-    The gains are the *effective* gains of the loop sampled at the simulation step (minutes, where a
-    BMS samples every second): K_p 0.005–0.05 /K (0.5–5 % valve per K) and T_i 600–3600 s keep the
-    discrete loop of a hot-water coil stable across the prior box at a 5-minute step (checked over
-    random draws of the other parameters); wider priors make the simulated loop oscillate, a limit
-    cycle no measurement shows.
+    setpoint w); :class:`DirectActingPIController` has a = −1. Back-calculation anti-windup (Åström
+    & Hägglund): while saturated, (u − v) pulls K_p·I/T_i back to the limit with tracking time T_t,
+    so the controller leaves the limit as soon as the error changes sign. Sampled at the simulation
+    step, with the loop's *effective* gains there; starts with I = 0. Why back-calculation, the
+    gains' priors and the warm-up: ``docs/components.md``.
     """
 
     inputs = (
@@ -46,15 +33,10 @@ class PIController(ComponentModel):
         Parameter("integral_time", "s", 1200.0, 600.0, 3600.0, "integral time, T_i"),
     )
     states = ("integral",)
-    #: A day: a low-gain loop (K_p 0.012 /K, T_i 1,850 s) takes ~5 h to build its integral from zero
-    #: and as long to wind down after a night setback; at the priors' slow corner longer still.
+    #: A day: a low-gain loop takes hours to build its integral from zero (``docs/components.md``).
     settling_s = 86400.0
-    #: Six hours: the integral a warm-up builds on the data's first day repeated is not the one the
-    #: plant had (its day before differed), and at typical gains the loop carries the difference for
-    #: hours. Over 30 synthetic truths (seeds 9–38 of the case study, 2026-11-26) the point fits'
-    #: offsets from the truth were 2.1 standard errors (root mean square) scoring the first day after
-    #: one hour, 1.3 after six hours, and 1.3 on the second day, whose warm-up is the measured first:
-    #: six hours leave no more of the start state than a measured history does.
+    #: Six hours: the integral a warm-up builds on a repeated first day is not the plant's, and the
+    #: loop carries the difference for hours (``docs/components.md``, *Start memory*).
     start_memory_s = 6 * 3600.0
     #: a in the error e = a · (w − y): +1 reverse acting, −1 direct acting
     action = 1.0

@@ -31,7 +31,7 @@ class SpeedControlledFan(ComponentModel):
     def step(self, params, inputs, state, dt_s):
         speed = np.minimum(np.maximum(inputs["speed"], 0.0), 1.0)
         power = params["nominal_power"] * part_load_power_fraction(
-            speed, params["c1"], params["c2"], params["c3"], params["c4"])
+            speed, c1=params["c1"], c2=params["c2"], c3=params["c3"], c4=params["c4"])
         return {
             "outlet_air_temperature": inputs["inlet_air_temperature"],
             "outlet_air_mass_flow": AIR_DENSITY_KG_PER_M3 * params["nominal_air_flow"] * speed,

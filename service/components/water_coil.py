@@ -1,33 +1,13 @@
 """Water coils driven by a logged valve command (heating and cooling): static ε-NTU.
 
-A building automation system logs the valve *command* of each coil but rarely the water side, so the
-coil's water flow follows from the command and its supply water temperature is a parameter::
+    v = clip((u − u₀)/(1 − u₀), 0, 1),   ṁ_w = v·ṁ_w,max                               [1, kg/s]
+    1/UA = 1/(hA_w·v^0.8) + 1/(hA_a·(ṁ_a/2 kg/s)^0.8)                                 [K/W]
+    Q = ε(NTU, C_r)·C_min·(T_w − T_a,in),   T_a,out = T_a,in + Q/C_a                    [W, °C]
 
-    v = clip((u − u₀)/(1 − u₀), 0, 1)                                                 [1]
-    ṁ_w = v · ṁ_w,max                                                              [kg/s]
-    1/UA = 1/(hA_w · v^0.8) + 1/(hA_a · (ṁ_a/ṁ_a,ref)^0.8),   ṁ_a,ref = 2 kg/s        [K/W]
-    Q = ε(NTU, C_r) · C_min · (T_w − T_a,in)      (counter-flow, :mod:`service.components.heat_exchanger`)
-    T_a,out = T_a,in + Q / C_a                                                        [°C]
-
-u the valve command (0–1), v the valve's opening: a linear valve at constant differential pressure
-(flow ∝ v) whose actuator starts to move only above the command u₀ (its dead band: a 2–10 V actuator
-on a 0–10 V output has u₀ = 0.2; u₀ = 0 an ideal actuator). C_w = ṁ_w·c_p,w, C_a = ṁ_a·c_p,a; hA_w
-is the water-side film conductance with the valve fully open, hA_a the air-side one at 2 kg/s of
-air. v = 0 gives no flow and no heat (T_a,out = T_a,in); with no air flow the stagnant air takes the
-water temperature (ε → 1).
-
-A controller holds a command inside the dead band while the coil need not heat (the FLEXLAB X3A
-logs 0.1–0.3 on September nights with no heat reaching the supply air), so a coil model without it
-can fit such data only with a coil that cannot heat at all.
-
-Static: the coil's thermal mass is the CoilThermalMass effect the diagnosis can add. A cooling coil
-gives Q < 0; condensation is ignored (sensible heat only: the air's humidity is not an input), so
-a wet coil's behaviour shows as a model error or is absorbed by the calibrated conductances.
-
-**Parameters (5)**: T_w, ṁ_w,max, hA_w, hA_a, u₀. Bounds are those of the coils of a 0.2–3 m³/s air
-handling unit. :class:`HeatingWaterCoil` (hot water, 35–90 °C) and :class:`CoolingWaterCoil`
-(chilled water, 4–18 °C) differ from :class:`WaterCoil` (whose service the graph does not state:
-2–90 °C) only in the prior of T_w.
+u the valve command, u₀ the actuator's dead band, T_w the supply water temperature (a parameter);
+counter-flow ε-NTU of :mod:`service.components.heat_exchanger`, sensible heat only. Parameters (5):
+T_w, ṁ_w,max, hA_w, hA_a, u₀; the heating and cooling coils differ only in the prior of T_w.
+Details: ``docs/components.md``.
 """
 
 from __future__ import annotations
@@ -73,10 +53,12 @@ class WaterCoil(ComponentModel):
         c_air = air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K
         c_water = opening * params["maximum_water_mass_flow"] * WATER_SPECIFIC_HEAT_J_PER_KG_K
         ua = series_film_ua_w_per_k(
-            params["water_side_conductance"], opening,
-            params["air_side_conductance"], air_flow / REFERENCE_AIR_MASS_FLOW,
+            water_conductance_w_per_k=params["water_side_conductance"], water_flow_ratio=opening,
+            air_conductance_w_per_k=params["air_side_conductance"], air_flow_ratio=air_flow / REFERENCE_AIR_MASS_FLOW,
         )
-        heat = coil_heat_rate_w(ua, c_water, c_air, params["supply_water_temperature"], air_in) * (opening > 0.0)
+        heat = coil_heat_rate_w(ua, water_capacity_w_per_k=c_water, air_capacity_w_per_k=c_air,
+                                water_inlet_temperature=params["supply_water_temperature"],
+                                air_inlet_temperature=air_in) * (opening > 0.0)
         return {"outlet_air_temperature": air_in + heat / np.maximum(c_air, _TINY), "heat_rate": heat}
 
 

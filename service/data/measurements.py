@@ -1,30 +1,12 @@
 """The measured-data contract: a CSV of time stamps and sensor columns, matched to graph nodes.
 
-**Format.** The first column is the time stamp: ISO 8601 (``2025-01-01 00:15:00``,
-``2025-01-01T00:15:00+01:00``; an offset is converted to UTC, and a file either gives every stamp an
-offset or none), the BMS format ``m/d/yyyy h:mm`` / ``m/d/yy h:mm`` (the LBNL FLEXLAB export) or the
-European ``d.m.yyyy h:mm``. Columns are separated by commas, or by semicolons when the header has
-semicolons and no comma; a semicolon file may write decimal commas (``20,5``). Every other column is a series; a column is matched to a
-measuring device of the model by the device's full IRI, its local name, or the literal it gives as
-``gt:timeSeriesId`` (header whitespace stripped). Empty cells, ``NaN``, ``NA`` and ``null`` are
-missing values, and so are spreadsheet error cells (``#VALUE!``, ``#N/A``, ``#DIV/0!`` …, counted
-in the warnings: exports of real BMS trends contain them). Values are converted from the device's QUDT unit to the unit of the model port that
-consumes them (:mod:`service.graph.units`).
-
-**Checks**, all reported at once in one :class:`MeasurementError` naming the column and the line:
-non-numeric cells, unparseable, duplicate or unsorted time stamps, rows with more or fewer fields
-than the header (a cell added or lost would shift the others into the wrong columns), columns missing
-for a boundary input or a target, two columns naming one device. Columns no device claims are listed in ``warnings`` (a BMS export has many),
-and so are frozen points: a sensor whose value holds exactly for 12 hours or more
-(:func:`frozen_spans`; not for devices whose signature says ``holds_values``, schedules and commands).
-A position, command or speed (a fraction 0–1 in the model) above 1.5 after conversion is an error
-(percent declared as a fraction); one never above 0.01 from a percent column is a warning.
-
-**Regular step.** The step is the median spacing of the time stamps, in whole seconds. An irregular
-file is resampled to that step by linear interpolation, with a warning; a grid point on a row keeps
-the row's value. Gaps (missing values or missing rows) of up to ``max_gap_steps`` steps are
-interpolated linearly; longer gaps stay NaN and are reported: they are never silently filled. The simulator holds a boundary input's last value through a gap and the
-calibration leaves the affected target steps out.
+The first column is the time stamp (ISO 8601, an offset converted to UTC; BMS ``m/d/yyyy h:mm``;
+European ``d.m.yyyy h:mm``), every other a series matched to a measuring device by its IRI, local
+name or ``gt:timeSeriesId`` and converted from the device's QUDT unit to the model port's. Every
+problem (cells, stamps, row lengths, missing or doubled columns, percent declared as a fraction) is
+reported at once in one :class:`MeasurementError` naming column and line; unclaimed columns and
+frozen points are warnings. The step is the median spacing (an irregular file is resampled); gaps
+up to ``max_gap_steps`` are interpolated, longer ones stay NaN. The full contract: ``docs/data.md``.
 """
 
 from __future__ import annotations
@@ -38,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.errors import MeasurementError
+from service.errors import InputError, MeasurementError
 from service.graph.namespaces import local_name
 from service.graph.units import UnitError, convert, unit_label
 
@@ -104,7 +86,7 @@ class MeasuredData:
     def window(self, start: datetime | str | None, end: datetime | str | None) -> slice:
         """Index slice of the steps with ``start ≤ t ≤ end`` (None: the data's first / last).
 
-        :raises ValueError: a window outside the data or empty, naming the data's range; a window
+        :raises InputError: a window outside the data or empty, naming the data's range; a window
             reaching more than one step beyond the data's first or last time stamp (``2026-01-14``
             as the end of data that stop at 23:50 the day before is fine; a week of data asked of a
             day is not cut silently).
@@ -114,17 +96,17 @@ class MeasuredData:
         hi = last if end is None else self._bound(end, "end")
         window, data = f"window {self.shown(lo)} – {self.shown(hi)}", f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
         if hi < lo:
-            raise ValueError(f"{window}: the end is before the start")
+            raise InputError(f"{window}: the end is before the start")
         if lo > last or hi < first:
-            raise ValueError(f"{window} lies outside {data}")
+            raise InputError(f"{window} lies outside {data}")
         step = np.timedelta64(int(round(self.step_s)), "s")
         if lo < first - step or hi > last + step:
             side = "starts before" if lo < first - step else "ends after"
-            raise ValueError(f"{window} {side} {data}: give a window inside the data")
+            raise InputError(f"{window} {side} {data}: give a window inside the data")
         i = int(np.searchsorted(self.timestamps, lo, side="left"))
         j = int(np.searchsorted(self.timestamps, hi, side="right"))
         if j - i < 2:
-            raise ValueError(f"{window} holds fewer than 2 steps of {self.source}")
+            raise InputError(f"{window} holds fewer than 2 steps of {self.source}")
         return slice(i, j)
 
     def _bound(self, value: datetime | str, which: str) -> np.datetime64:
@@ -132,13 +114,13 @@ class MeasuredData:
         one (they are read as UTC), without one where the file's are local (an offset would shift
         the window by it, silently).
 
-        :raises ValueError: a bound on the other clock."""
+        :raises InputError: a bound on the other clock."""
         text = value.isoformat() if isinstance(value, datetime) else str(value)
         stamp, with_offset = _parsed_timestamp(text)
         if with_offset != self.utc:
             stamps = "with a UTC offset (read as UTC)" if self.utc else "without a UTC offset (local time)"
             wanted = "with an offset too (…T06:00-07:00, or …T13:00Z)" if self.utc else "without an offset"
-            raise ValueError(f"the window's {which} {text!r}: the data {self.source} give their time stamps {stamps}; "
+            raise InputError(f"the window's {which} {text!r}: the data {self.source} give their time stamps {stamps}; "
                              f"give it {wanted}")
         return np.datetime64(stamp, "s")
 
@@ -177,7 +159,7 @@ def parse_timestamp(text: str) -> datetime:
     """ISO 8601 (an offset is converted to UTC and dropped), the BMS ``m/d/yy h:mm`` or the European
     ``d.m.yyyy h:mm`` format.
 
-    :raises ValueError: naming the text.
+    :raises InputError: naming the text.
     """
     return _parsed_timestamp(text)[0]
 
@@ -193,7 +175,7 @@ def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
                 return datetime.strptime(value, fmt), False
             except ValueError:
                 continue
-        raise ValueError(f"time stamp {text!r} is neither ISO 8601 nor m/d/yyyy h:mm nor d.m.yyyy h:mm") from None
+        raise InputError(f"time stamp {text!r} is neither ISO 8601 nor m/d/yyyy h:mm nor d.m.yyyy h:mm") from None
     if parsed.tzinfo is not None:
         return parsed.astimezone(timezone.utc).replace(tzinfo=None), True
     return parsed, False
@@ -247,7 +229,7 @@ def read_measurements(
     max_gap_steps: int = 5,
     frozen_after_s: float = 12 * 3600.0,
 ) -> MeasuredData:
-    """Read and check a measurement CSV (see the module docstring).
+    """Read and check a measurement CSV (``docs/data.md``).
 
     :param specs: node IRI → what the model needs from it.
     :param frozen_after_s: a sensor's value held exactly for this long is reported (:func:`frozen_spans`).

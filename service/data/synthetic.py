@@ -1,16 +1,12 @@
 """Synthetic measurements from a known truth, optionally with an effect the base model lacks.
 
-The truth is the assembled model (the case study, or any model) plus (optionally) one catalog effect at one
-building node, with parameters drawn reproducibly inside the priors: each estimated parameter is
-moved from its default 25 % of the way towards a seeded random bound (a truth the calibration must
-find, not the defaults it starts from), and the hidden effect's parameters take the values its
-signature gives under ``[extra.synthetic_truth]`` (strong enough to matter, physically plausible).
-The simulation runs on :func:`service.data.synthetic_operation.case_study_operation` boundary inputs, or
-on the boundary inputs of a measurement file (real operation, a known truth: semi-synthetic data),
-warmed up as :class:`~service.calibration.model_data.ModelData` warms a window up;
-Gaussian measurement noise is added to every target: 0.1 K on temperatures, 0.005 on positions,
-1 % of the mean on powers and flows (the accuracy of good building-automation sensors). Columns
-are written in each device's declared unit and named by its ``gt:timeSeriesId``.
+The truth: the assembled model plus (optionally) one catalog effect at one building node; each
+estimated parameter moved from its default 25 % of the way towards a seeded random bound, the
+hidden effect's parameters at its signature's ``[extra.synthetic_truth]``. Simulated on the case
+study's synthetic operation or a measurement file's boundary inputs (semi-synthetic), warmed up as
+a calibration window is; Gaussian noise on every target (0.1 K on temperatures, 0.005 on positions,
+1 % of the mean on powers and flows). Columns in each device's declared unit, named by its
+``gt:timeSeriesId``. Details: ``docs/data.md``, *Synthetic data*.
 """
 
 from __future__ import annotations
@@ -21,9 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from service.model.assembly import EffectRequest, assemble, without_model
-from service.calibration.model_data import _device_unit, model_warmup_s, read_model_data, warmup_period_steps
+from service.errors import InputError
+from service.model.assembly import assemble
+from service.model.effect_splicing import EffectRequest
+from service.model.wiring import without_model
 from service.data.measurements import write_csv
+from service.data.model_series import device_unit, model_warmup_s, read_model_data, warmup_period_steps
 from service.matching.signature import Signature
 from service.model.simulator import Simulator, loop_substeps, warmup_index
 from service.graph.store import GraphStore
@@ -74,7 +73,7 @@ def _truth_theta(model, model_name: str, effect: Signature | None, rng: np.rando
     given = {without_model(key): value for key, value in given.items()}
     unknown = sorted(given.keys() - {without_model(ref.key) for ref in model.estimated_parameters})
     if unknown:
-        raise ValueError(f"the truth names parameters model {model_name} does not estimate: {', '.join(unknown)}")
+        raise InputError(f"the truth names parameters model {model_name} does not estimate: {', '.join(unknown)}")
     for ref in model.estimated_parameters:
         spec, part = ref.spec, without_model(ref.key)
         if part in given:
@@ -115,12 +114,12 @@ def generate_synthetic_data(
     :param truth: parameter key → its value in the truth (a calibration's estimates, say; keys are
         matched without their model name, so a run of the same model under another name applies);
         the others are drawn as the module docstring says.
-    :raises ValueError: an unknown effect, or one that does not apply to the model; a truth key that
+    :raises InputError: an unknown effect, or one that does not apply to the model; a truth key that
         is no estimated parameter of the model (with the effect); synthetic operation of fewer than two
         steps.
     """
     if operation is None and n_days * 86400.0 < 2 * step_s:
-        raise ValueError(f"{n_days:g} days of data: give at least two steps of {step_s / 60:g} min "
+        raise InputError(f"{n_days:g} days of data: give at least two steps of {step_s / 60:g} min "
                          f"({2 * step_s / 86400.0:.3g} days); a calibration needs more than its first six hours")
     effect = None
     requests = []
@@ -128,14 +127,14 @@ def generate_synthetic_data(
         effect = library.get(hidden_effect)
         if effect is None or effect.kind != "effect":
             known = ", ".join(sorted(s.id for s in library.values() if s.kind == "effect"))
-            raise ValueError(f"unknown effect {hidden_effect!r}; the catalog has {known}")
+            raise InputError(f"unknown effect {hidden_effect!r}; the catalog has {known}")
         nodes = applicable_nodes(store, model_name, effect)
         if not nodes:
-            raise ValueError(f"effect {hidden_effect} applies nowhere in model {model_name}")
+            raise InputError(f"effect {hidden_effect} applies nowhere in model {model_name}")
         if node is None:
             node = nodes[0]
         elif node not in nodes:
-            raise ValueError(f"effect {hidden_effect} does not apply at {node}; it applies at {', '.join(nodes)}")
+            raise InputError(f"effect {hidden_effect} does not apply at {node}; it applies at {', '.join(nodes)}")
         requests = [EffectRequest(hidden_effect, node)]
     model = assemble(store, model_name, library=library, extra_effects=requests)
     rng = np.random.default_rng(seed)
@@ -148,7 +147,7 @@ def generate_synthetic_data(
         for component in model.boundary_inputs:
             link = model.measurement(component)
             if link.series_id not in synthetic.series:
-                raise ValueError(f"the synthetic operation has no series for {link.node} ({link.series_id})")
+                raise InputError(f"the synthetic operation has no series for {link.node} ({link.series_id})")
             boundary[component] = synthetic.series[link.series_id]
     else:
         measured = read_model_data(model, operation)
@@ -164,7 +163,7 @@ def generate_synthetic_data(
     columns = {}
     for component in model.boundary_inputs + model.targets:
         link = model.measurement(component)
-        unit = _device_unit(model, component)
+        unit = device_unit(model, component)
         values = boundary.get(component)
         if values is None:
             clean = result.target(component)[0]

@@ -1,22 +1,11 @@
 """A week of varied operation of the case-study ventilation unit: the boundary inputs of synthetic data.
 
-The truth the diagnosis must see through needs operation that excites every effect: days and nights,
-heating and no heating, fan speed changes and setpoint steps. Every series is in SI units (°C, m³/s)
-and keyed by the ``gt:timeSeriesId`` of the case-study sensor that measures it:
-
-* ``fan_inlet_air_temperature`` (outdoor air, the unit has no heat recovery): a daily sinusoid
-  ``T_mean + A·sin(2π(h − 9)/24)`` (minimum near 03:00, maximum near 15:00) with a daily mean that
-  wanders between days (a seeded random walk, ±3 K a day) plus a slow weather noise (AR(1), 0.3 K);
-  ``T_mean`` = 8 °C and A = 6 K: a shoulder-season week, cold nights and mild afternoons;
-* ``plant_room_air_temperature``: 16 °C + 0.4·(outdoor − 8 °C) + 1.5 K in occupied hours;
-* ``supply_air_flow``: 0.55 m³/s at night (22:00–06:00), in the day one of 1.0, 1.2, 1.35, 1.5 m³/s
-  drawn per 2-hour block (demand-controlled ventilation);
-* ``supply_water_temperature``: a heating curve, 70 °C at −10 °C outdoor to 45 °C at +20 °C,
-  clipped, plus 0.5 K supply noise;
-* ``coil_outlet_air_temperature_setpoint``: 16 °C at night (setback), 21 °C in the day, 12 °C from
-  13:00 to 16:00 every other day (ventilation only: the valve shuts when the afternoon is mild, so
-  what the coil does not do is seen), and a seeded 2 K step on two mornings (an operator's change),
-  so the loop's step response is seen.
+Days and nights, heating and none, fan speed changes and setpoint steps, so every effect is excited.
+Series in SI units (°C, m³/s), keyed by the case-study sensors' ``gt:timeSeriesId``: outdoor air (a
+daily sinusoid around 8 °C ± 6 K, a wandering daily mean and AR(1) weather noise), plant room air,
+supply air flow (0.55 m³/s at night, 1.0–1.5 m³/s per 2-hour block by day), supply water (a heating
+curve, 70 °C at −10 °C outdoor to 45 °C at +20 °C) and the coil outlet air setpoint (16/21 °C,
+ventilation-only afternoons, two seeded 2 K steps). The exact profiles: ``docs/data.md``.
 """
 
 from __future__ import annotations
@@ -24,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from service.errors import InputError
 
 __all__ = ["OperationProfile", "case_study_operation"]
 
@@ -50,9 +41,9 @@ def _ar1(rng: np.random.Generator, n: int, sigma: float, correlation: float) -> 
 def case_study_operation(
     n_days: float = 7.0, step_s: float = 600.0, seed: int = 0, start: str = "2026-01-12T00:00:00"
 ) -> OperationProfile:
-    """Boundary inputs for ``n_days`` of operation at ``step_s`` (see the module docstring)."""
+    """Boundary inputs for ``n_days`` of operation at ``step_s`` (the module docstring; ``docs/data.md``)."""
     if step_s <= 0 or n_days <= 0:
-        raise ValueError(f"need positive n_days and step_s, got {n_days} and {step_s}")
+        raise InputError(f"need positive n_days and step_s, got {n_days} and {step_s}")
     rng = np.random.default_rng(seed)
     n = int(round(n_days * 86400.0 / step_s))
     seconds = np.arange(n) * step_s

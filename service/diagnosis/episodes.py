@@ -1,21 +1,11 @@
 """When the model fails: runs of steps where the measurement leaves the model, as readable spans.
 
-A step *fails*
-
-* with a prediction interval (Bayesian calibration): when the measurement ``y`` lies outside
-  ``[lower, upper]``; its deviation is the distance beyond the nearer bound, signed
-  (``y − upper > 0`` above, ``y − lower < 0`` below);
-* with a point fit: when ``|e| > robust_threshold · σ̂`` for the residual ``e = y − ŷ``, with the
-  robust spread ``σ̂ = 1.4826 · median(|e − median(e)|)`` (MAD-based, so a fault affecting a
-  minority of the steps does not hide itself by inflating σ̂) and at least ``min_deviation`` (e.g.
-  the sensor accuracy, so a near-perfect fit does not call its quantisation noise a failure); the
-  deviation is ``e``.
-
-Steps with NaN (no measurement, no prediction) never fail. Failing steps separated by at most
-``merge_gap_steps`` steps are merged into one run (NaN steps included: a short gap in the data does
-not split an episode); runs spanning fewer than ``min_duration_steps`` steps are dropped (a spike is
-not an episode). An episode covers ``[start, end)``: ``end`` is the timestamp after its last failing
-step (that step plus the median sampling interval), so ``duration = end − start``.
+A step fails when the measurement ``y`` lies outside a prediction interval ``[lower, upper]``
+(deviation: the signed distance beyond the nearer bound) or, for a point fit, when its residual
+``|e| > robust_threshold · σ̂`` with ``σ̂ = 1.4826 · median(|e − median(e)|)`` and ``|e| ≥ min_deviation``
+(deviation: ``e``). NaN steps never fail; failing steps at most ``merge_gap_steps`` apart merge into
+one episode; episodes shorter than ``min_duration_steps`` are dropped. An episode covers
+``[start, end)``, ``end`` the step after its last failing one. Rationale: ``docs/diagnosis.md``, "Episodes".
 """
 
 from __future__ import annotations

@@ -1,26 +1,11 @@
 """Where along the flow path the model fails: between the last sensor it matches and the first it doesn't.
 
-The building graph's flow topology (``fso:suppliesFluidTo`` for air and water, ``fso:transfersHeatTo``
-between a coil's water side and its air side; ``queries/flow-edges.rq``) is a directed graph,
-possibly with loops (return air mixed back into the supply). A heat transfer couples both ways — the
-air a coil heats decides the water leaving it as much as the water decides the air — so it is an
-edge in both directions: a coil's water outlet sensor has the air side's upstream among its suspects
-(a fan's motor heat upstream of the coil shows at the water outlet). For a failing sensor ``f``:
-
-1. its place ``p`` is ``f`` itself when ``f`` sits in the flow path, else the node that has the
-   property it observes (a valve position sensor sits at its valve, a power meter at its fan;
-   ``queries/observed-node.rq``);
-2. walking upstream from ``p``, the walk stops at the first sensor on every branch; those are the
-   nearest upstream sensors. If one of them fails too and ``f``'s failure is what it carries down,
-   ``f`` only inherits it and is not reported (an off-path sensor is still reported at its
-   component). Whether it is: ``carries(u, f)``, given by the caller (the diagnosis: ``f``'s residual
-   minus ``u``'s is within the noise, for sensors of one unit); where no failing upstream sensor
-   carries it, the error grows between them, and they bound the suspects as a matching sensor does
-   (on real data a mixed-air sensor 0.7 K off must not hide a supply-air sensor 14 K off);
-3. the suspects are the nodes ``n`` with a walk ``u → n → p`` from a matching upstream sensor ``u``
-   that passes no other sensor: forward-reachable from ``u`` and backward-reachable from ``p``, each
-   search stopping at sensors. On a loop this is still exact, because searches stop at sensors
-   rather than at "already seen upstream" nodes.
+The flow topology (``queries/flow-edges.rq``: fluid edges, and heat couplings as edges both ways;
+off-path sensors placed at the node they observe, ``queries/observed-node.rq``) is a directed graph,
+possibly with loops. For a failing sensor, the walk upstream stops at the nearest sensors; a failure
+a failing upstream sensor carries down (``carries(u, f)``, the caller's) is not reported again; the
+suspects are the nodes on a walk from a bounding upstream sensor to the failing one that passes no
+other sensor. The algorithm and its rationale: ``docs/diagnosis.md``, "Localisation on the flow path".
 """
 
 from __future__ import annotations

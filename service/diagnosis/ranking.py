@@ -1,38 +1,12 @@
 """Which physical effect is missing: score test at the null, refit, out-of-sample check, ranking.
 
-For one candidate (an effect signature at one building node) graphtwin builds the base model plus
-that effect and asks three questions, cheapest first:
-
-1. **Score test at the null** (before fitting anything). With the base estimate θ̂_b and the effect
-   at its null value θ_e⁰, the weighted residuals r (n values, see
-   :class:`~service.calibration.problem.CalibrationProblem`) and their Jacobian J = ∂r/∂θ over base
-   and effect parameters (one ensemble simulate call, forward differences), the Gauss–Newton step
-   would remove ``‖P_J r‖² − ‖P_{J_b} r‖²`` of the residual sum of squares (P the projection on the
-   columns' span): the part only the effect's directions can explain. Divided by σ̂² = RSS/(n − p)
-   this is the score (Lagrange-multiplier) statistic S, ~χ²_k under the null, and S/2 the predicted
-   rise of the log-likelihood. The effect's step is kept inside its bounds (a bounded least-squares
-   step on the effect's directions with the base's span projected out: a leakage cannot go below 0,
-   a heat fraction the step would take past 1 counts at 1 — dropping it there scored the demo's
-   fan motor heat 0); the p-value is P(χ²_k > S), halved (the χ̄² mixture) when a parameter's null
-   lies on its bound, k the parameters the step moves.
-   Residuals of a time series are autocorrelated; every statistic uses the effective number of
-   observations ``n_eff = n · (1 − ρ₁)/(1 + ρ₁)`` (ρ₁ the lag-1 autocorrelation of the base
-   residuals), so S is scaled by n_eff/n.
-2. **Refit** of base + effect from the base estimate (point calibration), compared by
-   ΔBIC = n_eff·ln(RSS₁/RSS₀) + k·ln(n_eff) (negative favours the effect; below −10 is "very
-   strong" evidence in Kass & Raftery's scale).
-3. **Out of sample**: the test-window RMSE per target before and after (data not used to fit it),
-   and the share of the test-window weighted squared error the effect removes.
-   The refit moves the base parameters too; "before" (RSS₀, and the test-window prediction) is the
-   better of the base refit and the refit's own base parameters with the effect at its null (and,
-   for the test-window prediction, the base as trained), so an effect is never credited with what
-   moving the base parameters alone gains, nor with mending a base refit a fault bent.
-
-A candidate is *significant* when ΔBIC < ``bic_threshold`` and it removes at least
-``min_test_improvement`` of the test-window error. Candidates are ranked by the test-window share
-removed (to two decimals), then fewer extra parameters, then ΔBIC: effects that nest each other
-(a valve stuck fully open through weight w is a leakage λ = w) fit equally well, and the simpler
-one goes first.
+For one candidate (an effect signature at one building node): the **score test** at the null (the
+RSS the bounded Gauss–Newton step on the effect's directions would remove beyond the base's, over
+σ̂² = RSS/(n − p), scaled by n_eff/n with n_eff = n·(1 − ρ₁)/(1 + ρ₁); ~χ²_k), the **refit** compared
+by ΔBIC = n_eff·ln(RSS₁/RSS₀) + k·ln(n_eff), and the share of the test-window weighted squared error
+it removes **out of sample**. Significant: ΔBIC < ``bic_threshold`` and at least
+``min_test_improvement`` removed; ranked by the share removed (two decimals), then fewer parameters,
+then ΔBIC. The method in full: ``docs/diagnosis.md``, "What is missing".
 """
 
 from __future__ import annotations

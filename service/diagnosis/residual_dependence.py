@@ -1,19 +1,11 @@
 """What a residual depends on, when no effect in the catalog explains it: a pointer for the engineer.
 
-For every candidate signal x (measured series, model outputs near the failing sensor) the Pearson
-correlation of the residual ``e(t)`` with ``x(t − ℓ)`` is computed for the lags
-``ℓ = 0 … max_lag_steps`` on the steps where both are finite (and ``valid``); the lag with the
-largest ``|ρ|`` is the signal's best lag and the signals are ranked by that ``|ρ|``.
-
-Correlations overlap (two signals that follow each other both correlate with the residual), so the
-ranking is followed by a multiple-regression view over the top ``n_joint`` signals at their best
-lags: for the k-th ranked signal, ``partial_correlation`` is the correlation of the residual with
-that signal once both are cleared of the k − 1 signals ranked above (least squares with an
-intercept), and ``cumulative_r2`` is the R² of the residual regressed on the k top signals
-together. A signal with a sizeable ρ but a partial correlation near 0 only repeats a signal above it.
-
-Signals that are constant over the valid steps, or have fewer than ``min_steps`` finite valid
-steps, are not ranked: they are returned at the end of the list with ``skipped_reason`` set.
+Every candidate signal x is ranked by its strongest Pearson |ρ| of the residual ``e(t)`` with
+``x(t − ℓ)`` over the lags ``ℓ = 0 … max_lag_steps`` (steps where both are finite and ``valid``); for
+the top ``n_joint`` at their best lags, ``partial_correlation`` (with the signals ranked above
+regressed out of both, intercept included) and ``cumulative_r2`` (R² of the residual on the top k
+together). Constant or too short signals (fewer than ``min_steps``) come last with ``skipped_reason``.
+More: ``docs/diagnosis.md``, "When nothing is found".
 """
 
 from __future__ import annotations

@@ -1,17 +1,12 @@
 """Alignment worker processes: a large model's independent parts aligned side by side without
 sharing Python's lock.
 
-Threads align parts side by side too (Oxigraph evaluates a rule without holding the lock), but the
-rules' bookkeeping of new lines is Python and takes turns: on a 1M-triple Brick campus two threads
-reach 1.7x one. A worker here is a fresh interpreter, ``python -m service.graph.alignment_workers``,
-started when the alignment starts so that its imports (Oxigraph, NumPy, SciPy: ~0.5 s) overlap the
-parent cutting the model into parts. It is neither forked from the parent (whose large heap a child
-would copy page by page as it reuses it) nor started by :mod:`multiprocessing`, which imports the
-parent's main script in every worker (a script without an ``if __name__ == "__main__"`` guard would
-run again). The protocol is pickles over the worker's stdin and a private copy of its stdout (the
-worker's own ``print`` goes to stderr): the alignment context once per :meth:`AlignmentWorkers.map`,
-then a part's N-Triples text per request, answered with what :func:`service.graph.alignment._aligned_part`
-returns, or with the worker's traceback.
+A worker is a fresh interpreter, ``python -m service.graph.alignment_workers`` (neither forked nor
+started by :mod:`multiprocessing`), started when the alignment starts. The protocol is pickles over
+the worker's stdin and a private copy of its stdout (the worker's own ``print`` goes to stderr): the
+alignment context once per :meth:`AlignmentWorkers.map`, then a part's N-Triples text per request,
+answered with what :func:`service.graph.alignment_derivation._aligned_part` returns, or with the
+worker's traceback. Why processes, and why started this way: ``docs/alignment.md``.
 """
 
 from __future__ import annotations
@@ -27,6 +22,8 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import TracebackType
 from typing import Any
+
+from service.graph.alignment_derivation import _aligned_part
 
 __all__ = ["AlignmentWorkerError", "AlignmentWorkers"]
 
@@ -58,7 +55,7 @@ class AlignmentWorkers:
             raise
 
     def map(self, context: Any, texts: Iterable[bytes]) -> list[tuple[bytes, list[bytes]]]:
-        """:func:`service.graph.alignment._aligned_part` of each text with ``context``, in order.
+        """:func:`~service.graph.alignment_derivation._aligned_part` of each text with ``context``, in order.
 
         :raises AlignmentWorkerError: with the first failing worker's traceback or exit status."""
         numbered, lock, results, failed = enumerate(texts), threading.Lock(), {}, threading.Event()
@@ -119,8 +116,6 @@ def _serve() -> None:
     """A worker's loop until the end of its input: a request is ``("context", context)`` (for the
     parts after it) or ``("part", N-Triples text)``."""
     import traceback
-
-    from service.graph.alignment import _aligned_part
 
     answers = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # a stray print must not break the protocol

@@ -1,51 +1,11 @@
-"""A :class:`service.graph.store.SparqlBackend` on an external SPARQL 1.1 endpoint, over HTTP (``httpx``).
+"""A :class:`service.graph.backend.SparqlBackend` on an external SPARQL 1.1 endpoint, over HTTP (``httpx``).
 
-W3C SPARQL 1.1 Protocol and Graph Store HTTP Protocol, with the Oxigraph server's URLs
-(``oxigraph serve``: ``/query``, ``/update``, ``/store``) by :meth:`SparqlEndpointBackend.for_oxigraph_server`:
-
-==================  ==========================================================================
-``query``           ``POST query_url``, body ``application/sparql-query``; ``Accept:
-                    application/sparql-results+json`` (SELECT, ASK) or ``application/n-triples``
-                    (CONSTRUCT, DESCRIBE): the server picks by the query form, the reply's
-                    ``Content-Type`` says which came back. With a ``default_graph`` the query is
-                    sent URL-encoded (``query=…&default-graph-uri=…``, protocol §2.1.2), see Dataset.
-``update``          ``POST update_url``, body ``application/sparql-update``
-``replace_graph``   one update ``DROP SILENT GRAPH <g> ; INSERT DATA { GRAPH <g> { … } }``
-(``replace_graphs``) (:func:`service.graph.store.insert_data_update`), several graphs in one request
-``load_graph``      parse locally (:func:`service.graph.store.parse_rdf`), then as ``replace_graph``
-``drop_graph``      one update ``DROP SILENT GRAPH <g>``
-``graphs``          ``SELECT DISTINCT ?g WHERE { GRAPH ?g { } }``
-``dump``            ``GET store_url?graph=<g>`` with ``Accept`` = the format's media type
-``triple_count``    ``SELECT (COUNT(*) AS ?n) WHERE { GRAPH <g> { ?s ?p ?o } }``
-==================  ==========================================================================
-
-Atomicity. One SPARQL update request is one transaction in Oxigraph (the server runs it through
-``Store::update``: the whole request is applied or nothing is, also when a later operation fails at
-run time), so a reader sees a graph replaced by
-:meth:`~SparqlEndpointBackend.replace_graph` before or after, never empty or half written.
-``replace_graph`` is deliberately not a graph store ``PUT``: the Oxigraph server handles a ``PUT`` as a
-``clear`` followed by a load, two transactions, between which a reader can see the graph empty. The
-whole graph travels in one request body; the Oxigraph server 0.5.13 accepted a 12.7 MB update body
-(170,000 triples) in our measurement; older servers refused bodies over 1 MiB (HTTP 413).
-
-Values (``substitutions``) are bound as in the embedded store (:func:`service.graph.store.bind_values`):
-a ``VALUES (?v …) { (…) }`` block at the start of the query's outermost ``WHERE`` (or ``ASK``) group,
-the terms serialised by pyoxigraph, never spliced from user text.
-
-Dataset. Given ``default-graph-uri`` alone, the Oxigraph server leaves *no* named graph for
-``GRAPH`` patterns, whereas the embedded store keeps every named graph available. To give both
-backends one meaning, a query with a ``default_graph`` that mentions ``GRAPH`` also gets one
-``named-graph-uri`` per graph in the store (one extra request, only then; a graph created between
-the two requests is not seen). These parameters travel in the request body: in the URL, about a
-hundred graph IRIs already exceed the Oxigraph server's 8 KB header limit.
-
-Errors: a request the endpoint rejects (HTTP 400: a SPARQL syntax error, an invalid IRI) raises
-:class:`SparqlRequestError` (a ``ValueError``) carrying the server's text; any other HTTP status raises
-:class:`SparqlEndpointError` (a ``RuntimeError``, as pyoxigraph raises for an update that fails at run
-time, e.g. ``DROP GRAPH`` of an absent graph: HTTP 500) naming the endpoint URL and the status; an endpoint
-that cannot be reached or does not answer in time raises :class:`SparqlEndpointUnreachable` (also a
-``ConnectionError``) naming the URL. RDF that does not parse raises :class:`service.graph.store.ModelLoadError`
-before anything is sent.
+W3C SPARQL 1.1 Protocol and Graph Store HTTP Protocol, with the Oxigraph server's URLs (``oxigraph
+serve``: ``/query``, ``/update``, ``/store``). Every write is one SPARQL update request, one
+transaction on Oxigraph; values are bound and a default graph sees every named graph through
+``GRAPH`` as in the embedded store. HTTP 400 raises :class:`~service.errors.StoreRequestError`, any
+other failing status :class:`~service.errors.StoreUnavailableError`, no answer
+:class:`~service.errors.StoreUnreachableError`. Requests, atomicity, datasets: ``docs/graph-store.md``.
 """
 
 from __future__ import annotations
@@ -57,29 +17,17 @@ from urllib.parse import urlencode
 import httpx
 import pyoxigraph as ox
 
+from service.errors import StoreRequestError, StoreUnavailableError, StoreUnreachableError
+from service.graph.backend import Term, bind_values, insert_data_update
 from service.graph.ntriples import GraphTriples
-from service.graph.store import bind_values, insert_data_update, parse_rdf
+from service.graph.rdf_io import parse_rdf
 
-__all__ = ["SparqlEndpointBackend", "SparqlEndpointError", "SparqlEndpointUnreachable", "SparqlRequestError"]
+__all__ = ["SparqlEndpointBackend"]
 
-Term = ox.NamedNode | ox.BlankNode | ox.Literal
 _RESULTS_JSON = "application/sparql-results+json"
 _N_TRIPLES = "application/n-triples"
 _GRAPH_KEYWORD = re.compile(r"\bGRAPH\b", re.IGNORECASE)
 _MAX_SERVER_TEXT = 2000
-
-
-class SparqlRequestError(ValueError):
-    """The endpoint rejected a query or update as invalid (HTTP 400); the message carries its text."""
-
-
-class SparqlEndpointError(RuntimeError):
-    """The endpoint answered with an error status other than 400, or with something that is not a
-    SPARQL result; the message names the URL and the status."""
-
-
-class SparqlEndpointUnreachable(SparqlEndpointError, ConnectionError):
-    """No connection to the endpoint, or no answer within the timeout; the message names the URL."""
 
 
 def _term(binding: Mapping[str, str]) -> Term:
@@ -97,11 +45,11 @@ def _term(binding: Mapping[str, str]) -> Term:
         return ox.Literal(value)
     if kind == "triple" and isinstance(value, Mapping):  # RDF 1.2 / SPARQL 1.2 triple term
         return ox.Triple(*(_term(value[part]) for part in ("subject", "predicate", "object")))
-    raise SparqlEndpointError(f"unsupported term {binding!r} in SPARQL JSON results (expected uri, bnode, literal or triple)")
+    raise StoreUnavailableError(f"unsupported term {binding!r} in SPARQL JSON results (expected uri, bnode, literal or triple)")
 
 
 class SparqlEndpointBackend:
-    """graphtwin's :class:`~service.graph.store.SparqlBackend` on a remote SPARQL 1.1 endpoint.
+    """graphtwin's :class:`~service.graph.backend.SparqlBackend` on a remote SPARQL 1.1 endpoint.
 
     :param query_url: the SPARQL query endpoint.
     :param update_url: the SPARQL update endpoint.
@@ -143,14 +91,19 @@ class SparqlEndpointBackend:
 
     # ------------------------------------------------------------------ HTTP
     def _send(self, method: str, url: str, what: str, *, missing_ok: bool = False, **kwargs) -> httpx.Response | None:
-        """One request; None for a 404 when ``missing_ok``; errors raise as the module docstring says."""
+        """One request; None for a 404 when ``missing_ok``.
+
+        :raises StoreRequestError: HTTP 400 (the server's text).
+        :raises StoreUnavailableError: any other failing status (the URL and the status).
+        :raises StoreUnreachableError: no connection, or no answer within the timeout (the URL).
+        """
         try:
             response = self.client.request(method, url, **kwargs)
         except httpx.TimeoutException as exc:
-            raise SparqlEndpointUnreachable(
+            raise StoreUnreachableError(
                 f"SPARQL endpoint {url}: the {what} got no answer within {self.timeout_s:g} s ({exc})") from None
         except httpx.TransportError as exc:
-            raise SparqlEndpointUnreachable(f"cannot reach SPARQL endpoint {url} ({what}): {exc}") from None
+            raise StoreUnreachableError(f"cannot reach SPARQL endpoint {url} ({what}): {exc}") from None
         if response.status_code == 404 and missing_ok:
             return None
         if response.is_success:
@@ -158,8 +111,8 @@ class SparqlEndpointBackend:
         status = response.status_code
         text = response.text.strip()[:_MAX_SERVER_TEXT] or response.reason_phrase
         if status == 400:
-            raise SparqlRequestError(f"SPARQL endpoint {url} rejected the {what} (HTTP 400): {text}")
-        raise SparqlEndpointError(f"SPARQL endpoint {url} failed on the {what} (HTTP {status}): {text}")
+            raise StoreRequestError(f"SPARQL endpoint {url} rejected the {what} (HTTP 400): {text}")
+        raise StoreUnavailableError(f"SPARQL endpoint {url} failed on the {what} (HTTP {status}): {text}")
 
     # ------------------------------------------------------------------ SparqlBackend
     def query(self, sparql: str, *, substitutions: Mapping[str, Term] | None = None,
@@ -167,10 +120,10 @@ class SparqlEndpointBackend:
         """SELECT → ``list[dict[str, Term]]`` (unbound variables absent), ASK → ``bool``,
         CONSTRUCT/DESCRIBE → ``list[Triple]``, all read completely.
 
-        :param substitutions: variable name → term, bound by :func:`service.graph.store.bind_values`.
+        :param substitutions: variable name → term, bound by :func:`service.graph.backend.bind_values`.
         :param default_graph: the named graphs whose union is the default graph.
-        :raises SparqlRequestError: the endpoint rejected the query (a syntax error: the server's text).
-        :raises SparqlEndpointError: the endpoint failed; :class:`SparqlEndpointUnreachable`: no answer.
+        :raises StoreRequestError: the endpoint rejected the query (a syntax error: the server's text).
+        :raises StoreUnavailableError: the endpoint failed; :class:`StoreUnreachableError`: no answer.
         """
         text = bind_values(sparql, substitutions)
         if default_graph is None:
@@ -187,12 +140,12 @@ class SparqlEndpointBackend:
             return [ox.Triple(q.subject, q.predicate, q.object)
                     for q in ox.parse(response.content, format=ox.RdfFormat.N_TRIPLES)]
         if media_type != _RESULTS_JSON:
-            raise SparqlEndpointError(f"SPARQL endpoint {self.query_url} answered the query with "
-                                      f"{media_type or 'no content type'}, expected {_RESULTS_JSON} or {_N_TRIPLES}")
+            raise StoreUnavailableError(f"SPARQL endpoint {self.query_url} answered the query with "
+                                        f"{media_type or 'no content type'}, expected {_RESULTS_JSON} or {_N_TRIPLES}")
         try:
             results = response.json()
         except ValueError as exc:
-            raise SparqlEndpointError(f"SPARQL endpoint {self.query_url} sent invalid JSON results: {exc}") from None
+            raise StoreUnavailableError(f"SPARQL endpoint {self.query_url} sent invalid JSON results: {exc}") from None
         if "boolean" in results:
             return bool(results["boolean"])
         return [{name: _term(value) for name, value in row.items()} for row in results["results"]["bindings"]]
@@ -200,14 +153,14 @@ class SparqlEndpointBackend:
     def update(self, sparql: str) -> None:
         """Run a SPARQL update request: one request, one transaction on Oxigraph.
 
-        :raises SparqlRequestError: the endpoint rejected the update (the server's text).
+        :raises StoreRequestError: the endpoint rejected the update (the server's text).
         """
         self._send("POST", self.update_url, "update", content=sparql.encode("utf-8"),
                    headers={"Content-Type": "application/sparql-update"})
 
     def replace_graph(self, graph: ox.NamedNode, triples: Iterable[ox.Triple]) -> None:
         """Replace ``graph`` by ``triples`` (none: remove it) in one update request, atomically for
-        readers (module docstring)."""
+        readers (``docs/graph-store.md``, External endpoint)."""
         self.replace_graphs({graph: triples})
 
     def replace_graphs(self, graphs: Mapping[ox.NamedNode, GraphTriples]) -> None:
@@ -219,7 +172,7 @@ class SparqlEndpointBackend:
                    base_iri: str | None = None, source_name: str = "<data>") -> int:
         """Parse ``data`` here, then replace ``graph`` with it; returns the number of triples.
 
-        :raises service.graph.store.ModelLoadError: the data does not parse (source, line, column); nothing is sent.
+        :raises service.errors.ModelLoadError: the data does not parse (source, line, column); nothing is sent.
         """
         triples = parse_rdf(data, format, source_name, base_iri)
         self.replace_graph(graph, triples)

@@ -1,5 +1,5 @@
 """N-Triples text as the store's writes and the alignment hand it over: whole graphs as triples, as
-text, or as text in chunks of whole lines (a million-line text joined is a copy of ~200 MB)."""
+text, or as text in chunks of whole lines (not joined: ``docs/graph-store.md``, N-Triples hand-over)."""
 
 from __future__ import annotations
 

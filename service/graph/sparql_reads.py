@@ -1,18 +1,12 @@
 """Which triples a SPARQL query can read: the predicates of its patterns and the objects each can
-take, so that a rule engine re-runs a query only when a triple it could match was added
-(:func:`service.graph.alignment.inferred_triples`).
+take, so that the alignment's rule scheduler (:mod:`service.graph.alignment_derivation`) re-runs a
+query only when a triple it could match was added.
 
-The answer over-approximates and never misses: a predicate given by a variable reads every triple
-unless the variable is restricted — to constants (as objects are, below: those predicates, any
-object) or to IRIs starting with a text by a ``FILTER(STRSTARTS(STR(?p), "…"))`` conjunct (the
-predicates with that prefix); a negated property set reads every triple; a pattern reads the objects it can take — the IRI or literal it names, or the
-constants a variable is restricted to by a ``VALUES`` block or a ``FILTER(?v IN (…))`` conjunct of its
-own group or an enclosing one (``?x a ?class`` with ``VALUES ?class {…}`` reads those classes only);
-a ``VALUES`` row with ``UNDEF``, a variable no group restricts, a number (whose text is not canonical),
-and a predicate inside a property path read any object. Restrictions reach nested groups (``OPTIONAL``, ``UNION``, ``MINUS``, ``EXISTS``),
-whose rows are joined with or substituted by the group's, but not sub-selects, whose variables are
-their own. Subjects are not looked at. Queries are parsed with rdflib's SPARQL parser (parsing only;
-Oxigraph evaluates them).
+The answer over-approximates and never misses: a predicate or object given by a variable reads any
+unless a ``VALUES`` block, a ``FILTER(?v IN (…))`` or a ``FILTER(STRSTARTS(STR(?p), "…"))`` conjunct
+of its group or an enclosing one restricts it; property paths, negated property sets, ``UNDEF`` and
+numbers read more. Subjects are not looked at. Queries are parsed with rdflib's SPARQL parser
+(parsing only; Oxigraph evaluates them). Every rule: ``docs/alignment.md``, What a rule reads.
 """
 
 from __future__ import annotations

@@ -1,7 +1,5 @@
 """Which named graphs a SPARQL update can change, so that the service derives again the inferences of
-the building models an update edits (``POST /sparql/update``: a sensor added to a model graph with
-the SAREF v3 ``saref:measuresProperty`` is seen by the signatures only through what the alignment
-rules derive from it).
+the building models an update edits (``POST /sparql/update``; why: ``docs/graph-store.md``).
 
 Read from rdflib's parse of the update (parsing only; Oxigraph runs it): the graphs of ``INSERT DATA``,
 ``DELETE DATA`` and ``DELETE WHERE`` quads, of the ``GRAPH`` blocks of a ``DELETE``/``INSERT``

@@ -1,14 +1,11 @@
 """Units: QUDT unit IRIs in the graph, SI inside the simulator.
 
 A sensor declares its unit with a QUDT unit IRI (``saref:isMeasuredIn unit:DEG_F``); a model port
-declares the unit it works in (``"degC"``, ``"kg/s"``, ``"1"`` …). Conversion is affine,
-``value_port = (value · m_from + o_from − o_to) / m_to`` with QUDT's conversion multiplier ``m`` and
-offset ``o`` to the SI base unit of the dimension (K for temperatures, so °F → °C is
-``(F · 5/9 + 255.372…) − 273.15``). Percent becomes the 0–1 fraction the models use.
-
-**Temperature differences.** The port unit ``"K"`` is a temperature *difference* (a sensor bias, a
-temperature rise); between a difference and any temperature unit the offsets cancel and only the
-multipliers apply (1 °F of bias is 5/9 K). The QUDT IRI ``unit:K`` stays an absolute temperature.
+the unit it works in (``"degC"``, ``"kg/s"``, ``"1"`` …). Conversion is affine,
+``value_port = (value · m_from + o_from − o_to) / m_to``, with QUDT's multiplier ``m`` and offset ``o``
+to the SI unit of the dimension (K for temperatures); percent becomes the 0–1 fraction. The port unit
+``"K"`` is a temperature *difference*: only the multipliers apply (1 °F of bias is 5/9 K); the QUDT
+``unit:K`` stays absolute. Examples: ``docs/graph-store.md``, Units.
 """
 
 from __future__ import annotations

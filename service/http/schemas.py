@@ -1,24 +1,17 @@
 """Request and response bodies of the HTTP API (pydantic models; they make the OpenAPI document).
 
-Job requests are checked here, before a job is queued: model names (letters, digits, ``_-.+``),
-windows (``START/END``, ISO time stamps, either side may be empty), the calibration method.
+Job requests are the workflows' own (:mod:`service.workflows.requests`).
 """
 
 from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
-
-from service.calibration.model_data import DEFAULT_GP_INPUTS
-from service.calibration.run import parse_window
-from service.data.operating_filter import parse_condition
-from service.graph.store import GraphStore
+from pydantic import BaseModel, Field
 
 __all__ = [
     "ErrorBody", "Health", "ModelSummary", "ModelList", "ModelInfo", "ModelUploaded", "MeasurementsInfo",
-    "MeasurementsList", "NamedQueryInfo", "NamedQueryList", "AssembleRequest", "CalibrateRequest",
-    "DiagnoseRequest", "AddEffectRequest", "ProgressEntry", "JobPublic", "JobList",
+    "MeasurementsList", "NamedQueryInfo", "NamedQueryList", "ProgressEntry", "JobPublic", "JobList",
 ]
 
 
@@ -123,85 +116,6 @@ class NamedQueryInfo(BaseModel):
 class NamedQueryList(BaseModel):
     data: list[NamedQueryInfo]
     count: int
-
-
-class _ModelRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")  # a misspelt field ("start-from") is an error, not ignored
-
-    model: str = Field(description="model name in the store")
-
-    @field_validator("model")
-    @classmethod
-    def _model_name(cls, value: str) -> str:
-        return GraphStore.check_name(value)
-
-
-def _check_window(value: str | None) -> str | None:
-    if value is not None:
-        parse_window(value)
-    return value
-
-
-_ONLY_WHEN = ("operating conditions COLUMN OP NUMBER in the column's unit, e.g. 'SF Spd Cmd (%) > 5': the "
-              "targets are compared only where all hold (README: operating filter)")
-
-
-def _check_conditions(value: list[str]) -> list[str]:
-    for condition in value:
-        parse_condition(condition)
-    return value
-
-
-class AssembleRequest(_ModelRequest):
-    pass
-
-
-class _FitRequest(_ModelRequest):
-    """What calibrate and diagnose jobs share: the data, the seed, the operating filter, the start."""
-
-    measurements: str = Field(description="id of a measurement upload")
-    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
-    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
-    start_from: str | None = Field(default=None, description=(
-        "a model in the store whose latest calibrated parameters start the fit (the version before an added "
-        "effect, say); the others start at their defaults"))
-
-    _conditions = field_validator("only_when")(_check_conditions)
-
-    @field_validator("start_from")
-    @classmethod
-    def _start_model_name(cls, value: str | None) -> str | None:
-        return GraphStore.check_name(value) if value is not None else None
-
-
-class CalibrateRequest(_FitRequest):
-    train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
-    test: str | None = Field(default=None, description="test window START/END")
-    method: Literal["point", "bayes"] = "point"
-    gp_inputs: list[str] = Field(default=list(DEFAULT_GP_INPUTS), min_length=1, description=(
-        "inputs of the discrepancy GP (method bayes): 'time' and boundary inputs by node IRI, local name or "
-        "CSV column"))
-
-    _windows = field_validator("train", "test")(_check_window)
-
-
-class DiagnoseRequest(_FitRequest):
-    train: str = Field(description="training window START/END")
-    test: str = Field(description="test window START/END")
-
-    _windows = field_validator("train", "test")(_check_window)
-
-
-class AddEffectRequest(_ModelRequest):
-    effect: str = Field(description="effect signature id, e.g. FanMotorHeat")
-    target: str = Field(description="IRI of the building node the effect applies to")
-    version: str | None = Field(default=None, description="name of the new model version (default "
-                                "<model>+<effect>); an existing version with other effects is not overwritten (409)")
-
-    @field_validator("version")
-    @classmethod
-    def _version_name(cls, value: str | None) -> str | None:
-        return value if value is None else GraphStore.check_name(value)
 
 
 class ProgressEntry(BaseModel):

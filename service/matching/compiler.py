@@ -1,38 +1,18 @@
 """Signature → SPARQL: one SELECT query per signature pattern, and the parts the matcher runs.
 
-* A node with allowed classes becomes ``?n rdf:type/rdfs:subClassOf* ?n__class`` with
-  ``VALUES ?n__class { … }`` over its classes (subclasses match; several classes are alternatives).
-  A fixed-IRI node is the IRI itself; literal and ``any`` nodes are plain variables.
-* An ``exact`` triple is a triple pattern.
-* ``optional`` triples (and optional traverses) form OPTIONAL blocks: optional triples connected
-  through nodes that appear *only* in optional triples form ONE block, with those nodes' class
-  restrictions inside, so a chain value node → value → unit binds all together or not at all.
-* A ``traverse`` triple becomes the property path ``?s P+ ?o``: reachability. The *nearest*
-  condition — no intermediate node on the path is an instance of the searched-for end's allowed
-  classes (the end the signature does not model; both ends' when both or neither are modelled) — is
-  not expressible on property paths: written as ``FILTER NOT EXISTS`` or ``MINUS`` over two paths it
-  is either explosive (> 600 s at 100k triples) or wrong on recirculation loops (every candidate on
-  a loop lies "behind" another). A traverse with ``or_reverse`` becomes ``?s (P+|^P+) ?o``: the
-  nearest pair as written, and only where the searched-from end has none, the nearest reversed.
-
-:attr:`CompiledQuery.text` is that whole query (``graphtwin signature explain`` prints it): run on
-any SPARQL endpoint it returns every *reachable* combination, a superset of the matches. The matcher
-(:mod:`service.matching.matcher`) runs the same pattern cut at its traverse triples: each
-:class:`QueryPart` is a connected piece of the pattern over its exact triples (with the OPTIONAL
-blocks that hang on it), one SELECT each, or just a class's instances for a node reached only by
-traverses; the parts are joined on their shared nodes and on the nearest pairs of each
-:class:`Traversal`. Cutting there keeps the query from enumerating every reachable pair (on a loop,
-everything on the loop) and the cross product of several traverses, which made the whole query
-minutes long on a campus graph.
-
-Terms from signatures are serialised through pyoxigraph (``str(NamedNode(iri))``), which validates
-and escapes them: an IRI with a space or ``>`` is refused with a ``ValueError`` naming it.
+Classes become ``rdf:type/rdfs:subClassOf*`` restrictions (subclasses match), ``exact`` triples triple
+patterns, connected ``optional`` triples one OPTIONAL block, a ``traverse`` the path ``?s P+ ?o``
+(``?s (P+|^P+) ?o`` with ``or_reverse``). :attr:`CompiledQuery.text` is that whole query: a superset
+of the matches, as the *nearest* condition is not expressible on property paths. The matcher runs
+the pattern cut at its traverse triples (:class:`QueryPart`, :class:`Traversal`) and joins the parts
+on nearest pairs. Terms are serialised through pyoxigraph: an invalid IRI raises ``ValueError``
+naming it. Source: Bjørnskov, Jradi & Wetter, Sec. 3.2. Details and measured costs: ``docs/matching.md``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import KW_ONLY, dataclass
 
 import pyoxigraph as ox
 
@@ -59,6 +39,7 @@ class Traversal:
     predicate: str
     object: str
     blocking_classes: tuple[str, ...]
+    _: KW_ONLY
     block: int | None = None
     or_reverse: bool = False
     far_classes: tuple[str, ...] = ()
@@ -88,6 +69,7 @@ class QueryPart:
 
     nodes: tuple[str, ...]
     text: str | None
+    _: KW_ONLY
     classes: tuple[str, ...] = ()
     block: int | None = None
     reads: Reads = ()
@@ -104,6 +86,7 @@ class CompiledQuery:
     text: str
     variables: dict[str, str]
     traversals: tuple[Traversal, ...]
+    _: KW_ONLY
     parts: tuple[QueryPart, ...] = ()
     blocks: tuple[tuple[str, ...], ...] = ()
 
@@ -168,14 +151,13 @@ class _Writer:
             ]
         return [f"{subject} {predicate} {obj} ."]
 
-    def group(self, triples: list[PatternTriple], nodes: list[str], restricted: set[str],
+    def group(self, triples: list[PatternTriple], nodes: list[str], restricted: set[str], *,
               blocks: list[list[PatternTriple]], block_nodes: list[set[str]]) -> list[str]:
         """``triples`` ordered outward from ``nodes[0]`` so each step joins on a bound variable,
         then the other ``nodes``' restrictions (only those in ``restricted``), then the OPTIONAL
         ``blocks`` (each restricting its ``block_nodes``). With ``subclasses`` (a matcher's part) a
         block first repeats the restrictions of the restricted nodes it hangs on: that changes no
-        row, but Oxigraph then evaluates the block from those nodes' instances instead of from all
-        of its triples' matches (PowerMeter's part at 1M triples: 0.4 s → 0.1 s)."""
+        row, but Oxigraph then evaluates the block from those nodes' instances (``docs/matching.md``)."""
         lines: list[str] = []
         placed: set[str] = set()
 
@@ -214,7 +196,7 @@ class _Writer:
             lines.append("}")
         return lines
 
-    def reads(self, triples: list[PatternTriple], nodes) -> Reads:
+    def reads(self, triples: list[PatternTriple], nodes: Iterable[str]) -> Reads:
         """What a group over ``triples`` restricting the classes of ``nodes`` reads (see
         :attr:`QueryPart.reads`): each exact triple's predicate with its fixed object or any object,
         ``rdf:type`` with the classes listed (with the ``rdfs:subClassOf*`` path: any class, and the
@@ -240,7 +222,7 @@ class _Writer:
                 read(RDFS.iri("subClassOf"), None)
         return tuple((p, None if o is None else tuple(sorted(o))) for p, o in sorted(objects.items()))
 
-    def select(self, nodes, lines: list[str], title: str, distinct: bool = True) -> str:
+    def select(self, nodes: Sequence[str], lines: list[str], title: str, *, distinct: bool = True) -> str:
         projected = " ".join(f"?{n}" for n in nodes if not self.signature.nodes[n].iri)
         prefix_lines = "\n".join(f"PREFIX {p}: <{ns}>" for p, ns in PREFIXES.items())
         body = "\n".join(f"  {line}" for line in lines)
@@ -264,19 +246,17 @@ def _components(nodes: list[str], triples: list[PatternTriple]) -> list[list[str
     return list(groups.values())
 
 
-def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[str]] | None = None,
+def compile_signature(signature: Signature, *, subclasses: Mapping[str, Sequence[str]] | None = None,
                       instance_counts: Mapping[str, int] | None = None) -> CompiledQuery:
     """Compile ``signature``'s pattern (see the module docstring).
 
     :param subclasses: the subclasses of each class the signature names, as read from the store
         (:meth:`service.matching.matcher.MatchSession.subclasses`): the parts then restrict classes
-        by ``rdf:type`` over that list, which Oxigraph answers from its index, where the
-        ``rdf:type/rdfs:subClassOf*`` path is evaluated row by row (100x slower on a campus). The
-        whole query (:attr:`CompiledQuery.text`) keeps the path.
+        by ``rdf:type`` over that list, which Oxigraph answers from its index; the whole query
+        (:attr:`CompiledQuery.text`) keeps the ``rdf:type/rdfs:subClassOf*`` path.
     :param instance_counts: node id → how many instances its classes have (an estimate will do):
         each part's query then starts from its restricted node with the fewest, as Oxigraph
-        evaluates a group's triples in the written order (MixingBox's outdoor-sensor part at 1M
-        triples: 0.25 s from the 40k temperature sensors, 0.03 s from the 3k ``outdoors``).
+        evaluates a group's triples in the written order.
     :raises ValueError: a class, predicate or fixed IRI is not a valid IRI (named in the message).
     """
     writer = _Writer(signature)
@@ -310,7 +290,8 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
                   "# nearest only (no instance of the far end's classes between, never through a building space,\n"
                   "# boiler, chiller or cooling tower, nor past a stop_at class): run alone, this query returns\n"
                   "# those matches and more (service/matching/matcher.py).")
-    text = writer.select(order, writer.group(required, ordered_required, required_nodes, blocks, owns), title)
+    whole = writer.group(required, ordered_required, required_nodes, blocks=blocks, block_nodes=owns)
+    text = writer.select(order, whole, title)
 
     # the parts: required components over the exact triples; a block without traverse goes into the
     # query of the one component it hangs on, any other block is joined by the matcher
@@ -332,13 +313,13 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
         mine = attached.get(i, [])
         node = signature.nodes[component[0]]
         if not triples and not mine and len(component) == 1 and node.classes:
-            parts.append(QueryPart((component[0],), None, node.classes))
+            parts.append(QueryPart((component[0],), None, classes=node.classes))
             continue
         bound = component + [n for b in mine for n in order if n in owns[b]]
         lines = part_writer.group(triples, _fewest_first(component, set(component), instance_counts), set(component),
-                                  [blocks[b] for b in mine], [owns[b] for b in mine])
+                                  blocks=[blocks[b] for b in mine], block_nodes=[owns[b] for b in mine])
         parts.append(QueryPart(tuple(n for n in bound if not signature.nodes[n].iri),
-                               writer.select(bound, lines, f"signature {signature.id}: part {len(parts) + 1}", False),
+                               writer.select(bound, lines, f"signature {signature.id}: part {len(parts) + 1}", distinct=False),
                                reads=part_writer.reads(triples + [t for b in mine for t in blocks[b]], bound)))
     for number, index in enumerate(matcher_blocks):
         own = [n for n in order if n in owns[index]]
@@ -348,12 +329,13 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
             triples = [t for t in block_exact if t.subject in component]
             node = signature.nodes[component[0]]
             if not triples and len(component) == 1 and node.classes:
-                parts.append(QueryPart((component[0],), None, node.classes, number))
+                parts.append(QueryPart((component[0],), None, classes=node.classes, block=number))
                 continue
             restricted = set(component) & owns[index]
-            lines = part_writer.group(triples, _fewest_first(component, restricted, instance_counts), restricted, [], [])
+            lines = part_writer.group(triples, _fewest_first(component, restricted, instance_counts), restricted,
+                                      blocks=[], block_nodes=[])
             parts.append(QueryPart(tuple(n for n in component if not signature.nodes[n].iri),
-                                   writer.select(component, lines, f"signature {signature.id}: part {len(parts) + 1}", False),
+                                   writer.select(component, lines, f"signature {signature.id}: part {len(parts) + 1}", distinct=False),
                                    block=number, reads=part_writer.reads(triples, restricted)))
 
     traversals = [
@@ -362,8 +344,8 @@ def compile_signature(signature: Signature, subclasses: Mapping[str, Sequence[st
     ] + [_traversal(signature, t, None) for t in required if t.rule is Rule.TRAVERSE]
     variables = {n: ("" if signature.nodes[n].iri else n) for n in order}
     return CompiledQuery(
-        signature.id, text, variables, tuple(traversals), tuple(parts),
-        tuple(tuple(n for n in order if n in owns[index]) for index in matcher_blocks),
+        signature.id, text, variables, tuple(traversals), parts=tuple(parts),
+        blocks=tuple(tuple(n for n in order if n in owns[index]) for index in matcher_blocks),
     )
 
 
@@ -397,6 +379,7 @@ def _traversal(signature: Signature, triple: PatternTriple, block: int | None) -
     elif len(searched) == 2:
         searched = ends
     classes = tuple(c for n in searched for c in signature.nodes[n].classes) + triple.stop_at + OPAQUE_CLASSES
-    return Traversal(triple.subject, triple.predicate, triple.object, tuple(dict.fromkeys(classes)), block,
-                     triple.or_reverse, signature.nodes[searched[-1]].classes if triple.or_reverse else (),
-                     triple.or_reverse and searched[-1] == triple.subject)
+    return Traversal(triple.subject, triple.predicate, triple.object, tuple(dict.fromkeys(classes)), block=block,
+                     or_reverse=triple.or_reverse,
+                     far_classes=signature.nodes[searched[-1]].classes if triple.or_reverse else (),
+                     from_object=triple.or_reverse and searched[-1] == triple.subject)

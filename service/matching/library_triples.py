@@ -1,28 +1,11 @@
 """The signature library as triples, so SPARQL can ask which models apply where.
 
-Shape (vocabulary in ``ontologies/graphtwin.ttl``; ``<sig>`` is :func:`service.matching.signature.signature_iri`,
-every other resource is minted under it, no blank nodes, so two writes of one library are equal)::
-
-    <sig> a gt:Signature | gt:EffectSignature ; dcterms:identifier "Fan" ; rdfs:label "…" ;
-          [rdfs:comment "…"] ; gt:modelClass "service.components.fan:Fan" | gt:fmuFile "fan.fmu" ;
-          gt:complexity 1 ; gt:sourceFile "fan.toml" ;
-          gt:hasPatternNode <sig/node/fan> ; gt:modelsNode <sig/node/fan> ;
-          gt:hasPatternTriple <sig/triple/0> ; gt:hasInput <sig/input/P> ; gt:hasOutput <sig/output/P> ;
-          gt:hasParameterMapping <sig/parameter/N> ;
-          [gt:spliceNode <sig/node/X> ; gt:splicePort "p" ; gt:spliceSide "input" ; gt:hostModel "m:C"] .
-    <sig/node/fan> a gt:PatternNode ; gt:nodeId "fan" ; gt:allowedClass s4bldg:Fan .     # classes
-    <sig/node/k> a gt:PatternNode ; gt:nodeId "k" ; gt:fixedIri s4bldg:nominalAirFlowRate . # iri
-    <sig/node/v> a gt:PatternNode, gt:LiteralPatternNode ; gt:nodeId "v" .                  # literal
-    <sig/node/u> a gt:PatternNode, gt:AnyTermPatternNode ; gt:nodeId "u" .                  # any
-    <sig/triple/0> a gt:PatternTriple ; gt:patternSubject <sig/node/a> ; gt:patternPredicate fso:suppliesFluidTo ;
-          gt:patternObject <sig/node/b> ; gt:rule gt:Exact | gt:Traverse | gt:Optional ; [gt:mayBeAbsent true] ; [gt:orReverse true] ;
-          [gt:stopsAt gt:MixingBox] .
-    <sig/input/P> a gt:PortMapping ; gt:portName "P" ; gt:sourceNode <sig/node/s> ; gt:quantity "temperature" .
-    <sig/output/P> a gt:PortMapping ; gt:portName "P" ; gt:atNode <sig/node/n> ; gt:quantity "power" .
-    <sig/parameter/N> a gt:ParameterMapping ; gt:parameterName "N" ; gt:valueNode <sig/node/v> ;
-          [gt:unitNode <sig/node/u>] .
-
-``queries/models-for-class.rq`` reads this graph with the ontology graph's class hierarchy.
+Each signature is ``<sig> a gt:Signature | gt:EffectSignature`` (:func:`~service.matching.signature.signature_iri`)
+with its pattern nodes, pattern triples, port and parameter mappings and splice as resources minted
+under ``<sig>/node/…``, ``<sig>/triple/N``, ``<sig>/input/P``, ``<sig>/output/P``,
+``<sig>/parameter/N`` (vocabulary in ``ontologies/graphtwin.ttl``): no blank nodes, so two writes of
+one library are equal. ``queries/models-for-class.rq`` reads this graph with the ontology graph's
+class hierarchy. The full shape: ``docs/matching.md`` (*The library as triples*).
 """
 
 from __future__ import annotations
@@ -53,7 +36,7 @@ def _source_name(path: Path | None) -> str | None:
 
 
 def signature_triples(signature: Signature) -> list[ox.Triple]:
-    """Every triple describing ``signature`` (shape in the module docstring)."""
+    """Every triple describing ``signature`` (shape: ``docs/matching.md``)."""
     sig = ox.NamedNode(signature.iri)
 
     def node(node_id: str) -> ox.NamedNode:

@@ -1,51 +1,36 @@
 """Match a signature in a graph: its query parts, joined on shared nodes and on *nearest* traverses.
 
-Nearness (the paper's "follow the predicate until an instance of the class is found"), exactly:
-``s P+ o`` such that some path from ``s`` to ``o`` along ``P`` has no intermediate node that is an
-instance of the searched-for end's allowed classes (see :mod:`service.matching.compiler`). The
-condition is the same read in either direction, so the matcher searches from whichever end is
-already bound: a breadth-first search over the predicate's edges that does not expand through
-blocking nodes; the nodes it reaches are that end's nearest partners. Searches never expand a node
-twice, so loops (return air mixed back into the supply) terminate and give the right answer: a
-sensor on a loop finds the equipment right before it, not everything on the loop. A node is not its
-own partner: a loop that comes back to the start without meeting another instance gives no pair
-(a fan whose only upstream equipment is itself has no inlet to wire, and is reported). A traverse
-with ``or_reverse`` is not symmetric (the reversed triple counts only where the written one gives the
-searched-from end no partner), so it is searched from that end (:attr:`Traversal.start`, the end the
-signature models): the join binds it first.
-
-A :class:`MatchSession` reads each traversed predicate's edge list, each class's instances and
-subclasses ONCE, runs each distinct part query once (signatures share sensor and device parts) and
-caches every search, so matching a whole library costs one query per distinct pattern part plus one
-per predicate and class, and one search per distinct start node. Each part's query starts from its
-node whose classes have the fewest instances (one capped count per class list, also kept). It keeps
-what it read: make a new session after the graph changes.
-
-The compiled pattern is cut at its traverse triples (:attr:`CompiledQuery.parts`): the required
-parts are joined on their shared nodes and on the nearest pairs of the required traverses (a node
-with no nearest partner drops the row); each optional block holding a traverse is left-joined the
-same way and binds all together or not at all. Matches are de-duplicated and sorted.
-
-Inside a session a term is its text in SPARQL TSV results (N-Triples syntax: ``<iri>``, ``_:id``,
-``"lexical"^^<datatype>``, or a bare ``42`` / ``true``), and a row is a tuple of those texts, one
-per bound node ("" when an optional part left the node unbound): Oxigraph writes TSV several times
-faster than it hands out term objects, and strings hash and compare at C speed in the joins (a
-term object hashes in Rust on every dict lookup). Terms become values only for the final matches.
+Nearness (Bjørnskov, Jradi & Wetter, Sec. 3.2: "follow the predicate until an instance of the class
+is found"): ``s P+ o`` such that some path from ``s`` to ``o`` along ``P`` has no intermediate node
+that is an instance of the searched-for end's allowed classes (:mod:`service.matching.compiler`),
+found by a breadth-first search from the bound end that does not expand through blocking nodes. A
+:class:`MatchSession` reads each predicate's edges, class's instances and part query once for all
+signatures matched in one graph state; inside it a term is its text in SPARQL TSV results
+(N-Triples syntax; "" when unbound). Matches are de-duplicated and sorted. Details and measured
+costs: ``docs/matching.md``.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from itertools import repeat
 from operator import itemgetter
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import pyoxigraph as ox
 
 from service.runtime import cyclic_gc_paused
 from service.matching.signature import Rule, Signature
 from service.matching.compiler import CompiledQuery, QueryPart, Reads, Traversal, compile_signature
+
+if TYPE_CHECKING:
+    from service.graph.backend import SparqlBackend
+    from service.graph.store import GraphStore
+
+    #: What the matcher queries: a graph store, one of its backends, or a bare pyoxigraph store.
+    MatchStore = GraphStore | SparqlBackend | ox.Store
 
 __all__ = ["Match", "MatchSession", "match_signature", "missing_class_report"]
 
@@ -54,7 +39,7 @@ _SUBCLASS = "http://www.w3.org/2000/01/rdf-schema#subClassOf"
 _EQUIVALENT = "http://www.w3.org/2002/07/owl#equivalentClass"
 _ROW = "\0row"  # column of the input row index while an optional block is joined
 _UNBOUND = ""  # a row's term for a node its optional part left unbound
-_COUNT_CAP = 10_000  # instance counts stop there (counting 40k sensors costs 20 ms at 1M triples)
+_COUNT_CAP = 10_000  # instance counts stop there: enough to choose a part's start node
 _SCANNED_TRIPLES = 100_000  # a graph beyond the model with more is read by every query (see dataset_for)
 
 Row = tuple  # the terms (TSV text) of a row's bound nodes, in the order of its columns
@@ -63,13 +48,14 @@ Row = tuple  # the terms (TSV text) of a row's bound nodes, in the order of its 
 class Match(dict):
     """Pattern node id → bound IRI string / literal lexical form / None; ``literals`` keeps the
     bound :class:`pyoxigraph.Literal` of literal nodes (datatype, language). The matcher sets it on
-    the matches that bind literals; the others share an empty read-only mapping (an ``__init__``
-    taking it cost 0.2 s for the 240k matches of a 1M-triple campus)."""
+    the matches that bind literals; the others share an empty read-only mapping (no ``__init__``
+    argument: cheaper for many matches, ``docs/matching.md``)."""
 
     literals: Mapping[str, ox.Literal] = MappingProxyType({})
 
 
-def _select(store, sparql: str, names: Sequence[str], default_graph) -> list[Row]:
+def _select(store: MatchStore, sparql: str, names: Sequence[str],
+            default_graph: Sequence[ox.NamedNode] | None) -> list[Row]:
     """Rows of a SELECT projecting ``names`` (in that order) as tuples of term texts ("": unbound)."""
     if hasattr(store, "backend") and isinstance(getattr(store.backend, "store", None), ox.Store):
         store = store.backend.store  # the embedded store: read its TSV results, no term objects
@@ -83,7 +69,7 @@ def _select(store, sparql: str, names: Sequence[str], default_graph) -> list[Row
             for row in store.query(sparql, default_graph=default_graph)]
 
 
-def _ask(store, sparql: str, default_graph) -> bool:
+def _ask(store: MatchStore, sparql: str, default_graph: Sequence[ox.NamedNode] | None) -> bool:
     if isinstance(store, ox.Store):
         kwargs = {"default_graph": list(default_graph)} if default_graph is not None else {}
         return bool(store.query(sparql, **kwargs))
@@ -141,9 +127,10 @@ class MatchSession:
     """One graph state's edges, class instances, part rows and nearest searches, shared by every
     signature matched in it (``store``: a :class:`~service.graph.store.GraphStore`, a backend or a bare
     pyoxigraph ``Store``; ``default_graph``: the graphs the patterns are matched in). ``literals``
-    and ``values`` map term texts to literals and to match values, each made once."""
+    and ``values`` map term texts to literals and to match values, each made once. It keeps what it
+    read: make a new session after the graph changes."""
 
-    def __init__(self, store, default_graph: Sequence[ox.NamedNode] | None = None):
+    def __init__(self, store: MatchStore, default_graph: Sequence[ox.NamedNode] | None = None):
         self.store = store
         self.default_graph = list(default_graph) if default_graph is not None else None
         self._edges: dict[tuple[str, bool], dict[str, list[str]]] = {}
@@ -170,9 +157,7 @@ class MatchSession:
         first graph (the model) always, each other one when it holds one of those predicates
         (``rdf:type``: with one of those classes) or is too large to look through (more than
         :data:`_SCANNED_TRIPLES`: a Brick model's inferred view). The answers are the same; a graph
-        left out costs no lookups (over model + inferred + ontologies every triple pattern is looked
-        up in each: the signatures' part queries at 1M triples took 1.5 s over the three, 1.2 s over
-        the graphs they read)."""
+        left out costs no lookups."""
         if self.default_graph is None:
             return None
         if reads not in self._datasets:
@@ -191,7 +176,7 @@ class MatchSession:
 
     def _contents(self, graph: ox.NamedNode) -> tuple[frozenset[str], frozenset[str]] | None:
         """The predicates of ``graph`` and the classes typed in it; None when it holds more than
-        :data:`_SCANNED_TRIPLES` triples (the scan stops there: 20 ms)."""
+        :data:`_SCANNED_TRIPLES` triples (the scan stops there)."""
         query = (f"SELECT ?p (COUNT(*) AS ?n) WHERE {{ {{ SELECT ?p WHERE {{ ?s ?p ?o }} LIMIT {_SCANNED_TRIPLES + 1} }} }} "
                  "GROUP BY ?p")
         counted = _select(self.store, query, ("p", "n"), [graph])
@@ -222,7 +207,7 @@ class MatchSession:
             self._edges[(predicate, False)] = predecessors
         return self._edges[key]
 
-    def subclasses(self, classes) -> dict[str, tuple[str, ...]]:
+    def subclasses(self, classes: Collection[str]) -> dict[str, tuple[str, ...]]:
         """Class IRI → the IRIs of its subclasses (direct or not) in the session's graphs, equivalent
         classes (``owl:equivalentClass``, either way) counted as subclasses: a model's
         ``ex:Office owl:equivalentClass s4bldg:BuildingSpace`` makes its offices building spaces."""
@@ -244,7 +229,7 @@ class MatchSession:
                                 for n in (t.subject, t.object)}
             counts = {n: self.instance_count(tuple(dict.fromkeys(s for c in node.classes for s in (c, *subclasses[c]))))
                       for n, node in signature.nodes.items() if n in in_exact_triples and node.classes and not node.iri}
-            self._compiled[signature.id] = (signature, compile_signature(signature, subclasses, counts))
+            self._compiled[signature.id] = (signature, compile_signature(signature, subclasses=subclasses, instance_counts=counts))
         return self._compiled[signature.id][1]
 
     def instance_count(self, classes: tuple[str, ...]) -> int:
@@ -260,7 +245,7 @@ class MatchSession:
 
     def instance_terms(self, classes: tuple[str, ...]) -> frozenset[str]:
         """The term texts of the instances of any of ``classes`` or their subclasses (the queries leave
-        duplicates to the set: DISTINCT made them 1.5x slower)."""
+        duplicates to the set, cheaper than DISTINCT)."""
         if classes not in self._instances:
             found: set[str] = set()
             for cls, subclasses in self.subclasses(classes).items():
@@ -390,7 +375,7 @@ def _join(session: MatchSession, rows: list[Row], columns: list[str], parts: lis
 
 
 def match_signature(
-    store, signature: Signature, *, default_graph: Sequence[ox.NamedNode] | None = None,
+    store: MatchStore, signature: Signature, *, default_graph: Sequence[ox.NamedNode] | None = None,
     compiled: CompiledQuery | None = None, session: MatchSession | None = None,
 ) -> list[Match]:
     """Every match of ``signature`` (see the module docstring), sorted.
@@ -452,7 +437,8 @@ def _as_matches(signature: Signature, session: MatchSession, rows: list[Row], co
     return matches
 
 
-def missing_class_report(store, signature: Signature, default_graph: Sequence[ox.NamedNode] | None) -> list[str]:
+def missing_class_report(store: MatchStore, signature: Signature,
+                         default_graph: Sequence[ox.NamedNode] | None) -> list[str]:
     """One sentence per class ``signature`` names that no loaded ontology (or the model) declares."""
     problems = []
     classes = sorted({c for node in signature.nodes.values() for c in node.classes})

@@ -1,58 +1,18 @@
 """Signature patterns: the declarative description of where a component model (or an effect) applies.
 
-A signature is read from one TOML file in ``signatures/``. It names pattern nodes (local ids with
-allowed classes, a fixed IRI, or a literal slot), pattern triples between them with a rule each,
-the nodes the model represents, and the input / output / parameter mapping of the paper's Table 1
-(Bjørnskov, Jradi & Wetter, "Automated model generation and parameter estimation of building energy
-models using an ontology-based framework"). File format (every key documented in ``signatures/README.md``)::
-
-    id = "Fan"
-    label = "Fan, polynomial part-load power curve"
-    kind = "component"                 # or "effect"
-    model = "service.components.fan:Fan"          # Python class, "module:Class"; or fmu = "fan.fmu"
-    complexity = 1                     # tie-break when several signatures claim the same node
-    modeled_nodes = ["fan"]
-
-    [nodes]
-    fan = { classes = ["s4bldg:Fan"] }
-    inlet = { classes = ["gt:TemperatureSensor", "s4bldg:Coil"] }
-    nominal_flow_kind = { iri = "s4bldg:nominalAirFlowRate" }
-    nominal_flow = { literal = true }
-    nominal_flow_unit = { any = true }
-
-    [[triples]]
-    subject = "inlet"
-    predicate = "fso:suppliesFluidTo"
-    object = "fan"
-    rule = "traverse"                  # "exact" (default), "traverse" or "optional"
-
-    [inputs.inlet_air_temperature]     # the model's input port
-    source = "inlet"                   # the pattern node whose model feeds it
-    quantity = "temperature"           # which output of that node's model
-
-    [outputs.outlet_air_temperature]   # the model's output port
-    node = "fan"                       # located at this node's outlet (default: first modeled node)
-    quantity = "temperature"
-
-    [parameters.nominal_air_flow]      # the model's parameter
-    node = "nominal_flow"              # mapped from this literal node's value
-    unit_node = "nominal_flow_unit"    # optional: node bound to the value's QUDT unit IRI
-
-:func:`read_signature` checks a file's content (quantities are those of :data:`QUANTITY_UNITS`);
-:class:`service.components.library.SignatureLibrary` checks it against the classes it names. Every
-problem raises :class:`SignatureError` naming the file and the key.
-
-Rules (the paper's Sec. 3.2): ``exact`` is one triple; ``optional`` triples may be absent from the
-graph (connected optional triples form one OPTIONAL block); ``traverse`` follows the predicate from
-subject to object through any number of intermediate nodes and stops at the *nearest* match: no
-intermediate node is an instance of the searched-for end's allowed classes, the end the signature
-does not model (see :mod:`service.matching.compiler`; exact on recirculation loops).
+A signature is one TOML file in ``signatures/`` (every key in ``signatures/README.md``): pattern nodes
+(allowed classes, a fixed IRI, a literal or any-term slot), pattern triples with a rule each
+(``exact``, ``optional``, ``traverse``: the nearest match along the predicate), the nodes the model
+represents, and the input / output / parameter mapping of Table 1 of Bjørnskov, Jradi & Wetter,
+"Automated model generation and parameter estimation of building energy models using an
+ontology-based framework". :func:`read_signature` checks a file's content; every problem raises
+:class:`SignatureError` naming the file and the key. Format, rules and checks: ``docs/matching.md``.
 """
 
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from enum import Enum
 from pathlib import Path
 from typing import Any
@@ -73,7 +33,10 @@ QUANTITY_UNITS = {
 }
 QUANTITIES = frozenset(QUANTITY_UNITS)
 
+
 class Rule(str, Enum):
+    """How a pattern triple matches: one triple, possibly absent, or the nearest along the predicate."""
+
     EXACT = "exact"
     TRAVERSE = "traverse"
     OPTIONAL = "optional"
@@ -93,9 +56,12 @@ class PatternNode:
 
 @dataclass(frozen=True)
 class PatternTriple:
+    """A triple between pattern nodes (ids; the predicate an IRI) and its rule (``docs/matching.md``)."""
+
     subject: str
     predicate: str
     object: str
+    _: KW_ONLY
     rule: Rule = Rule.EXACT
     optional: bool = False  # True for an optional traverse (rule TRAVERSE); OPTIONAL rule implies it
     #: a traverse that, where the triple as written gives the end it searches from no partner, takes
@@ -152,6 +118,8 @@ class EffectSplice:
 
 @dataclass(frozen=True)
 class Signature:
+    """One signature file: its pattern, the nodes its model represents, and the model's mapping."""
+
     id: str
     label: str
     kind: str
@@ -338,7 +306,8 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
             _array(path, f"{where}.stop_at", spec.get("stop_at", []), "an array of class CURIEs")))
         if stop_at and rule is not Rule.TRAVERSE:
             raise signature_error(path, where + ".stop_at", "only a traverse has places to stop at")
-        triples.append(PatternTriple(subject, predicate, obj, rule, optional or rule is Rule.OPTIONAL, or_reverse, stop_at))
+        triples.append(PatternTriple(subject, predicate, obj, rule=rule, optional=optional or rule is Rule.OPTIONAL,
+                                     or_reverse=or_reverse, stop_at=stop_at))
 
     modeled = tuple(known(n, f"modeled_nodes[{i}]") for i, n in enumerate(_array(
         path, "modeled_nodes", data["modeled_nodes"], "a non-empty array of node ids", empty_ok=False)))
@@ -381,8 +350,8 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         side = sides[0]
         host_models = _array(path, "splice.host_models", spec.get("host_models", []), "an array of 'module:Class' names")
         splice = EffectSplice(
-            known(spec.get("node"), "splice.node"), _text(path, f"splice.{side}", spec[side]), side,
-            tuple(_model_name(path, f"splice.host_models[{i}]", m) for i, m in enumerate(host_models)),
+            node=known(spec.get("node"), "splice.node"), port=_text(path, f"splice.{side}", spec[side]), side=side,
+            host_models=tuple(_model_name(path, f"splice.host_models[{i}]", m) for i, m in enumerate(host_models)),
         )
     elif kind == "effect":
         raise signature_error(path, "splice", "an effect must say where it enters the model ([splice])")

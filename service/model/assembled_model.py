@@ -34,7 +34,7 @@ class MeasurementLink:
     unit: str | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ComponentInstance:
     """One match of a signature: the model that represents ``modeled_nodes`` of the building graph."""
 
@@ -83,8 +83,11 @@ class ParameterRef:
         return f"{self.component}#{self.spec.name}"
 
 
-@dataclass
+@dataclass(kw_only=True)
 class AssembledModel:
+    """The simulation model of one building model: its components by IRI, their connections, the
+    boundary inputs and targets (Eq. 1), and the mapped and estimated parameters (Eq. 2)."""
+
     components: dict[str, ComponentInstance]
     connections: tuple[Connection, ...]
     boundary_inputs: tuple[str, ...]  # component IRIs of measuring devices with no input

@@ -1,16 +1,11 @@
 """The assembled model written back as triples, linked to the building nodes it models.
 
-Shape (vocabulary in ``ontologies/graphtwin.ttl``)::
-
-    <assembly> a gt:AssembledModel ; gt:assembledFrom <building model graph> ;
-        gt:hasComponent <component> ; gt:hasConnection <connection> ;
-        gt:hasBoundaryInput <component> ; gt:hasTarget <component> .
-    <component> a gt:ComponentInstance ; gt:instanceOf <signature> ; gt:represents <building node> ;
-        gt:hasParameter <parameter> .
-    <connection> a gt:Connection ; gt:fromComponent <c1> ; gt:fromPort "p" ; gt:toComponent <c2> ; gt:toPort "q" .
-    <parameter> a gt:Parameter ; gt:parameterName "UA_nominal" ; gt:unit "W/K" ;
-        gt:lowerBound 500.0 ; gt:upperBound 8000.0 ; gt:defaultValue 2000.0 ;
-        ( gt:mappedValue 2.5 ; a gt:MappedParameter ) | a gt:EstimatedParameter .
+``<assembly> a gt:AssembledModel`` (:func:`assembly_iri`) with its ``gt:hasComponent``,
+``gt:hasConnection``, ``gt:hasBoundaryInput`` and ``gt:hasTarget``; each component
+``gt:instanceOf`` its signature and ``gt:represents`` its building nodes; each parameter carries its
+name, unit, bounds, default and ``gt:mappedValue`` (a ``gt:MappedParameter``) or is a
+``gt:EstimatedParameter``. Vocabulary in ``ontologies/graphtwin.ttl``; the full shape:
+``docs/assembly.md`` (*The assembled model as triples*).
 """
 
 from __future__ import annotations

@@ -1,15 +1,13 @@
 """Recording an effect in the semantic model: the triples ``add-effect`` writes and re-assembly reads.
 
-An applied effect is data in the building graph, so a user can also write it by hand or POST it::
+An applied effect is data in the building graph (a user can also write it by hand or POST it)::
 
     <node> gt:hasEffect <applied> .
-    <applied> a gt:AppliedEffect ; gt:effectSignature <signature IRI> ;
-        rdfs:label "FanMotorHeat at supply_fan" ; prov:generatedAtTime "…"^^xsd:dateTime .
+    <applied> a gt:AppliedEffect ; gt:effectSignature <signature IRI> ; rdfs:label "…" ; prov:generatedAtTime "…" .
 
-``queries/applied-effects.rq`` finds them; :func:`service.model.assembly.assemble` splices each one.
-The new model is written in the format of the output file's suffix (``.ttl``, ``.nt``, ``.rdf``,
-``.jsonld``); where source and output are both Turtle or both N-Triples the new triples are appended to
-the user's text (prefixes, comments and layout kept), otherwise the model is re-serialised.
+``queries/applied-effects.rq`` finds them; :mod:`service.model.effect_splicing` splices each one. The
+new model is written in the format of the output file's suffix, appended to the user's text where
+both are Turtle or both N-Triples (``docs/assembly.md``).
 """
 
 from __future__ import annotations
@@ -19,9 +17,10 @@ from pathlib import Path
 
 import pyoxigraph as ox
 
+from service.errors import InputError, UnsupportedFormatError
 from service.graph.namespaces import GT, GTR, PROV, RDF, RDFS, XSD, local_name
 from service.matching.signature import Signature
-from service.graph.store import rdf_format
+from service.graph.rdf_io import rdf_format
 
 __all__ = ["applied_effect_iri", "applied_effect_triples", "record_effect_in_file"]
 
@@ -48,15 +47,15 @@ def applied_effect_triples(signature: Signature, node: str, when: datetime | Non
 def record_effect_in_file(source: Path, output: Path, triples: list[ox.Triple]) -> None:
     """Write ``source`` plus ``triples`` to ``output``, in the format its suffix names.
 
-    :raises ValueError: when ``output`` is ``source`` (the user's file is never overwritten) or its
-        suffix names no RDF format graphtwin writes.
+    :raises InputError: when ``output`` is ``source`` (the user's file is never overwritten);
+    :raises UnsupportedFormatError: its suffix names no RDF format graphtwin writes.
     """
     if output.resolve() == source.resolve():
-        raise ValueError(f"{output}: write the new model to another file; graphtwin keeps the original")
+        raise InputError(f"{output}: write the new model to another file; graphtwin keeps the original")
     try:
         source_format, output_format = rdf_format(source.suffix), rdf_format(output.suffix)
-    except ValueError as exc:
-        raise ValueError(f"{output}: {exc}") from None
+    except UnsupportedFormatError as exc:
+        raise UnsupportedFormatError(f"{output}: {exc}") from None
     block = "\n".join(f"{t.subject} {t.predicate} {t.object} ." for t in triples)
     header = f"\n# Added by graphtwin add-effect ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC)\n"
     if source_format == output_format and source_format in (ox.RdfFormat.TURTLE, ox.RdfFormat.N_TRIPLES):

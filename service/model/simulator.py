@@ -1,42 +1,12 @@
 """Ensemble-vectorised fixed-step simulation of an assembled model.
 
-:class:`Simulator` prepares once what does not depend on θ (component order, where every input comes
-from, the boundary series as per-step views) and then :meth:`Simulator.run` steps all ensemble
-members together: every component's ``step`` receives arrays of shape ``(n_ensemble,)``, so the
-Python work per step is per component, not per member. A single parameter set is ``n_ensemble = 1``.
-
-**Order and feedback.** Components run in topological order of the connections (ties broken by
-IRI, so runs are deterministic). A control loop (controller → valve → coil → sensor → controller)
-is a cycle; it is broken with a **one-step delay on the loop-closing connection**: the connection
-into an input declared ``Port(..., feedback=True)`` (a controller's measured value) when it lies on
-a cycle. A cycle without such a port (a draw-through fan whose air flow feeds the coils upstream of it: a
-loop of components, not of physics) is broken at a connection carrying a flow (kg/s, m³/s: set by
-commands, slow) if the cycle has one, else at the connection whose target comes first in IRI order,
-with a warning naming it. A delayed input at step ``k`` receives the producer's output of
-step ``k − 1``; at ``k = 0`` it receives the producer's measured value when the producer is a
-measuring device with a series in ``boundary`` (the sensor's first reading: what the real
-controller saw); else, on a feedback port, 0 (not a value from the producer's ``initial_state``: a
-state is not an output, and the output at ``t_0`` depends on the loop being broken); else the
-producer's output of a first pass over step 0 (a draw-through fan's air flow, which does not depend
-on the coils that read it: they saw still air at step 0 before).
-
-**Sub-steps.** ``substeps = S`` runs the components at ``step_s / S`` (a PI loop sampled every few
-minutes would oscillate where the real controller, sampled every second, does not) with the
-boundary series interpolated linearly between data steps; outputs are reported at the data steps.
-
-**Stepping.** Only what needs it is stepped: a component with a state or on a loop. A
-*memoryless* component (no state, :meth:`~service.components.component.ComponentModel.memoryless`) fed only by
-the boundary and other such components (the boundary sensors, a fan driven by its measured flow) is
-evaluated once over all internal steps, arrays ``(n_steps, n_ensemble)``; a memoryless component
-whose outputs feed only other such components (the target sensors after the loop) is evaluated once
-over the data steps after the stepping. Step functions are elementwise, so the outputs are those of
-stepping every component, at a fraction of the Python work per step (tests/model/test_simulator.py).
-
-**Boundary inputs** (measuring devices with no connected input) receive their measured series
-through their ``measured_value`` input; NaN gaps in a boundary series are held at the last value
-(the calibration leaves those steps out). Dynamic components start from ``initial_state`` with
-their first inputs (a PI controller's integral at 0); ``warmup_steps`` lets them settle first, over
-the steps before a window (:func:`warmup_index`), before the steps the result reports.
+:class:`Simulator` prepares what does not depend on θ once; :meth:`Simulator.run` steps all ensemble
+members together (arrays of shape ``(n_ensemble,)``), components in topological order. A control
+loop is broken by a one-step delay on the connection into a ``feedback`` port (else on a flow
+connection, with a note); ``substeps`` runs the components at ``step_s / substeps`` with the boundary
+series interpolated linearly. Memoryless components outside loops are evaluated over all steps at
+once. Boundary inputs replay their measured series (NaN gaps held at the last value); ``warmup_steps``
+lets dynamic components settle before the reported steps. Times in s. Details: ``docs/assembly.md``.
 """
 
 from __future__ import annotations
@@ -44,13 +14,15 @@ from __future__ import annotations
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from service.errors import InputError
 from service.model.assembled_model import AssembledModel, Connection
 
-__all__ = ["Simulator", "SimulationResult", "simulate", "component_order", "loop_substeps", "MAX_LOOP_STEP_S",
-           "target_series", "held_over_gaps", "warmup_index"]
+__all__ = ["Simulator", "SimulationResult", "simulate", "ComponentOrder", "component_order", "loop_substeps",
+           "MAX_LOOP_STEP_S", "target_series", "held_over_gaps", "warmup_index"]
 
 #: Longest internal step of a model with a closed control loop, s: at 2 minutes the case study's
 #: heating loop is free of the sampling limit cycle over its whole prior (tests/components).
@@ -141,8 +113,17 @@ def held_over_gaps(values: np.ndarray) -> np.ndarray:
     return held
 
 
-def component_order(model: AssembledModel) -> tuple[list[str], set[Connection], list[str]]:
-    """Topological order, the delayed (loop-closing) connections and warnings (module docstring)."""
+class ComponentOrder(NamedTuple):
+    """The components in stepping order, the delayed (loop-closing) connections, and a note per
+    cycle without a feedback port saying where it was broken."""
+
+    order: list[str]
+    delayed: set[Connection]
+    notes: list[str]
+
+
+def component_order(model: AssembledModel) -> ComponentOrder:
+    """The stepping order of ``model``'s components and the loop-closing connections (``docs/assembly.md``)."""
     nodes = sorted(model.components)
     edges: dict[str, set[str]] = defaultdict(set)
     for c in model.connections:
@@ -174,7 +155,7 @@ def component_order(model: AssembledModel) -> tuple[list[str], set[Connection], 
                     ready.sort()
         self_loops = [c for c in live if c.source == c.target]
         if len(order) == len(nodes) and not self_loops:
-            return order, delayed, notes
+            return ComponentOrder(order, delayed, notes)
         stuck = sorted(set(nodes) - set(order)) or [self_loops[0].target]
         candidates = sorted((c for c in live if c.target in stuck and (c.source in stuck or c.source == c.target)),
                             key=lambda c: (model.components[c.source].model_class.port(c.source_port).unit not in _FLOW_UNITS,
@@ -190,7 +171,7 @@ def component_order(model: AssembledModel) -> tuple[list[str], set[Connection], 
 def loop_substeps(model: AssembledModel, step_s: float) -> int:
     """Sub-steps per data step: ``ceil(step_s / MAX_LOOP_STEP_S)`` when the model closes a loop
     (a delayed connection), else 1 (a command-driven model has no loop to destabilise)."""
-    _, delayed, _ = component_order(model)
+    delayed = component_order(model).delayed
     return max(1, int(np.ceil(step_s / MAX_LOOP_STEP_S - 1e-9))) if delayed else 1
 
 
@@ -227,8 +208,8 @@ class Simulator:
         self.ahead, self.behind = self._memoryless_ends()
 
     def _memoryless_ends(self) -> tuple[list[str], list[str]]:
-        """(ahead, behind): the memoryless components evaluated over all steps at once (module
-        docstring, *Stepping*), in order; the others are stepped."""
+        """(ahead, behind): the memoryless components evaluated over all internal steps before the
+        stepping, and over the data steps after it (``docs/assembly.md``, *Stepping*), in order."""
         consumers: dict[str, set[str]] = defaultdict(set)
         for c in self.model.connections:
             consumers[c.source].add(c.target)
@@ -261,8 +242,8 @@ class Simulator:
         self,
         boundary: Mapping[str, np.ndarray],
         theta: np.ndarray,
-        fixed: Mapping[str, float] | None = None,
         *,
+        fixed: Mapping[str, float] | None = None,
         record: Iterable[tuple[str, str]] | None = None,
         warmup_steps: int = 0,
     ) -> SimulationResult:
@@ -292,7 +273,7 @@ class Simulator:
             raise ValueError(f"boundary series have different lengths: {sorted(lengths)}")
         n_steps = lengths.pop()
         if not 0 <= warmup_steps < n_steps:
-            raise ValueError(f"a warm-up of {warmup_steps} steps leaves nothing of {n_steps} steps to simulate")
+            raise InputError(f"a warm-up of {warmup_steps} steps leaves nothing of {n_steps} steps to simulate")
         n_kept = n_steps - warmup_steps
         n_ens = theta.shape[0]
         params = self._parameters(theta, fixed or {})
@@ -306,7 +287,7 @@ class Simulator:
             bad = ~np.isfinite(filled)
             if bad.all():
                 if iri in self.model.boundary_inputs:
-                    raise ValueError(f"boundary input {iri} has no finite value in the window")
+                    raise InputError(f"boundary input {iri} has no finite value in the window")
                 continue
             if bad.any():
                 filled = held_over_gaps(filled)
@@ -383,7 +364,7 @@ class Simulator:
                         buffers[(iri, port)][k - warmup_steps] = outputs[port]
 
         # a delayed input off a feedback port and without a measured seed starts from its source's
-        # output of a first pass over step 0 (module docstring)
+        # output of a first pass over step 0 (docs/assembly.md, *Order and feedback*)
         unseeded = {(c.source, c.source_port) for c in self.delayed if series.get(c.source) is None
                     and not components[c.target].model_class.port(c.target_port).feedback}
         if plan and unseeded:

@@ -8,7 +8,7 @@ from rich.console import Console
 from rich.table import Table
 
 from service.model.assembled_model import AssembledModel, ParameterRef
-from service.model.assembly import without_model
+from service.model.wiring import without_model
 from service.graph.namespaces import distinct_local_names, namespace_of
 from service.graph.units import unit_label
 

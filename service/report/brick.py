@@ -2,25 +2,10 @@
 (``queries/alignment/*-brick-*.rq``) did not align, the assumptions they made where the model is
 ambiguous, and the points they could not place or link to data. Nothing is dropped silently.
 
-Read from a loaded model (:meth:`service.graph.store.GraphStore.load_model`): its own graph and its
-``inferred`` graph.
-
-* **Unaligned classes**: a Brick or RealEstateCore class the model types nodes with, where some of
-  those nodes took no part in the alignment: no rule derived anything from them (they carry no
-  ``gt:derivedByRule``: a node a flow edge merely passes, such as a humidifier between two coils, is
-  not aligned) and, for an air handling unit, none of its parts or points (``brick:hasPart`` /
-  ``brick:hasPoint`` and inverses) was aligned. Per class:
-  the count of such nodes out of all, and what would be needed (an official class of
-  ``ontologies/brick-subset.ttl`` with a similar name when the class is not in it; a signature or
-  rule for it when it is). Given the official ontology file (``official_brick_classes``), a class
-  outside the subset is told apart: an official class graphtwin does not model, or no official class
-  at all (misspelt, with the official names close to it).
-* **Unread relations**: a Brick (``brick:``, ``ref:``) predicate the model uses that no alignment
-  rule reads, with its triple count.
-* **Assumptions**: every ``gt:AlignmentAssumption`` the rules recorded (what was assumed, the
-  triple that would remove the ambiguity).
-* **Measuring points without a column or unit**, and **temperature points off the flow path**
-  (boundary inputs only: no model can predict them).
+Read from a loaded model's own graph and its ``inferred`` graph: unaligned classes (with what would
+be needed; told official-but-unmodelled from misspelt given the official ontology), unread
+relations, ``gt:AlignmentAssumption`` records, points without a column or unit, and temperature
+points off the flow path. The rules for each: ``docs/report.md``, "The Brick report".
 """
 
 from __future__ import annotations
@@ -32,9 +17,11 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from service.graph.alignment import rule_terms
+from service.errors import InputError, NotFoundError
+from service.graph.alignment_derivation import rule_terms
 from service.graph.namespaces import local_name
-from service.graph.store import ONTOLOGY_GRAPH, GraphStore, parse_rdf, rdf_format
+from service.graph.rdf_io import parse_rdf, rdf_format
+from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
 __all__ = ["BRICK", "REC", "REF", "UnalignedClass", "UnreadRelation", "Assumption", "BrickReport",
            "brick_report", "official_brick_classes", "print_brick_report"]
@@ -198,22 +185,21 @@ def official_brick_classes(path: Path) -> frozenset[str]:
     """The Brick and RealEstateCore classes (``owl:Class`` / ``rdfs:Class``) an official ontology file
     declares (``Brick.ttl``; the RDF syntaxes models load in, by the file's suffix: :func:`rdf_format`).
 
-    :raises ValueError: naming the file, when it cannot be read, has no RDF suffix, or declares no such
-        class; :class:`~service.graph.store.ModelLoadError` (a ValueError) naming its line and column when it
-        cannot be parsed.
+    :raises InputError: naming the file, when it cannot be read, has no RDF suffix, or declares no such
+        class; :class:`~service.errors.ModelLoadError` naming its line and column when it cannot be parsed.
     """
     path = Path(path)
     try:
         fmt, data = rdf_format(path.suffix), path.read_bytes()
     except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise InputError(f"{path}: {exc}") from None
     kinds = {"http://www.w3.org/2002/07/owl#Class", "http://www.w3.org/2000/01/rdf-schema#Class"}
     classes = frozenset(
         t.subject.value for t in parse_rdf(data, fmt, str(path))
         if t.predicate.value == "http://www.w3.org/1999/02/22-rdf-syntax-ns#type" and t.object.value in kinds
         and t.subject.value.startswith((BRICK, REC)))
     if not classes:
-        raise ValueError(f"{path}: declares no Brick or RealEstateCore class: not the official Brick ontology")
+        raise InputError(f"{path}: declares no Brick or RealEstateCore class: not the official Brick ontology")
     return classes
 
 
@@ -222,10 +208,10 @@ def brick_report(store: GraphStore, model_name: str, official: frozenset[str] | 
     official Brick ontology (:func:`official_brick_classes`), to tell official classes graphtwin does
     not model from misspelt ones.
 
-    :raises KeyError: no model of that name in the store.
+    :raises NotFoundError: no model of that name in the store.
     """
     if not store.has_model(model_name):
-        raise KeyError(f"no model {model_name!r} in the store (known: {', '.join(store.models()) or 'none'})")
+        raise NotFoundError(f"no model {model_name!r} in the store (known: {', '.join(store.models()) or 'none'})")
     store.ensure_ontologies()
     graphs = {"model": store.model_graph(model_name), "inferred": store.inferred_graph(model_name),
               "ontology": ONTOLOGY_GRAPH}

@@ -1,19 +1,11 @@
 """Figures of a calibration run: measured vs predicted with intervals, MCMC traces and a corner plot.
 
-:func:`plot_calibration` is what ``graphtwin calibrate --plots DIR`` writes: for every run the
-measured series against the prediction (the posterior predictive median and its 90 % interval for a
-Bayesian run with a test window; :func:`service.report.plots.plot_measured_vs_model`), and for a Bayesian
-run also
-
-* the **trace** of every estimated parameter: one line per walker of the β = 1 chain over all steps,
-  the discarded burn-in shaded, so drift, stuck walkers or a chain far from stationary are seen;
-* the **corner** plot of the kept samples: the marginal histogram of each parameter on the diagonal
-  with its 16 / 50 / 84 % quantiles, and below it the 2-D histogram of every pair (a ridge is a pair
-  the data identify only in combination, e.g. the fan polynomial's coefficients).
-
-Parameters are shown in their physical units, named by their short parameter name and component.
-matplotlib with the Agg backend; every ``*_figure`` function returns the figure (tests count its
-axes and artists) and the ``plot_*`` functions save it and return the path.
+:func:`plot_calibration` is what ``graphtwin calibrate --plots DIR`` writes: the fit for every run
+(:func:`service.report.plots.plot_measured_vs_model`), and for a Bayesian run the trace of every
+parameter (every walker of the β = 1 chain, burn-in shaded) and the corner plot of the kept samples
+(marginals with 16/50/84 % quantiles, pairwise 2-D histograms), in physical units. matplotlib with
+the Agg backend; ``*_figure`` functions return the figure, ``plot_*`` save it and return the path.
+More: ``docs/report.md``, "Figures".
 """
 
 from __future__ import annotations

@@ -22,11 +22,13 @@ import time
 import pyoxigraph as ox
 from brick_campus import campus_turtle, units_for_triples
 
-from service.graph.alignment import alignment_rules, inferred_ntriples
+from service.graph.alignment import inferred_ntriples
+from service.graph.alignment_derivation import alignment_rules
 from service.runtime import usable_cpu_count
 from service.resources import ontologies_dir
 from service.graph.sparql_reads import query_reads
-from service.graph.store import parse_rdf, skolemize
+from service.graph.blank_nodes import skolemize
+from service.graph.rdf_io import parse_rdf
 
 GOAL_S = 10.0
 

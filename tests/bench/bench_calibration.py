@@ -32,7 +32,8 @@ import numpy as np
 
 from service.model.assembly import assemble
 from service.calibration.bayesian import BayesianCalibrator
-from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.model_data import ModelData
+from service.data.model_series import read_model_data
 from service.calibration.problem import CalibrationProblem
 from service.calibration.koh_likelihood import KennedyOHaganLikelihood
 from service.calibration.point import PointCalibrator

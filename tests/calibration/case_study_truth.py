@@ -9,7 +9,8 @@ from case_study import CASE_STUDY, EX
 
 from service.model.assembly import assemble
 from service.calibration.bayesian import BayesianCalibrator
-from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.model_data import ModelData
+from service.data.model_series import read_model_data
 from service.calibration.run import continuation
 from service.calibration.metrics import target_metrics
 from service.components.library import SignatureLibrary

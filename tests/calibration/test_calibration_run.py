@@ -7,7 +7,8 @@ import pytest
 from case_study import CASE_STUDY, EX, case_study_with_effect
 
 from service.report.calibration_plots import plot_calibration
-from service.calibration.run import calibrate, parse_window
+from service.calibration.run import calibrate
+from service.data.windows import parse_window
 from service.components.library import SignatureLibrary
 from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
@@ -41,7 +42,7 @@ def test_point_calibration_matches_the_truth_within_the_noise(point_run):
     assert point_run.record.settings["warmup_s"] == 86400.0  # recorded with the run: its PI loop's day
     assert point_run.record.settings["unscored_start_s"] == 6 * 3600.0  # the training day starts the data
     assert any(w.startswith("the training window's first 6 h are simulated, not scored")
-               for w in point_run.record.diagnostics["warnings"])
+               for w in point_run.record.diagnostics.warnings)
 
 
 def test_identified_parameters_are_recovered(synthetic, point_run):
@@ -110,7 +111,7 @@ def test_a_too_short_test_window_is_refused_before_anything_is_written_and_an_ov
         diagnose(store, "case", path, train=TRAIN, test=("2026-01-14T00:00", "2026-01-14T00:10"))
     assert set(store.backend.graphs()) == graphs_before
     overlapping = calibrate(store, "case", path, train=("2026-01-12", "2026-01-14T11:59"), test=TEST)
-    assert any("overlaps the training window by 72 steps" in w for w in overlapping.record.diagnostics["warnings"])
+    assert any("overlaps the training window by 72 steps" in w for w in overlapping.record.diagnostics.warnings)
 
 
 def _edited_csv(source, target, column, rows):
@@ -185,7 +186,7 @@ def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_
                         test=("2026-01-13", "2026-01-13T05:59"), method="bayes", seed=1, substeps=1,
                         bayes_settings={"max_steps": 20, "check_interval": 10, "n_temperatures": 2})
     record = outcome.record
-    assert record.method == "bayes" and record.diagnostics["converged"] is False  # capped: said so
+    assert record.method == "bayes" and record.diagnostics.sampler.converged is False  # capped: said so
     node = EX + "coil_outlet_air_temperature_sensor"
     lower, upper = outcome.intervals["test"][node][0.9]
     median = outcome.predictions["test"][node]
@@ -368,7 +369,7 @@ def test_recalibrating_after_an_effect_from_the_base_fit_finds_the_truths_basin(
     """A leaking valve hidden in the truth, six training hours: the model with the leak fitted from the
     component defaults ends in another basin (cost 11.0 against 7.66 at the truth, measured); started
     from the base model's fit, the leak at its default, it reaches the truth's cost."""
-    from service.model.assembly import without_model
+    from service.model.wiring import without_model
 
     library = SignatureLibrary.load()
     store = GraphStore.embedded(None)
@@ -384,13 +385,13 @@ def test_recalibrating_after_an_effect_from_the_base_fit_finds_the_truths_basin(
     at_truth = {without_model(k): v for k, v in truth.theta.items()}
     theta = np.array([at_truth[without_model(r.key)] for r in after.model.estimated_parameters])
     truth_cost = 0.5 * np.sum(problem.weighted_residuals(problem.run(theta[None, :])) ** 2)
-    assert after.record.diagnostics["cost"] <= 1.01 * truth_cost
-    assert "ValveLeakage" in after.record.diagnostics["start"].split("at their defaults: ")[1]
+    assert after.record.diagnostics.cost <= 1.01 * truth_cost
+    assert "ValveLeakage" in after.record.diagnostics.start.split("at their defaults: ")[1]
 
 
 def test_a_comparison_of_a_version_starts_its_base_fit_where_told(synthetic, point_run):
     from service.diagnosis.loop import diagnose
-    from service.report.page import read_run
+    from service.report.stored_run import read_run
 
     store, path, _ = synthetic
     store.load_model("case_compared", CASE_STUDY)
@@ -413,7 +414,8 @@ def test_test_inputs_beyond_what_the_training_saw_are_a_note(synthetic):
     """The FLEXLAB heating valve's dead band was fitted just above the training day's highest command;
     the next day's commands above it made a fault-free day look failed, without a word."""
     from service.model.assembly import assemble
-    from service.calibration.model_data import ModelData, read_model_data
+    from service.calibration.model_data import ModelData
+    from service.data.model_series import read_model_data
     from service.calibration.run import inputs_beyond_training
 
     store, path, _ = synthetic

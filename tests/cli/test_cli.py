@@ -288,14 +288,14 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
 def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():
     from types import SimpleNamespace
 
-    from service import cli
+    from service.cli import printing
 
     sensor = EX + "coil_outlet_air_temperature_sensor"
     record = SimpleNamespace(regime_rule_accuracy=1.0, metrics={"test": {sensor: SimpleNamespace(unit="degC")}}, regimes=[
         {"rule": "setpoint > 18.5 °C", "share": 1.0, "rmse": {sensor: 0.31}},
         {"rule": "setpoint ≤ 14 °C", "share": 0.0, "rmse": {sensor: float("nan")}}])
-    with cli.console.capture() as captured:
-        cli._print_regimes(record)
+    with printing.console.capture() as captured:
+        printing.print_regimes(record)
     rows = {line.split("│")[1].strip(): line for line in captured.get().splitlines() if line.count("│") > 2}
     assert "0.31 °C" in rows["setpoint > 18.5 °C"]
     assert "nan" not in rows["setpoint ≤ 14 °C"] and "–" in rows["setpoint ≤ 14 °C"]
@@ -335,18 +335,18 @@ def test_a_bayesian_runs_metrics_show_the_90_percent_intervals_ace_and_width(mon
 
     from rich.console import Console
 
-    import service.cli as cli
     from service.calibration.metrics import IntervalCoverage
+    from service.cli import printing
 
     printed = Console(record=True, width=200)
-    monkeypatch.setattr(cli, "console", printed)
+    monkeypatch.setattr(printing, "console", printed)
     common = dict(rmse=0.1, mae=0.08, r2=0.9, cv_rmse_percent=1.0, nmbe_percent=0.2, unit="degC")
-    cli._print_metrics("Metrics, test window", {
+    printing.print_metrics("Metrics, test window", {
         EX + "a_sensor": SimpleNamespace(**common, coverage=(IntervalCoverage(0.5, 0.52, 0.02, 0.1),
                                                              IntervalCoverage(0.9, 0.87, -0.03, 0.33))),
         EX + "b_sensor": SimpleNamespace(**common, coverage=())})
     text = printed.export_text()
     assert "ACE 90 %" in text and "90 % width" in text
     assert any("a_sensor" in line and "-3.0" in line and "0.33" in line for line in text.splitlines())
-    cli._print_metrics("Metrics, train window", {EX + "a_sensor": SimpleNamespace(**common, coverage=())})
+    printing.print_metrics("Metrics, train window", {EX + "a_sensor": SimpleNamespace(**common, coverage=())})
     assert "ACE" not in printed.export_text()  # a point fit has no intervals

@@ -8,7 +8,8 @@ import pytest
 from shared_data import SZVAV
 
 from service.model.assembly import assemble
-from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.model_data import ModelData
+from service.data.model_series import read_model_data
 from service.resources import examples_dir
 from service.graph.store import GraphStore
 

@@ -109,7 +109,9 @@ def test_runs_inside_the_simulator_beside_the_python_fan_without_leaking_instanc
                                       "model": "service.components.fan:Fan"})
     model = replace(
         model,
-        components={**model.components, "urn:pyfan": ComponentInstance("urn:pyfan", python_fan, {"n": "urn:pyfan"}, ("urn:pyfan",), {})},
+        components={**model.components, "urn:pyfan": ComponentInstance(
+            iri="urn:pyfan", signature=python_fan, bindings={"n": "urn:pyfan"}, modeled_nodes=("urn:pyfan",),
+            mapped_parameters={})},
         connections=(*model.connections, Connection("urn:flow", "measured_value", "urn:pyfan", "air_volume_flow")),
         mapped_parameters=(*model.mapped_parameters,
                            *(ParameterRef("urn:pyfan", Fan.parameter(name), value) for name, value in FAN_CURVE.items())),

@@ -25,15 +25,18 @@ def test_effectiveness_rises_with_ntu_and_falls_with_the_capacity_ratio():
 
 def test_series_film_conductances():
     # hA_w = 1000 W/K at half its reference flow: 1000·0.5^0.8 = 574.35 W/K; with 3000 W/K in series: 482.06 W/K
-    ua = series_film_ua_w_per_k(np.array([1000.0, 1000.0, 1000.0]), np.array([1.0, 0.5, 0.0]),
-                                np.array([3000.0, 3000.0, 3000.0]), np.array([1.0, 1.0, 1.0]))
+    ua = series_film_ua_w_per_k(water_conductance_w_per_k=np.array([1000.0, 1000.0, 1000.0]),
+                                water_flow_ratio=np.array([1.0, 0.5, 0.0]),
+                                air_conductance_w_per_k=np.array([3000.0, 3000.0, 3000.0]),
+                                air_flow_ratio=np.array([1.0, 1.0, 1.0]))
     np.testing.assert_allclose(ua[:2], [750.0, 482.06], rtol=1e-5)
     assert 0.0 <= ua[2] < 1e-3
 
 
 def test_coil_heat_rate_sign_bound_and_zero_flow():
     c_water, c_air = np.array([800.0, 800.0, 0.0]), np.array([1500.0, 1500.0, 1500.0])
-    q = coil_heat_rate_w(np.full(3, 5000.0), c_water, c_air, np.array([60.0, 7.0, 60.0]), np.full(3, 20.0))
+    q = coil_heat_rate_w(np.full(3, 5000.0), water_capacity_w_per_k=c_water, air_capacity_w_per_k=c_air,
+                         water_inlet_temperature=np.array([60.0, 7.0, 60.0]), air_inlet_temperature=np.full(3, 20.0))
     assert q[0] > 0 > q[1]
     assert q[0] <= 800.0 * 40.0 and -q[1] <= 800.0 * 13.0  # |Q| ≤ C_min·|ΔT|
     assert abs(q[2]) < 1e-6  # no water flow: no heat

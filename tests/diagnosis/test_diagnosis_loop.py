@@ -57,7 +57,7 @@ def test_the_hidden_effect_ranks_first_and_adding_it_halves_the_error(tmp_path, 
     # the sensors the hidden effect disturbs beyond the truth's measurement noise (on the evaluation
     # half, base model refitted without the effect); with the effect added and fitted on other data,
     # their RMSE there halves, or falls to the noise floor (an RMSE cannot fall below the noise)
-    noise = {n: NOISE_STD.get(report.sensors[n]["unit"], report.sensors[n]["noise"]) for n in best.rmse_before}
+    noise = {n: NOISE_STD.get(report.sensors[n].unit, report.sensors[n].noise) for n in best.rmse_before}
     affected = [n for n in best.rmse_before if best.rmse_before[n] > 1.5 * noise[n]]
     assert affected, (best.rmse_before, noise)
     for node in affected:
@@ -71,7 +71,7 @@ def test_nothing_is_invented_when_nothing_is_missing(tmp_path):
     report = _diagnose(tmp_path, None, None)
     assert not report.significant, [(e.effect, e.delta_bic, e.test_improvement) for e in report.effects[:3]]
     assert "nothing significant is missing" in report.to_dict()["summary"] or not any(
-        s["fails"] for s in report.sensors.values())
+        s.fails for s in report.sensors.values())
     assert report.to_dict()["nothing_significant_missing"] is True
 
 
@@ -141,7 +141,7 @@ def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():
 
 
 def test_an_effect_the_model_records_is_not_offered_again():
-    from service.diagnosis.loop import effect_candidates
+    from service.diagnosis.candidates import effect_candidates
 
     store = GraphStore.embedded(None)
     store.load_model("case", case_study_with_effect(LIBRARY["FanMotorHeat"], EX + "supply_fan"))

@@ -112,7 +112,7 @@ def test_ranking_prefers_significant_then_larger_improvement_then_fewer_paramete
 
 def test_an_estimate_at_a_bound_of_its_prior_is_flagged_in_the_explanation():
     from service.components.component import Parameter
-    from service.diagnosis.loop import _bound_note
+    from service.diagnosis.candidates import _bound_note
 
     offset = Parameter("offset", "K", 0.0, -5.0, 5.0, "sensor offset", null=0.0)
     assert _bound_note(4.99999999961, offset) == " (at its upper bound 5)"
@@ -122,7 +122,7 @@ def test_an_estimate_at_a_bound_of_its_prior_is_flagged_in_the_explanation():
 
 def test_an_estimate_the_data_leave_anywhere_in_its_prior_is_called_not_identified():
     from service.components.component import Parameter
-    from service.diagnosis.loop import _estimate_text
+    from service.diagnosis.candidates import _estimate_text
 
     leak = Parameter("leakage_fraction", "1", 0.0, 0.0, 0.3, "leakage", null=0.0)
     assert _estimate_text("leakage_fraction", 0.21, 1.3e8, leak) == \

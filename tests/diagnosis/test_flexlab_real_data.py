@@ -94,8 +94,8 @@ def test_the_model_fails_on_the_supply_air_temperature(reports, fault):
     failure as inherited from it, so it names the mixing box, not the coils.)"""
     sensors = reports[fault]["report"].sensors
     supply, mixed = sensors[SUPPLY], sensors[EX + "mixed_air_temperature_sensor"]
-    assert supply["fails"] and supply["rmse"] > 5.0, supply
-    assert supply["rmse"] > 10.0 * mixed["rmse"], (supply["rmse"], mixed["rmse"])
+    assert supply.fails and supply.rmse > 5.0, supply
+    assert supply.rmse > 10.0 * mixed.rmse, (supply.rmse, mixed.rmse)
 
 
 @pytest.mark.parametrize("fault", sorted(FAULT_DAYS))

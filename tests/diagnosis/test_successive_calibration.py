@@ -9,7 +9,8 @@ import pytest
 from case_study import EX
 
 from service.model.assembly import assemble
-from service.calibration.model_data import ModelData, read_model_data
+from service.calibration.model_data import ModelData
+from service.data.model_series import read_model_data
 from service.calibration.problem import CalibrationProblem
 from service.calibration.regime_sensitivity import calibration_morris_by_regime, dominant_parameters_by_regime
 from service.components.library import SignatureLibrary

@@ -6,9 +6,10 @@ import pytest
 from case_study import EX
 
 from service.graph.namespaces import GT, RDF
-import service.graph.alignment
+import service.graph.alignment_derivation
 from service.graph.alignment import inferred_triples
-from service.graph.store import ONTOLOGY_GRAPH, GraphStore, parse_rdf
+from service.graph.rdf_io import parse_rdf
+from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
 V4 = b"""@prefix saref: <https://saref.etsi.org/core/> . @prefix s4bldg: <https://saref.etsi.org/saref4bldg/> .
 @prefix ex: <https://example.org/a#> .
@@ -88,8 +89,8 @@ def test_a_rule_that_keeps_minting_terms_is_stopped_with_a_clear_error(case_stor
         CONSTRUCT { ?next ex:follows ?x } WHERE {
           { ?x a <https://saref.etsi.org/saref4bldg/Fan> } UNION { ?x ex:follows ?previous }
           BIND(IRI(CONCAT(STR(?x), "+")) AS ?next) }""")
-    shipped = service.graph.alignment.alignment_rules()
-    monkeypatch.setattr(service.graph.alignment, "alignment_rules", lambda: shipped + (minting,))
+    shipped = service.graph.alignment_derivation.alignment_rules()
+    monkeypatch.setattr(service.graph.alignment_derivation, "alignment_rules", lambda: shipped + (minting,))
     model = case_store.graph_triples(case_store.model_graph("case"))
     with pytest.raises(RuntimeError, match=r"alignment rules in .*alignment did not reach a fixpoint in 8 runs per rule"):
         inferred_triples(model, case_store.graph_triples(ONTOLOGY_GRAPH))

@@ -11,7 +11,8 @@ import pytest
 from brick_models import campus_triples, ontology_triples
 
 import service.graph.alignment
-from service.graph.alignment import _aligned_part, _Context, _ntriples, _vocabulary, independent_parts, inferred_triples
+from service.graph.alignment import _vocabulary, independent_parts, inferred_triples
+from service.graph.alignment_derivation import _aligned_part, _Context, _ntriples
 from service.graph.alignment_workers import AlignmentWorkerError, AlignmentWorkers
 
 

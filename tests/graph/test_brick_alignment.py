@@ -12,11 +12,16 @@ from brick_models import campus_triples, ontology_triples
 from shared_data import OFFICIAL_BRICK, SCHOOL
 
 import service.graph.alignment
-from service.graph.alignment import BlankNodeError, alignment_rules, independent_parts, inferred_ntriples, inferred_triples
-from service.model.assembly import IncompleteModelError, assemble
+import service.graph.alignment_derivation
+from service.graph.alignment import independent_parts, inferred_ntriples, inferred_triples
+from service.graph.alignment_derivation import BlankNodeError, alignment_rules
+from service.errors import IncompleteModelError
+from service.model.assembly import assemble
 from service.resources import examples_dir, ontologies_dir
 from service.graph.sparql_reads import QueryReads
-from service.graph.store import GraphStore, parse_rdf, skolemize
+from service.graph.blank_nodes import skolemize
+from service.graph.rdf_io import parse_rdf
+from service.graph.store import GraphStore
 from tests.bench.brick_campus import CAMPUS_NAMESPACE
 
 BRICK = "https://brickschema.org/schema/Brick#"
@@ -151,10 +156,10 @@ def test_re_running_only_the_rules_whose_reads_changed_reaches_the_same_fixpoint
     model = (store.graph_triples(store.model_graph("points")) if example == "points" else
              parse_rdf((examples_dir() / example / "model.ttl").read_bytes(), ox.RdfFormat.TURTLE, example))
     scheduled = inferred_triples(model, ontology)
-    monkeypatch.setattr(service.graph.alignment, "query_reads", lambda text: QueryReads({}, any_predicate=True))
+    monkeypatch.setattr(service.graph.alignment_derivation, "query_reads", lambda text: QueryReads({}, any_predicate=True))
     # every rule re-run after every addition: the points-only unit takes 163 runs of the 18 rules,
     # past the scheduled mode's safety cap (8 a rule; it takes 23)
-    monkeypatch.setattr(service.graph.alignment, "MAX_ROUNDS", 16)
+    monkeypatch.setattr(service.graph.alignment_derivation, "MAX_ROUNDS", 16)
     assert len(scheduled) == len(set(scheduled)) and set(scheduled) == set(inferred_triples(model, ontology))
 
 
@@ -272,7 +277,7 @@ def test_a_node_several_parts_mint_or_another_part_states_is_derived_as_it_is_wh
         CONSTRUCT { <urn:everywhere> <urn:sees> ?ahu ; a brick:Site . ?twin a brick:Supply_Fan ; <urn:twinOf> ?ahu . }
         WHERE { ?ahu a brick:Air_Handling_Unit . BIND(IRI(CONCAT(STR(?ahu), "_twin")) AS ?twin) }""")
     shipped = alignment_rules()
-    monkeypatch.setattr(service.graph.alignment, "alignment_rules", lambda: shipped + (minting,))
+    monkeypatch.setattr(service.graph.alignment_derivation, "alignment_rules", lambda: shipped + (minting,))
     twin = f"<{CAMPUS_NAMESPACE}ahu1#ahu_twin>"
     campus = campus_triples(6, f"\n{twin} a brick:Supply_Fan ; rdfs:label \"stated twin\" .")
     ontology = ontology_triples()

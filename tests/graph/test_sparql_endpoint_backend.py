@@ -12,10 +12,10 @@ from case_study import CASE_STUDY, EX
 from oxigraph_server import endpoint_backend, free_loopback_port, oxigraph_server  # noqa: F401 (pytest fixtures)
 from service.model.assembly import assemble
 from service.model.summary import assembly_to_dict
-from service.graph.endpoint import (
-    SparqlEndpointBackend, SparqlEndpointError, SparqlEndpointUnreachable, SparqlRequestError,
-)
-from service.graph.store import EmbeddedBackend, GraphStore, ModelLoadError
+from service.errors import ModelLoadError, StoreRequestError, StoreUnavailableError, StoreUnreachableError
+from service.graph.backend import EmbeddedBackend
+from service.graph.endpoint import SparqlEndpointBackend
+from service.graph.store import GraphStore
 
 X = "https://example.org/x#"
 G1 = ox.NamedNode("https://example.org/graph/one")
@@ -148,7 +148,7 @@ def test_an_update_request_fails_as_a_whole_as_in_the_embedded_store(endpoint_ba
             backend.update(request)
         assert not isinstance(info.value, ValueError)
         assert backend.graphs() == []
-    with pytest.raises(SparqlEndpointError, match=f"{endpoint_backend.update_url}.*HTTP 500"):
+    with pytest.raises(StoreUnavailableError, match=f"{endpoint_backend.update_url}.*HTTP 500"):
         endpoint_backend.update(request)
 
 
@@ -179,7 +179,7 @@ def test_dump_round_trips(endpoint_backend, fmt):
 
 
 def test_sparql_syntax_errors_are_value_errors_with_the_servers_text(endpoint_backend):
-    with pytest.raises(SparqlRequestError) as info:
+    with pytest.raises(StoreRequestError) as info:
         endpoint_backend.query("SELEC ?x WHERE { ?x ?y ?z }")
     assert isinstance(info.value, ValueError)
     message = str(info.value)
@@ -210,12 +210,12 @@ def test_bad_turtle_raises_before_sending_and_leaves_the_server_unchanged(endpoi
 
 def test_error_statuses_and_unreachable_endpoints_name_the_url(oxigraph_server):
     with SparqlEndpointBackend.for_oxigraph_server(f"{oxigraph_server.url}/no-such-prefix") as misplaced:
-        with pytest.raises(SparqlEndpointError, match=f"{misplaced.query_url}.*HTTP 404") as info:
+        with pytest.raises(StoreUnavailableError, match=f"{misplaced.query_url}.*HTTP 404") as info:
             misplaced.graphs()
         assert isinstance(info.value, RuntimeError) and not isinstance(info.value, ValueError)
     url = f"http://127.0.0.1:{free_loopback_port()}"
     with SparqlEndpointBackend.for_oxigraph_server(url, timeout_s=2) as dead:
-        with pytest.raises(SparqlEndpointUnreachable, match=f"cannot reach SPARQL endpoint {url}/update") as info:
+        with pytest.raises(StoreUnreachableError, match=f"cannot reach SPARQL endpoint {url}/update") as info:
             dead.drop_graph(G1)
         assert isinstance(info.value, ConnectionError) and isinstance(info.value, RuntimeError)
 

@@ -5,7 +5,7 @@ import threading
 
 import pytest
 
-from service.graph.alignment import alignment_rules
+from service.graph.alignment_derivation import alignment_rules
 from service.graph.sparql_reads import QueryReads, query_reads
 
 RDF_TYPE = "http://www.w3.org/1999/02/22-rdf-syntax-ns#type"

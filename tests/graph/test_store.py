@@ -6,9 +6,9 @@ import threading
 import pyoxigraph as ox
 import pytest
 
-from service.graph.store import (
-    ALIGNMENT_RULES_GRAPH, ONTOLOGY_GRAPH, STAGING, EmbeddedBackend, GraphStore, ModelLoadError, StoreInUseError, bind_values, insert_data_update,
-)
+from service.errors import ModelLoadError, NotFoundError, StoreInUseError
+from service.graph.backend import STAGING, EmbeddedBackend, bind_values, insert_data_update
+from service.graph.store import ALIGNMENT_RULES_GRAPH, ONTOLOGY_GRAPH, GraphStore
 
 from case_study import CASE_STUDY, EX
 from store_holder import held_by_another_process
@@ -319,7 +319,7 @@ def test_query_argument_errors_name_the_problem(case_store):
         case_store.run_named_query("measurement-link", dataset="case", device="https://example.org/a b")
     with pytest.raises(TypeError, match="query parameter device"):
         case_store.run_named_query("measurement-link", dataset="case", device=[1])
-    with pytest.raises(KeyError, match="known: .*measurement-link"):
+    with pytest.raises(NotFoundError, match="known: .*measurement-link"):
         case_store.run_named_query("no-such-query")
     has_a_fan = "ASK { ?s a <https://saref.etsi.org/saref4bldg/Fan> }"
     assert case_store.query(has_a_fan, model="case") is True

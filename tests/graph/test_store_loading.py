@@ -6,7 +6,9 @@ import re
 import pyoxigraph as ox
 import pytest
 
-from service.graph.store import GraphStore, ModelLoadError, skolemize
+from service.errors import ModelLoadError
+from service.graph.blank_nodes import skolemize
+from service.graph.store import GraphStore
 
 EX = "http://ex.org/"
 KEEP = b"<http://ex.org/keep> <http://ex.org/p> <http://ex.org/o> ."

@@ -13,13 +13,15 @@ from case_study import CASE_STUDY, EX
 from fastapi.testclient import TestClient
 from shared_data import OFFICIAL_BRICK
 
-from service.http import app as api_module
+from service.http import sparql_protocol
 from service.http.app import create_app
 from service.model.assembly import assemble
-from service.calibration.model_data import series_specs
-from service.jobs.runner import JobRecord, JobRecords, JobResult
+from service.data.model_series import series_specs
+from service.jobs.records import JobRecord, JobRecords
+from service.jobs.work import JobKind, JobResult
+from service.workflows.requests import AssembleRequest
 from service.settings import Settings
-from service.graph.endpoint import SparqlEndpointError
+from service.errors import StoreUnavailableError
 from service.graph.store import GraphStore
 
 GT = "https://w3id.org/graphtwin/ontology#"
@@ -373,7 +375,7 @@ def test_a_model_name_longer_than_a_file_name_can_be_is_refused(client, auth):
 
 def test_a_query_over_the_time_limit_gets_503(tmp_path, store, monkeypatch):
     release = threading.Event()
-    monkeypatch.setattr(api_module, "_execute", lambda *args: release.wait(30) and b"")
+    monkeypatch.setattr(sparql_protocol, "_execute", lambda *args: release.wait(30) and b"")
     try:
         with TestClient(create_app(Settings(data_dir=tmp_path, query_timeout_s=0.2), store=store)) as client:
             response = client.get("/sparql", params={"query": "ASK {}"})
@@ -384,9 +386,9 @@ def test_a_query_over_the_time_limit_gets_503(tmp_path, store, monkeypatch):
 
 def test_a_failing_sparql_endpoint_gets_503(tmp_path, store, monkeypatch):
     def endpoint_fails(*args):
-        raise SparqlEndpointError("SPARQL endpoint http://127.0.0.1:7878/query failed on the query (HTTP 500): boom")
+        raise StoreUnavailableError("SPARQL endpoint http://127.0.0.1:7878/query failed on the query (HTTP 500): boom")
 
-    monkeypatch.setattr(api_module, "_execute", endpoint_fails)
+    monkeypatch.setattr(sparql_protocol, "_execute", endpoint_fails)
     with TestClient(create_app(Settings(data_dir=tmp_path, executor="threads"), store=store)) as client:
         response = client.get("/sparql", params={"query": "ASK {}"})
         assert response.status_code == 503 and "(HTTP 500): boom" in response.json()["detail"]
@@ -496,14 +498,14 @@ def test_a_queued_job_is_cancelled_at_once_and_a_running_one_is_discarded(client
     runner = client.app.state.graphtwin.runner
     started, release = threading.Event(), threading.Event()
 
-    def blocking(job_store, params, context):
+    def blocking(job_store, request, context):
         started.set()
         release.wait(30)
-        job_store.write_graph(job_store.assembly_graph(params["model"]), [
+        job_store.write_graph(job_store.assembly_graph(request.model), [
             ox.Triple(ox.NamedNode(EX + "x"), ox.NamedNode(EX + "y"), ox.Literal("z"))])
         return JobResult({"done": True})
 
-    runner.kinds["assemble"] = blocking
+    runner.kinds["assemble"] = JobKind(AssembleRequest, blocking)
     running = client.post("/jobs/assemble", json={"model": "case"}, headers=auth).json()
     assert started.wait(10)
     queued = client.post("/jobs/assemble", json={"model": "case"}, headers=auth).json()

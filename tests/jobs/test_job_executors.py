@@ -12,9 +12,15 @@ from fastapi.testclient import TestClient
 
 from service.http.app import create_app
 from service.model.assembly import assemble
-from service.jobs.runner import (
-    DaskJobExecutor, JobRecords, JobResult, JobRunner, ProcessJobExecutor, ShippedJob, add_effect_job, assemble_job,
-    calibrate_job, run_shipped_job, ship_job,
+from service.errors import ConflictError, NotFoundError
+from service.jobs.executors import DaskJobExecutor, ProcessJobExecutor
+from service.jobs.kinds import JOB_KINDS, add_effect_job, assemble_job, calibrate_job
+from service.jobs.records import JobRecords
+from service.jobs.runner import JobRunner
+from service.jobs.shipping import ShippedJob, run_shipped_job, ship_job
+from service.jobs.work import JobKind, JobResult
+from service.workflows.requests import (
+    AddEffectRequest, AssembleRequest, CalibrateRequest, JobRequest,
 )
 from service.settings import Settings
 from service.graph.store import GraphStore
@@ -33,17 +39,16 @@ def test_a_process_pool_job_failing_on_bad_input_fails_clearly_and_the_pool_runs
     not unpickle as it is); the pool is not broken by them."""
     bad_csv = tmp_path / "bad.csv"
     bad_csv.write_text("time,mystery_sensor\n2026-01-12T00:00,1.0\n2026-01-12T00:10,2.0\n")
-    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), {
-        "add-effect": add_effect_job, "assemble": assemble_job, "calibrate": calibrate_job,
-    }, executor=ProcessJobExecutor(1), locate_measurements={"0123456789abcdef": bad_csv}.__getitem__)
+    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), JOB_KINDS, executor=ProcessJobExecutor(1),
+                       locate_measurements={"0123456789abcdef": bad_csv}.__getitem__)
     try:
-        failed = _wait(runner, runner.submit("add-effect", {
-            "model": "case", "effect": "FanMotorHeat", "target": EX + "heating_valve"}).id)
+        failed = _wait(runner, runner.submit("add-effect", AddEffectRequest(
+            model="case", effect="FanMotorHeat", target=EX + "heating_valve")).id)
         assert failed.status == "failed" and "does not apply" in failed.error, failed.error
-        refused = _wait(runner, runner.submit("calibrate", {"model": "case", "measurements": "0123456789abcdef"}).id)
+        refused = _wait(runner, runner.submit("calibrate", CalibrateRequest(model="case", measurements="0123456789abcdef")).id)
         assert refused.status == "failed" and f"no column for {EX}supply_air_flow_meter" in refused.error, refused.error
         assert not any(job.error.startswith("internal error") for job in (failed, refused))
-        done = _wait(runner, runner.submit("assemble", {"model": "case"}).id)
+        done = _wait(runner, runner.submit("assemble", AssembleRequest(model="case")).id)
         assert done.status == "succeeded", done.error
         assert [p["message"] for p in done.progress][1:3] == ["sent to a local process pool (1 process)",
                                                                 "matching the signature library"]
@@ -60,15 +65,15 @@ def test_after_a_pool_worker_dies_the_next_job_runs_in_a_new_pool(case_store, tm
     import signal
 
     executor = ProcessJobExecutor(1)
-    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), {"assemble": assemble_job}, executor=executor)
+    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), JOB_KINDS, executor=executor)
     try:
-        assert _wait(runner, runner.submit("assemble", {"model": "case"}).id).status == "succeeded"
+        assert _wait(runner, runner.submit("assemble", AssembleRequest(model="case")).id).status == "succeeded"
         for pid in list(executor._slots[0]._processes):
             os.kill(pid, signal.SIGKILL)
         deadline = time.monotonic() + 30
         while not executor._slots[0]._broken and time.monotonic() < deadline:
             time.sleep(0.05)
-        done = [_wait(runner, runner.submit("assemble", {"model": "case"}).id) for _ in range(2)]
+        done = [_wait(runner, runner.submit("assemble", AssembleRequest(model="case")).id) for _ in range(2)]
         assert [job.status for job in done] == ["succeeded", "succeeded"], [job.error for job in done]
     finally:
         runner.shutdown(wait=True)
@@ -92,9 +97,13 @@ def test_shutting_the_pool_down_stops_a_worker_still_running_a_job():
     assert [w.is_alive() for w in workers] == [False]
 
 
-def _sleep_job(store, params, context):
-    time.sleep(params["seconds"])
-    return JobResult({"slept": params["seconds"]})
+class Sleep(JobRequest):
+    seconds: float
+
+
+def _sleep_job(store, request: Sleep, context):
+    time.sleep(request.seconds)
+    return JobResult({"slept": request.seconds})
 
 
 def _workers(executor: ProcessJobExecutor) -> list:
@@ -105,11 +114,11 @@ def test_cancelling_a_running_pool_job_stops_its_process_and_leaves_the_other_jo
     """A cancelled job's process is terminated (it does not compute on for nothing); the job running
     beside it in the other process finishes, and the next job runs in the new process."""
     executor = ProcessJobExecutor(2)
-    runner = JobRunner(GraphStore.embedded(None), JobRecords(tmp_path / "jobs"), {"sleep": _sleep_job},
+    runner = JobRunner(GraphStore.embedded(None), JobRecords(tmp_path / "jobs"), {"sleep": JobKind(Sleep, _sleep_job)},
                        max_workers=2, executor=executor)
     try:
-        doomed = runner.submit("sleep", {"seconds": 120}).id
-        other = runner.submit("sleep", {"seconds": 4}).id
+        doomed = runner.submit("sleep", Sleep(seconds=120)).id
+        other = runner.submit("sleep", Sleep(seconds=4)).id
         deadline = time.monotonic() + 60
         while len([w for w in _workers(executor) if w.is_alive()]) < 2 or any(
                 runner.get(j).status != "running" for j in (doomed, other)):
@@ -123,7 +132,7 @@ def test_cancelling_a_running_pool_job_stops_its_process_and_leaves_the_other_jo
         assert len(stopped) == 1 and stopped[0].exitcode < 0, [(w.pid, w.exitcode) for w in before.values()]
         finished = _wait(runner, other)
         assert finished.status == "succeeded" and finished.result == {"slept": 4}
-        assert _wait(runner, runner.submit("sleep", {"seconds": 0}).id).status == "succeeded"
+        assert _wait(runner, runner.submit("sleep", Sleep(seconds=0)).id).status == "succeeded"
     finally:
         runner.shutdown(wait=True)
 
@@ -207,9 +216,9 @@ class _InlineExecutor:
 
 
 def test_a_shipped_job_waits_on_done_and_takes_its_result_without_a_timeout(case_store, tmp_path):
-    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), {"assemble": assemble_job}, executor=_InlineExecutor())
+    runner = JobRunner(case_store, JobRecords(tmp_path / "jobs"), JOB_KINDS, executor=_InlineExecutor())
     try:
-        done = _wait(runner, runner.submit("assemble", {"model": "case"}).id)
+        done = _wait(runner, runner.submit("assemble", AssembleRequest(model="case")).id)
     finally:
         runner.shutdown(wait=True)
     assert done.status == "succeeded", done.error
@@ -217,7 +226,7 @@ def test_a_shipped_job_waits_on_done_and_takes_its_result_without_a_timeout(case
 
 
 def test_shipped_work_reads_only_the_shipped_graphs_and_writes_nothing_until_the_commit(case_store, tmp_path):
-    shipped = ship_job(case_store, "0f" * 16, {"model": "case"}, None)
+    shipped = ship_job(case_store, "0f" * 16, AssembleRequest(model="case"), None)
     assert isinstance(shipped, ShippedJob) and shipped.measurements == {}
     before = set(case_store.backend.store)
     outcome, nquads, dropped, messages = run_shipped_job(assemble_job, shipped)
@@ -227,8 +236,8 @@ def test_shipped_work_reads_only_the_shipped_graphs_and_writes_nothing_until_the
     written = GraphStore.embedded(None)
     written.backend.store.load(nquads, format=ox.RdfFormat.N_QUADS)
     assert written.backend.graphs() == [case_store.assembly_graph("case")]
-    with pytest.raises(KeyError, match="no measurement upload 'abc'"):
-        ship_job(case_store, "0f" * 16, {"model": "case", "measurements": "abc"}, None)
+    with pytest.raises(NotFoundError, match="no measurement upload 'abc'"):
+        ship_job(case_store, "0f" * 16, CalibrateRequest(model="case", measurements="abc"), None)
 
 
 def test_an_unreachable_scheduler_is_named(tmp_path):
@@ -244,17 +253,18 @@ def test_a_shipped_job_reads_the_model_it_starts_from_and_the_version_it_would_w
     the job found none and overwrote it). ``run_shipped_job`` is what the pool process runs."""
     from case_study import case_study_with_effect
 
-    from service.calibration.run import calibrate, parse_window
+    from service.calibration.run import calibrate
+    from service.data.windows import parse_window
     from service.calibration.triples import run_iri
     from service.components.library import SignatureLibrary
 
     first = calibrate(case_store, "case", case_csv, train=parse_window("/2026-01-12T15:50"), seed=0)
     case_store.load_model("case_again", CASE_STUDY)
-    params = {"model": "case_again", "measurements": "day", "train": "/2026-01-12T15:50", "start_from": "case"}
-    outcome, *_ = run_shipped_job(calibrate_job, ship_job(case_store, "j1", params, {"day": case_csv}.__getitem__))
+    request = CalibrateRequest(model="case_again", measurements="day", train="/2026-01-12T15:50", start_from="case")
+    outcome, *_ = run_shipped_job(calibrate_job, ship_job(case_store, "j1", request, {"day": case_csv}.__getitem__))
     assert outcome.result["settings"]["start_from"] == {"model": "case", "runs": [run_iri(first.record.run_id).value]}
     library = SignatureLibrary.load()
     case_store.load_model("v", case_study_with_effect(library["ValveLeakage"], EX + "heating_valve"))
-    with pytest.raises(FileExistsError, match="model v exists with ValveLeakage at .*heating_valve: it is not overwritten"):
-        run_shipped_job(add_effect_job, ship_job(case_store, "j2", {
-            "model": "case", "effect": "FanMotorHeat", "target": EX + "supply_fan", "version": "v"}, None))
+    with pytest.raises(ConflictError, match="model v exists with ValveLeakage at .*heating_valve: it is not overwritten"):
+        run_shipped_job(add_effect_job, ship_job(case_store, "j2", AddEffectRequest(
+            model="case", effect="FanMotorHeat", target=EX + "supply_fan", version="v"), None))

@@ -13,11 +13,17 @@ import numpy as np
 import pyoxigraph as ox
 import pytest
 
-from service.jobs.runner import (
-    DeferredWrites, JobCancelled, JobRecord, JobRecords, JobResult, JobRunner, JobStateError, calibrate_job,
-    diagnose_job, json_safe,
-)
-from service.graph.store import EmbeddedBackend, GraphStore
+from pydantic import ConfigDict
+
+from service.errors import InputError, NotFoundError
+from service.graph.backend import EmbeddedBackend
+from service.graph.store import GraphStore
+from service.jobs.deferred_writes import DeferredWrites
+from service.jobs.kinds import JOB_KINDS
+from service.jobs.records import JobRecord, JobRecords, json_safe
+from service.jobs.runner import JobRunner, JobStateError
+from service.jobs.work import JobCancelled, JobKind, JobResult
+from service.workflows.requests import CalibrateRequest, DiagnoseRequest, FitRequest, JobRequest, ModelRequest
 
 EX = "https://example.org/jobs#"
 G1, G2 = ox.NamedNode(EX + "g1"), ox.NamedNode(EX + "g2")
@@ -44,6 +50,25 @@ class CountingBackend(EmbeddedBackend):
         before = self.updates
         super().replace_graphs(graphs)
         self.updates = before + 1
+
+
+class Work(JobRequest):
+    """A fake job's request: any fields."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class ModelWork(ModelRequest):
+    model_config = ConfigDict(extra="allow")
+
+
+class UploadWork(FitRequest):
+    pass
+
+
+def _kinds(**runs) -> dict[str, JobKind]:
+    """Fake job kinds taking a :class:`Work` request."""
+    return {name: JobKind(Work, run) for name, run in runs.items()}
 
 
 def _wait(runner: JobRunner, job_id: str, timeout_s: float = 20.0) -> JobRecord:
@@ -128,16 +153,16 @@ def test_a_job_reports_progress_and_its_results_appear_together_when_it_succeeds
     store = GraphStore(backend)
     halfway, release = threading.Event(), threading.Event()
 
-    def work(job_store, params, context):
-        job_store.write_graph(G1, [_triple(ox.NamedNode(EX + "a"), params["label"])])
+    def work(job_store, request, context):
+        job_store.write_graph(G1, [_triple(ox.NamedNode(EX + "a"), request.label)])
         context.report("first graph written")
-        job_store.write_graph(G2, [_triple(ox.NamedNode(EX + "b"), params["label"])])
+        job_store.write_graph(G2, [_triple(ox.NamedNode(EX + "b"), request.label)])
         halfway.set()
         release.wait(10)
         return JobResult({"value": np.float64(1.5)}, {"graph": G1.value})
 
-    runner = runners(store, records, {"work": work})
-    job = runner.submit("work", {"label": "x"})
+    runner = runners(store, records, _kinds(work=work))
+    job = runner.submit("work", Work(label="x"))
     assert job.status in ("queued", "running") and records.load(job.id) is not None
     assert halfway.wait(10)
     assert runner.get(job.id).status == "running" and records.load(job.id).status == "running"
@@ -151,19 +176,21 @@ def test_a_job_reports_progress_and_its_results_appear_together_when_it_succeeds
 
 
 @pytest.mark.parametrize("error, expected", [
-    (ValueError("window 2026-02-01 – 2026-02-02 lies outside the data"), "window 2026-02-01 – 2026-02-02 lies outside the data"),
-    (KeyError("no measurement upload 'abc'"), "no measurement upload 'abc'"),
+    (InputError("window 2026-02-01 – 2026-02-02 lies outside the data"), "window 2026-02-01 – 2026-02-02 lies outside the data"),
+    (NotFoundError("no measurement upload 'abc'"), "no measurement upload 'abc'"),
+    (ValueError("a defect's message"), "internal error: ValueError: a defect's message"),
     (RuntimeError("boom"), "internal error: RuntimeError: boom"),
 ])
 def test_a_failing_job_is_failed_with_its_message_and_writes_nothing(records, runners, error, expected):
+    """A user's error (graphtwin's) fails the job with its message; anything else is a defect, said so."""
     store = GraphStore.embedded(None)
 
-    def work(job_store, params, context):
+    def work(job_store, request, context):
         job_store.write_graph(G1, [_triple(ox.NamedNode(EX + "a"), "partial")])
         raise error
 
-    runner = runners(store, records, {"work": work})
-    done = _wait(runner, runner.submit("work", {}).id)
+    runner = runners(store, records, _kinds(work=work))
+    done = _wait(runner, runner.submit("work", Work()).id)
     assert done.status == "failed" and done.error == expected and done.result is None
     assert store.backend.graphs() == []
 
@@ -172,7 +199,7 @@ def test_cancel_stops_a_running_job_at_its_next_progress_message(records, runner
     store = GraphStore.embedded(None)
     started, release, reached = threading.Event(), threading.Event(), []
 
-    def work(job_store, params, context):
+    def work(job_store, request, context):
         job_store.write_graph(G1, [_triple(ox.NamedNode(EX + "a"), "x")])
         started.set()
         release.wait(10)
@@ -180,10 +207,10 @@ def test_cancel_stops_a_running_job_at_its_next_progress_message(records, runner
         reached.append("after the cancel")
         return JobResult({})
 
-    runner = runners(store, records, {"work": work, "quick": lambda s, p, c: JobResult({})})
-    running = runner.submit("work", {})
+    runner = runners(store, records, _kinds(work=work, quick=lambda s, r, c: JobResult({})))
+    running = runner.submit("work", Work())
     assert started.wait(10)
-    queued = runner.submit("quick", {})
+    queued = runner.submit("quick", Work())
     assert runner.cancel(queued.id).status == "cancelled"
     flagged = runner.cancel(running.id)
     assert flagged.status == "running" and flagged.cancel_requested
@@ -193,17 +220,19 @@ def test_cancel_stops_a_running_job_at_its_next_progress_message(records, runner
     assert runner.get(queued.id).started is None
     with pytest.raises(JobStateError, match="already ended"):
         runner.cancel(running.id)
-    with pytest.raises(KeyError):
+    with pytest.raises(NotFoundError):
         runner.cancel("ff" * 16)
-    with pytest.raises(KeyError, match="unknown job kind"):
-        runner.submit("nope", {})
+    with pytest.raises(NotFoundError, match="unknown job kind"):
+        runner.submit("nope", Work())
+    with pytest.raises(InputError, match="a work job takes a Work, not a ModelWork"):
+        runner.submit("work", ModelWork(model="m"))
 
 
 def test_resubmit_copies_an_ended_job_and_refuses_an_active_one(records, runners):
     store = GraphStore.embedded(None)
     release = threading.Event()
-    runner = runners(store, records, {"wait": lambda s, p, c: JobResult({"waited": release.wait(10), **p})})
-    first = runner.submit("wait", {"n": 1})
+    runner = runners(store, records, _kinds(wait=lambda s, r, c: JobResult({"waited": release.wait(10), **r.model_dump()})))
+    first = runner.submit("wait", Work(n=1))
     with pytest.raises(JobStateError, match="cancel it or wait"):
         runner.resubmit(first.id)
     release.set()
@@ -215,14 +244,14 @@ def test_resubmit_copies_an_ended_job_and_refuses_an_active_one(records, runners
 def test_shutdown_marks_queued_jobs_interrupted_and_lets_the_running_one_finish(records):
     started, release = threading.Event(), threading.Event()
 
-    def block(job_store, params, context):
+    def block(job_store, request, context):
         started.set()
         return JobResult({"released": release.wait(10)})
 
-    runner = JobRunner(GraphStore.embedded(None), records, {"block": block})
-    first = runner.submit("block", {})
+    runner = JobRunner(GraphStore.embedded(None), records, _kinds(block=block))
+    first = runner.submit("block", Work())
     assert started.wait(10)
-    second = runner.submit("block", {})
+    second = runner.submit("block", Work())
     runner.shutdown(wait=False)
     assert records.load(second.id).status == "interrupted" and "resubmit" in records.load(second.id).error
     release.set()
@@ -245,7 +274,7 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
     calls, gate = [], threading.Event()
 
     def fake_diagnose(diag_store, model_name, data_path, *, train, test, seed, on_progress, workers, only_when,
-                      start_from):
+                      start_from, rank_effects):
         calls.append((model_name, data_path, train, test, seed, workers, list(only_when), start_from))
         on_progress("calibrating the base model")
         gate.wait(10)
@@ -254,11 +283,11 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
         return _Report()
 
     monkeypatch.setitem(sys.modules, "service.diagnosis.loop", types.SimpleNamespace(diagnose=fake_diagnose))
-    runner = runners(store, records, {"diagnose": diagnose_job}, locate_measurements={"u1": data}.__getitem__)
-    params = {"model": "m", "measurements": "u1", "train": "/2026-01-12T12:00", "test": "2026-01-12T12:10/", "seed": 3,
-              "only_when": ["x > 1"], "start_from": "m0"}
+    runner = runners(store, records, {"diagnose": JOB_KINDS["diagnose"]}, locate_measurements={"u1": data}.__getitem__)
+    request = DiagnoseRequest(model="m", measurements="u1", train="/2026-01-12T12:00", test="2026-01-12T12:10/", seed=3,
+                              only_when=["x > 1"], start_from="m0")
     gate.set()
-    done = _wait(runner, runner.submit("diagnose", params).id)
+    done = _wait(runner, runner.submit("diagnose", request).id)
     assert done.status == "succeeded" and done.result == {"summary": "nothing significant is missing", "score": 2.0}
     assert calls == [("m", data, (None, "2026-01-12T12:00"), ("2026-01-12T12:10", None), 3, 1, ["x > 1"], "m0")], \
         "one diagnosis worker, the operating filter and the start passed on"
@@ -269,7 +298,7 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
 
     store.backend.drop_graph(store.run_graph("m-point-0123abcd"))
     gate.clear()
-    job = runner.submit("diagnose", params)
+    job = runner.submit("diagnose", request)
     while len(calls) < 2:
         time.sleep(0.01)
     runner.cancel(job.id)
@@ -279,21 +308,21 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
 
 def test_calibrate_job_fails_clearly_when_the_upload_is_gone(records, runners):
     def locate(upload_id):
-        raise KeyError(f"no measurement upload {upload_id!r}")
+        raise NotFoundError(f"no measurement upload {upload_id!r}")
 
-    runner = runners(GraphStore.embedded(None), records, {"calibrate": calibrate_job}, locate_measurements=locate)
-    done = _wait(runner, runner.submit("calibrate", {"model": "m", "measurements": "0123456789abcdef"}).id)
+    runner = runners(GraphStore.embedded(None), records, {"calibrate": JOB_KINDS["calibrate"]}, locate_measurements=locate)
+    done = _wait(runner, runner.submit("calibrate", CalibrateRequest(model="m", measurements="0123456789abcdef")).id)
     assert done.status == "failed" and done.error == "no measurement upload '0123456789abcdef'"
 
 
 def test_work_that_raises_job_cancelled_ends_cancelled(records, runners):
-    def give_up(job_store, params, context):
+    def give_up(job_store, request, context):
         job_store.write_graph(G1, [_triple(ox.NamedNode(EX + "a"), "x")])
         raise JobCancelled()
 
     store = GraphStore.embedded(None)
-    runner = runners(store, records, {"give-up": give_up})
-    assert _wait(runner, runner.submit("give-up", {}).id).status == "cancelled" and store.backend.graphs() == []
+    runner = runners(store, records, _kinds(**{"give-up": give_up}))
+    assert _wait(runner, runner.submit("give-up", Work()).id).status == "cancelled" and store.backend.graphs() == []
 
 
 MODEL_TTL = b"<https://example.org/jobs#fan> a <https://saref.etsi.org/saref4bldg/Fan> ."
@@ -306,14 +335,14 @@ def test_a_job_whose_model_is_replaced_while_it_runs_writes_nothing(records, run
     store.load_model("m", MODEL_TTL)
     started, release = threading.Event(), threading.Event()
 
-    def work(job_store, params, context):
-        job_store.write_graph(job_store.assembly_graph(params["model"]), [_triple(ox.NamedNode(EX + "a"), "old")])
+    def work(job_store, request, context):
+        job_store.write_graph(job_store.assembly_graph(request.model), [_triple(ox.NamedNode(EX + "a"), "old")])
         started.set()
         release.wait(10)
         return JobResult({})
 
-    runner = runners(store, records, {"work": work})
-    job = runner.submit("work", {"model": "m"})
+    runner = runners(store, records, {"work": JobKind(ModelWork, work)})
+    job = runner.submit("work", ModelWork(model="m"))
     assert started.wait(10)
     store.load_model("m", MODEL_TTL + b'\n<https://example.org/jobs#fan> <http://www.w3.org/2000/01/rdf-schema#label> "new" .')
     release.set()
@@ -327,14 +356,14 @@ def test_of_two_jobs_creating_the_same_model_version_the_second_does_not_overwri
     store.load_model("m", MODEL_TTL)
     both_started, release = threading.Barrier(2), threading.Event()
 
-    def work(job_store, params, context):
-        job_store.write_graph(job_store.model_graph("m+Effect"), [_triple(ox.NamedNode(EX + "a"), params["label"])])
+    def work(job_store, request, context):
+        job_store.write_graph(job_store.model_graph("m+Effect"), [_triple(ox.NamedNode(EX + "a"), request.label)])
         both_started.wait(10)
         release.wait(10)
         return JobResult({})
 
-    runner = runners(store, records, {"work": work}, max_workers=2)
-    first, second = (runner.submit("work", {"model": "m", "label": label}) for label in ("first", "second"))
+    runner = runners(store, records, {"work": JobKind(ModelWork, work)}, max_workers=2)
+    first, second = (runner.submit("work", ModelWork(model="m", label=label)) for label in ("first", "second"))
     time.sleep(0.2)
     release.set()
     done = sorted((_wait(runner, job.id) for job in (first, second)), key=lambda r: r.status)
@@ -348,18 +377,18 @@ def test_a_job_error_names_the_upload_not_the_servers_file_path(records, runners
     upload = "0123456789abcdef"
     csv = tmp_path / "measurements" / "m" / f"{upload}.csv"
 
-    def work(job_store, params, context):
-        raise ValueError(f"window 2030-01-01 – 2030-02-01 lies outside the data {csv} (2026-01-12 – 2026-01-13)")
+    def work(job_store, request, context):
+        raise InputError(f"window 2030-01-01 – 2030-02-01 lies outside the data {csv} (2026-01-12 – 2026-01-13)")
 
-    runner = runners(GraphStore.embedded(None), records, {"work": work})
-    done = _wait(runner, runner.submit("work", {"measurements": upload}).id)
+    runner = runners(GraphStore.embedded(None), records, {"work": JobKind(UploadWork, work)})
+    done = _wait(runner, runner.submit("work", UploadWork(model="m", measurements=upload)).id)
     assert done.error == f"window 2030-01-01 – 2030-02-01 lies outside the data upload {upload} (2026-01-12 – 2026-01-13)"
 
 
 def test_result_links_quote_a_model_name_with_a_plus():
     """``model+Effect`` (what add-effect names a version) in a query string: '+' would read as a space."""
-    from service.jobs.runner import _result_links
+    from service.workflows.runs import result_links
 
-    links = _result_links(GraphStore.embedded(None), "case+FanMotorHeat", "r1")
+    links = result_links(GraphStore.embedded(None), "case+FanMotorHeat", "r1")
     assert links["calibrated_parameters"] == "/queries/calibrated-parameters?model=case%2BFanMotorHeat"
     assert links["sensor_metrics"] == "/queries/sensor-metrics?model=case%2BFanMotorHeat"

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from service.calibration.model_data import QUANTITY_UNITS
 from service.components.component import ComponentModel, Port
-from service.matching.signature import QUANTITIES, SignatureError, signature_from_dict
+from service.graph.units import unit_spec
+from service.matching.signature import QUANTITIES, QUANTITY_UNITS, SignatureError, signature_from_dict
 from service.components.library import SignatureLibrary, check_model_names, load_signature
 
 TOP = 'id = "T"\nmodel = "service.components.fan:Fan"\nmodeled_nodes = ["fan"]\n'
@@ -72,8 +72,16 @@ def test_an_unknown_quantity_is_refused_with_the_known_ones(tmp_path):
              "outputs.outlet_air_temperature.quantity", "'temprature' is not a quantity; known: heat_rate, mass_flow")
 
 
-def test_the_quantities_are_those_the_simulator_has_units_for():
-    assert QUANTITIES == set(QUANTITY_UNITS)
+def test_every_quantity_has_an_unscaled_unit_of_its_own_dimension():
+    """The simulator's unit of each quantity a port may carry is a unit graphtwin knows, of the
+    quantity's dimension and not scaled (°C, the one with an offset, is the simulator's temperature):
+    what the CSV reader converts a column into."""
+    dimensions = {"temperature": "temperature", "mass_flow": "mass_flow", "volume_flow": "volume_flow",
+                  "power": "power", "heat_rate": "power", "position": "fraction"}
+    assert QUANTITIES == set(QUANTITY_UNITS) == set(dimensions)
+    for quantity, unit in QUANTITY_UNITS.items():
+        spec = unit_spec(unit)
+        assert (spec.dimension, spec.multiplier) == (dimensions[quantity], 1.0), (quantity, unit)
 
 
 @pytest.mark.parametrize("table, key, problem", [

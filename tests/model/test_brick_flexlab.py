@@ -12,7 +12,9 @@ from shared_data import SZVAV
 
 from service.model.assembly import assemble
 from service.resources import examples_dir
-from service.graph.store import GraphStore, parse_rdf, skolemize
+from service.graph.blank_nodes import skolemize
+from service.graph.rdf_io import parse_rdf
+from service.graph.store import GraphStore
 
 EX = "https://example.org/flexlab-x3a#"
 
@@ -152,4 +154,4 @@ def test_diagnose_on_the_leak_day_finds_the_same_for_brick_and_saref(both):
     assert brick.effects[0].test_improvement == pytest.approx(saref.effects[0].test_improvement, abs=1e-6)
     assert sorted(brick.sensors) == sorted(saref.sensors)
     for sensor, figures in saref.sensors.items():
-        assert brick.sensors[sensor].get("fails") == figures.get("fails"), sensor
+        assert brick.sensors[sensor].fails == figures.fails, sensor

@@ -8,7 +8,8 @@ import pyoxigraph as ox
 import pytest
 from shared_data import SCHOOL
 
-from service.model.assembly import IncompleteModelError, assemble
+from service.errors import IncompleteModelError
+from service.model.assembly import assemble
 from service.report.brick import brick_report
 from service.calibration.run import calibrate
 from service.diagnosis.loop import diagnose
@@ -102,21 +103,21 @@ def test_a_winter_week_compared_fails_at_the_mixed_air_with_the_fan_off(winter_c
     reproduce (the README records the full diagnosis)."""
     report = winter_comparison
     assert not report.effects_tested and report.effects == []
-    assert {n.removeprefix(AHU7) for n, s in report.sensors.items() if s["fails"]} == {"mat_sensor", "sat_sensor"}
-    assert report.sensors[AHU7 + "mat_sensor"]["rmse"] > 5.0
-    located = {(loc["between"][0].removeprefix(AHU7), loc["between"][1].removeprefix(AHU7)): loc["components"]
-               for loc in report.localization if not loc["upstream_fails"]}
+    assert {n.removeprefix(AHU7) for n, s in report.sensors.items() if s.fails} == {"mat_sensor", "sat_sensor"}
+    assert report.sensors[AHU7 + "mat_sensor"].rmse > 5.0
+    located = {(loc.matching_sensor.removeprefix(AHU7), loc.failing_sensor.removeprefix(AHU7)): loc.components
+               for loc in report.localization if not loc.upstream_fails}
     assert set(located) == {("oat_sensor", "mat_sensor"), ("rat_sensor", "mat_sensor")}
     assert all(AHU7 + "ahu_7_mixing_section" in components for components in located.values())
     # the supply air's error is not the mixed air's carried down (with the fan off they read still air
     # differently): it grows between them, where the preheat coil is
-    [grown] = [loc for loc in report.localization if loc["upstream_fails"]]
-    assert grown["between"] == [AHU7 + "mat_sensor", AHU7 + "sat_sensor"]
-    assert any("prht" in c for c in grown["components"]), grown
+    [grown] = [loc for loc in report.localization if loc.upstream_fails]
+    assert [grown.matching_sensor, grown.failing_sensor] == [AHU7 + "mat_sensor", AHU7 + "sat_sensor"]
+    assert any("prht" in c for c in grown.components), grown
     worst = next(r for r in report.regimes if r["worst"])
     assert "sf spd cmd ≤" in worst["rule"] and worst["share"] > 0.2, worst
     mat_episodes = report.episodes[AHU7 + "mat_sensor"]
-    assert mat_episodes[0]["start"].startswith("2025-01-06T00:00"), mat_episodes[0]
+    assert str(mat_episodes[0].start).startswith("2025-01-06T00:00"), mat_episodes[0]
     # the data file's outdoor air temperature freezes at 70 °F from 9 January: said, for the sensor only
     frozen = [w for w in report.data_warnings if "frozen point" in w]
     assert len(frozen) == 1 and frozen[0].startswith("column 'OAT (°F)': holds 70 °F exactly from 2025-01-09"), frozen
@@ -150,8 +151,8 @@ def test_with_the_fan_off_left_out_the_supply_air_matches_and_the_mixed_air_erro
     error falls to a quarter (what is left: the mixing section in operation); the filter is recorded
     with the run, and a condition on a column the file does not have is refused by name."""
     everything, running = winter_comparison, fan_on_comparison
-    assert not running.sensors[AHU7 + "sat_sensor"]["fails"]
-    assert running.sensors[AHU7 + "mat_sensor"]["rmse"] < 0.4 * everything.sensors[AHU7 + "mat_sensor"]["rmse"]
+    assert not running.sensors[AHU7 + "sat_sensor"].fails
+    assert running.sensors[AHU7 + "mat_sensor"].rmse < 0.4 * everything.sensors[AHU7 + "mat_sensor"].rmse
     settings = store.query("SELECT ?s WHERE { GRAPH ?g { ?run <https://w3id.org/graphtwin/ontology#settings> ?s } }",
                            substitutions={"run": ox.NamedNode(f"https://w3id.org/graphtwin/resource/run/{running.run_id}")})
     assert '"only_when": ["SF Spd Cmd (%) > 5"]' in settings[0]["s"].value
@@ -178,8 +179,8 @@ def test_recirculated_air_not_following_the_supply_fan_cuts_the_mixed_air_error(
     air's unchanged, with an exponent well off its null."""
     base = fan_on_comparison.sensors
     mixed, supply = AHU7 + "mat_sensor", AHU7 + "sat_sensor"
-    assert recirculation.metrics["test"][mixed].rmse < 0.85 * base[mixed]["rmse"]
-    assert recirculation.metrics["test"][supply].rmse < 1.1 * base[supply]["rmse"]
+    assert recirculation.metrics["test"][mixed].rmse < 0.85 * base[mixed].rmse
+    assert recirculation.metrics["test"][supply].rmse < 1.1 * base[supply].rmse
     exponent = next(e for e in recirculation.estimates if e.name == "recirculation_speed_exponent")
     assert 0.2 < exponent.median < 1.5, exponent
 
@@ -196,7 +197,7 @@ def test_on_the_units_own_operation_a_hidden_recirculation_effect_is_found(store
     generate_synthetic_data(store, "school-fixed", data, library=SignatureLibrary.load(),
                             hidden_effect="ReturnFlowOffFanSpeed", seed=1, operation=SCHOOL / "AHU7.csv", truth=given)
     report = diagnose(store, "school-fixed", data, seed=0, refit_max_nfev=20, **FAN_ON_WINDOW)
-    assert report.sensors[AHU7 + "mat_sensor"]["fails"]
+    assert report.sensors[AHU7 + "mat_sensor"].fails
     best = report.effects[0]
     assert (best.effect, best.node, best.significant) == ("ReturnFlowOffFanSpeed", AHU7 + "ahu_7_mixing_section", True), \
         [(e.effect, e.test_improvement) for e in report.effects[:3]]

@@ -49,7 +49,8 @@ class FlowSetter(ComponentModel):
 def _instance(iri, cls, measured=False):
     signature = signature_from_dict({"id": iri.split(":")[-1].capitalize(), "modeled_nodes": ["n"], "nodes": {"n": {"classes": ["urn:C"]}},
                                      "model": f"{cls.__module__}:{cls.__name__}"})
-    return ComponentInstance(iri, signature, {"n": iri}, (iri,), {}, MeasurementLink(iri, None, None) if measured else None)
+    return ComponentInstance(iri=iri, signature=signature, bindings={"n": iri}, modeled_nodes=(iri,), mapped_parameters={},
+                             measurement=MeasurementLink(iri, None, None) if measured else None)
 
 
 def _loop_model(summer=Summer):
@@ -67,7 +68,8 @@ def _loop_model(summer=Summer):
         Connection("urn:sum", "y", "urn:gain", "x"),
         Connection("urn:gain", "y", "urn:sum", "b"),
     )
-    return AssembledModel(components, connections, ("urn:source",), (), (), (ParameterRef("urn:gain", Gain.parameters[0]),))
+    return AssembledModel(components=components, connections=connections, boundary_inputs=("urn:source",), targets=(),
+                          mapped_parameters=(), estimated_parameters=(ParameterRef("urn:gain", Gain.parameters[0]),))
 
 
 def test_feedback_port_closes_the_loop_one_step_late():
@@ -130,7 +132,8 @@ def _sensor_loop_model():
         Connection("urn:gain", "y", "urn:sensor", "measured_value"),
         Connection("urn:sensor", "measured_value", "urn:sum", "b"),
     )
-    return AssembledModel(components, connections, ("urn:source",), ("urn:sensor",), (), base.estimated_parameters)
+    return AssembledModel(components=components, connections=connections, boundary_inputs=("urn:source",),
+                          targets=("urn:sensor",), mapped_parameters=(), estimated_parameters=base.estimated_parameters)
 
 
 def test_a_delayed_sensor_starts_from_its_first_reading():
@@ -187,7 +190,8 @@ def test_a_cycle_without_feedback_port_is_broken_at_a_flow():
     connection into urn:a; the flow rule delays the kg/s connection into urn:b instead."""
     components = {"urn:a": _instance("urn:a", FlowSetter), "urn:b": _instance("urn:b", Plain)}
     connections = (Connection("urn:a", "m", "urn:b", "a"), Connection("urn:b", "y", "urn:a", "x"))
-    model = AssembledModel(components, connections, (), (), (), ())
+    model = AssembledModel(components=components, connections=connections, boundary_inputs=(), targets=(),
+                           mapped_parameters=(), estimated_parameters=())
     order, delayed, notes = component_order(model)
     assert delayed == {connections[0]} and order == ["urn:b", "urn:a"]
     assert notes == ["cycle without a feedback port: delayed urn:a.m → urn:b.a by one step"]
@@ -230,8 +234,10 @@ def test_memoryless_ends_are_evaluated_at_once_and_agree_with_stepping():
         Connection("urn:pre", "y", "urn:lag", "x"),
         Connection("urn:lag", "y", "urn:out2", "measured_value"),
     )
-    model = AssembledModel(components, connections, ("urn:source",), ("urn:out", "urn:out2"), (),
-                           (ParameterRef("urn:pre", Gain.parameters[0]), ParameterRef("urn:gain", Gain.parameters[0])))
+    model = AssembledModel(components=components, connections=connections, boundary_inputs=("urn:source",),
+                           targets=("urn:out", "urn:out2"), mapped_parameters=(),
+                           estimated_parameters=(ParameterRef("urn:pre", Gain.parameters[0]),
+                                                 ParameterRef("urn:gain", Gain.parameters[0])))
     sim = Simulator(model, 60.0, substeps=3)
     assert sim.ahead == ["urn:pre", "urn:source"] or sim.ahead == ["urn:source", "urn:pre"]
     assert sorted(sim.behind) == ["urn:out", "urn:out2"]

@@ -29,13 +29,15 @@ from service.calibration.record import CalibrationRecord
 from service.calibration.run import calibrate
 from service.calibration.triples import run_iri
 from service.cli import app as cli
-from service.diagnosis.loop import DiagnosisReport, diagnose
+from service.diagnosis.loop import diagnose
+from service.diagnosis.report import DiagnosisReport
 from service.model.effect_recording import applied_effect_triples, record_effect_in_file
 from service.diagnosis.error_history import error_history
-from service.report.page import (
-    CONTENT_SECURITY_POLICY, INTERVAL_LEVEL, UnknownRunError, data_file_locator, read_diagnosis,
-    read_run, recompute_series, report_html, topology_svg,
-)
+from service.errors import NotFoundError
+from service.report.page import CONTENT_SECURITY_POLICY, report_html
+from service.report.run_series import INTERVAL_LEVEL, data_file_locator, recompute_series
+from service.report.stored_run import read_diagnosis, read_run
+from service.report.topology_svg import topology_svg
 from service.settings import Settings
 from service.components.library import SignatureLibrary
 from service.matching.library_triples import ensure_signature_library
@@ -159,8 +161,8 @@ def test_every_sensor_has_its_stored_metrics_and_a_measured_vs_model_figure_that
     assert set(rows) == {_short(s) for s in sensors}
     for sensor, measures in sensors.items():
         row = rows[_short(sensor)]
-        assert row[2] == f"{measures['rmse']:.3g}", row  # the stored test RMSE
-        assert row[-1] == ("yes" if sensor in {loc["between"][1] for loc in case.report.localization} else "no")
+        assert row[2] == f"{measures.rmse:.3g}", row  # the stored test RMSE
+        assert row[-1] == ("yes" if sensor in {loc.failing_sensor for loc in case.report.localization} else "no")
     figures = {i["alt"]: i for i in parsed.images if i["class"] == "series"}
     assert set(figures) == {f"measured vs model: {_short(s)}" for s in sensors}
     for image in figures.values():
@@ -178,7 +180,7 @@ def test_series_recomputed_from_the_stored_estimates_reproduce_the_run(case):
     z = 1.6448536269514722  # two-sided 90 %
     assert INTERVAL_LEVEL == 0.90
     for sensor, measures in case.report.sensors.items():
-        assert series.rmse[sensor] == pytest.approx(measures["rmse"], rel=1e-9)
+        assert series.rmse[sensor] == pytest.approx(measures.rmse, rel=1e-9)
         np.testing.assert_allclose(series.predicted[sensor], case.report.base_test_prediction[sensor], rtol=1e-12)
         low, high = series.band[sensor]
         np.testing.assert_allclose(high - low, 2 * z * run.metrics["train"][sensor]["rmse"], rtol=1e-9)
@@ -201,17 +203,17 @@ def test_the_localisation_is_drawn_on_the_topology_with_the_suspects_highlighted
     locations = case.report.localization
     assert locations, "the leaking valve must make the model fail somewhere"
     drawn = topology_classes(page)
-    suspects = {_short(c) for loc in locations for c in loc["components"]}
+    suspects = {_short(c) for loc in locations for c in loc.components}
     assert "heating_valve" in suspects
     assert {n for n, classes in drawn.items() if "suspect" in classes} == suspects
-    assert {n for n, classes in drawn.items() if "failing" in classes} == {_short(loc["between"][1]) for loc in locations}
+    assert {n for n, classes in drawn.items() if "failing" in classes} == {_short(loc.failing_sensor) for loc in locations}
     assert {n for n, classes in drawn.items() if "matching" in classes} == {
-        _short(loc["between"][0]) for loc in locations if loc["between"][0] and not loc["upstream_fails"]}
+        _short(loc.matching_sensor) for loc in locations if loc.matching_sensor and not loc.upstream_fails}
     # the whole flow topology is drawn, components and sensors apart
     assert {"supply_fan", "pump", "heating_coil_air_side", "supply_water_temperature_sensor"} <= set(drawn)
     assert "component" in drawn["pump"] and "sensor" in drawn["supply_water_temperature_sensor"]
     for location in locations:
-        assert location["text"] in html.unescape(page)
+        assert location.describe() in html.unescape(page)
 
 
 def test_the_regimes_and_the_ranked_effects_with_their_evidence_are_listed(case, page):
@@ -233,7 +235,7 @@ def test_the_error_history_compares_the_model_versions(case, page):
     versions, rmse = history.versions, history.rmse
     assert versions == ["case", f"case+{case.report.effects[0].effect}"]
     for sensor, values in rmse.items():
-        assert values == pytest.approx([case.report.sensors[sensor]["rmse"], case.version.metrics["test"][sensor].rmse])
+        assert values == pytest.approx([case.report.sensors[sensor].rmse, case.version.metrics["test"][sensor].rmse])
     air = EX + "coil_outlet_air_temperature_sensor"
     assert rmse[air][1] < 0.5 * rmse[air][0], "adding the leak halves the air temperature error"
     # per regime: the base version's numbers are the diagnosis's, both versions have the same regimes
@@ -272,7 +274,7 @@ def test_runs_are_found_by_their_id_or_their_diagnosis_graph_and_unknown_ones_ra
     assert read_diagnosis(case.store, run_id).summary == case.report.summary
     assert read_diagnosis(case.store, case.version.run_id) is None
     for unknown in ("case-point-00000000", "../etc/passwd"):
-        with pytest.raises(UnknownRunError, match="no .*run"):
+        with pytest.raises(NotFoundError, match="no .*run"):
             read_run(case.store, unknown)
 
 
@@ -425,7 +427,8 @@ def test_a_heat_coupling_is_drawn_once_dashed_and_not_as_a_fluid_edge_back():
 
 
 def test_a_compare_runs_report_says_the_catalog_was_not_tested():
-    from service.report.page import StoredDiagnosis, _diagnosis_sections
+    from service.report.page import _diagnosis_sections
+    from service.report.stored_run import StoredDiagnosis
 
     section = _diagnosis_sections(StoredDiagnosis(iri="urn:d", summary="", effects=[], locations=[]))
     assert "The effect catalog was not tested on this run" in section and "<table" not in section
@@ -437,5 +440,5 @@ def test_the_page_lists_the_runs_parameter_estimates(case, page):
     assert table[0] == ["node", "parameter", "estimate", "16–84 %", "unit", "identified"]
     assert len(table) == 1 + len(run.estimates) and len(run.estimates) >= 14
     leak = next(row for row in table[1:] if row[1] == "valve_flow_coefficient" or row[1] == "loop_pressure_difference")
-    estimate = next(e for e in run.estimates.values() if e["name"] == leak[1])
-    assert leak[2] == f"{estimate['median']:.4g}" and leak[5] in ("yes", "no")
+    estimate = next(e for e in run.estimates.values() if e.name == leak[1])
+    assert leak[2] == f"{estimate.median:.4g}" and leak[5] in ("yes", "no")

@@ -16,18 +16,10 @@ MINIMUM_FAN_SPEED = 0.05
 class ReturnFlowOffFanSpeed(SplicedEffect):
     """T_mix' = T_oa − (T_oa − T_mix) · s^(−β),  clipped to [min(T_oa, T_ra), max(T_oa, T_ra)]   [°C]
 
-    The mixing box model gives the outdoor-air fraction x from the damper command alone, as if the
-    outdoor and the recirculated air both scaled with the supply flow. Where the return air is moved
-    by a return fan at its own (often fixed) speed, or driven by the building's pressure, the
-    recirculated flow does not follow the supply fan: with recirculated flow ṁ_rec ∝ s^(1−β) and
-    supply flow ṁ ∝ s (s the supply fan speed, 0–1), the recirculated share is (1 − x)·s^(−β) and
-
-        x' = 1 − (1 − x) · s^(−β),   T_mix' = T_ra + x'·(T_oa − T_ra) = T_oa − (T_oa − T_mix)·s^(−β),
-
-    so the outdoor-air share grows with the supply fan's speed. β = 1: a recirculated flow fixed
-    whatever the supply fan does; β = 0 (null): both scale with the fan, the base model. x' is held
-    in [0, 1] (the clip), and s at least :data:`MINIMUM_FAN_SPEED`. The damper law x(d) then holds at
-    full speed.
+    The recirculated flow ∝ s^(1−β) while the supply flow ∝ s (s the supply fan speed, 0–1, at least
+    :data:`MINIMUM_FAN_SPEED`), so the outdoor-air share grows with the fan's speed: β = 1 a
+    recirculated flow fixed whatever the supply fan does, β = 0 (null) both scale with the fan (the
+    base model). The derivation: ``docs/components.md``.
     """
 
     inputs = (

@@ -10,14 +10,10 @@ __all__ = ["ValveLeakage"]
 class ValveLeakage(SplicedEffect):
     """u_eff = u + λ · (1 − u)   [1]
 
-    u the commanded position (0 shut … 1 open), λ the leakage as a fraction of the fully open
-    flow coefficient: a linear valve with a parallel leak path of Kv_leak = λ·Kv (a shut valve still
-    passes λ of its open flow). Null: λ = 0.
-
-    The effect acts on the command the valve's model receives. Where that model maps the command to
-    an opening through an actuator dead band u₀ (:class:`service.components.water_coil.WaterCoil`), λ is the
-    command-equivalent leak: the shut valve passes the flow share (λ − u₀)/(1 − u₀), and a leak below
-    that share's resolution (λ ≤ u₀) cannot be told from a tight valve.
+    u the commanded position (0 shut … 1 open), λ the leakage as a fraction of the fully open flow
+    coefficient: a linear valve with a parallel leak path of Kv_leak = λ·Kv. Null: λ = 0. It acts on
+    the command, so behind an actuator dead band u₀ a leak λ ≤ u₀ cannot be told from a tight valve
+    (``docs/components.md``).
     """
 
     inputs = (Port("value_in", "1", "commanded valve position"),)

@@ -1,12 +1,8 @@
 """``GET /runs/{run_id}/report``: a run's report page (:mod:`service.report.page`) over HTTP.
 
-A read endpoint (open or behind the token as ``open_reads`` says). The run's data file is the
-measurement upload its ``gt:dataSource`` names (``<upload id>.csv``); when that upload is gone, the
-page shows the stored numbers without the measured-vs-model figures and says why. The page is
-built on a worker thread (it simulates the model once).
-
-Included by :func:`service.http.app.create_app` (``app.include_router(report_routes.router)``, imported
-there: this module imports :mod:`service.http.app`).
+The run's data file is the measurement upload its ``gt:dataSource`` names (``<upload id>.csv``);
+when that upload is gone, the page shows the stored numbers without the measured-vs-model figures
+and says why. The page is built on a worker thread (it simulates the model once).
 """
 
 from __future__ import annotations
@@ -17,9 +13,9 @@ from fastapi import APIRouter
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse
 
-from service.http.app import ApiError, ReadAccess, Service, ServiceDep
-from service.http.schemas import ErrorBody
-from service.report.page import UnknownRunError, report_html
+from service.http.deps import ReadAccess, Service, ServiceDep
+from service.http.errors import error_responses
+from service.report.page import report_html
 
 __all__ = ["router"]
 
@@ -27,14 +23,11 @@ router = APIRouter(tags=["reports"])
 
 
 def _page(service: Service, run_id: str) -> str:
-    try:
-        return report_html(service.store, run_id, locate_data=lambda source: service.uploads.locate(Path(source).stem))
-    except UnknownRunError as exc:
-        raise ApiError(404, str(exc)) from None
+    return report_html(service.store, run_id, locate_data=lambda source: service.uploads.locate(Path(source).stem))
 
 
 @router.get("/runs/{run_id}/report", response_class=HTMLResponse, dependencies=[ReadAccess],
-            responses={404: {"model": ErrorBody}, 401: {"model": ErrorBody}, 403: {"model": ErrorBody},
+            responses={**error_responses(404, 401, 403),
                        200: {"content": {"text/html": {}}, "description": "the report page"}})
 async def run_report(run_id: str, service: ServiceDep) -> HTMLResponse:
     """One self-contained HTML page for calibration run ``run_id`` (or diagnosis graph

@@ -1,0 +1,126 @@
+"""What every command shares: the consoles, the options, the store it opens, the model file it loads,
+and the one place where graphtwin's errors become a one-line message and exit code 2."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, ParamSpec
+
+import typer
+from rich.console import Console
+from rich.text import Text
+
+from service.components.library import SignatureLibrary
+from service.errors import GraphtwinError, InputError
+from service.graph.store import GraphStore
+from service.matching.library_triples import ensure_signature_library
+
+__all__ = [
+    "app", "signature_app", "example_app", "console", "error_console", "fail", "error_text", "reports_errors",
+    "open_store", "model_name_for", "load_model_file", "USER_ERROR_EXIT_CODE",
+]
+
+app = typer.Typer(no_args_is_help=True, add_completion=False, help=(
+    "The graphtwin command line: the same work as the HTTP service, run locally.\n\n"
+    "Every command that touches the store takes --store DIR (the embedded Oxigraph store on disk, default "
+    "./graphtwin-data) or --memory (a throw-away in-memory store). A model argument is a file (Turtle, "
+    "N-Triples, RDF/XML, JSON-LD), loaded under --name (default: the file name)."))
+signature_app = typer.Typer(no_args_is_help=True, help="Inspect the signature library.")
+example_app = typer.Typer(no_args_is_help=True, help="Example models and synthetic data.")
+app.add_typer(signature_app, name="signature")
+app.add_typer(example_app, name="example")
+
+console = Console()
+error_console = Console(stderr=True)
+
+#: The exit code of a command refused for its input (a user's error, not a defect).
+USER_ERROR_EXIT_CODE = 2
+
+StoreOption = Annotated[Path, typer.Option("--store", help="Embedded store folder (created if missing).")]
+MemoryOption = Annotated[bool, typer.Option("--memory", help="Use a throw-away in-memory store.")]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")]
+NameOption = Annotated[str | None, typer.Option("--name", help="Model name in the store (default: from the file name).")]
+SeedOption = Annotated[int, typer.Option("--seed", help="Random seed (runs are reproducible).")]
+OnlyWhenOption = Annotated[list[str] | None, typer.Option(
+    "--only-when", help="Compare only at steps where COLUMN OP NUMBER holds, in the column's unit "
+                        "(e.g. 'SF Spd Cmd (%) > 5'); repeat for several (all must hold).")]
+ModelFileArgument = Annotated[Path, typer.Argument(help="Building model file.")]
+MeasurementsArgument = Annotated[Path, typer.Argument(help="Measurement CSV (docs/data.md: the data contract).")]
+TrainWindowOption = Annotated[str, typer.Option(help="Training window START/END (ISO; either side may be empty).")]
+TestWindowOption = Annotated[str | None, typer.Option(help="Test window START/END.")]
+StartFromOption = Annotated[str | None, typer.Option(help=(
+    "A model in the store whose latest calibrated parameters start the fit (the version before `add-effect`, "
+    "or the model itself: a warm start on new data); the others, an added effect's, start at their defaults."))]
+
+
+def error_text(exc: BaseException) -> str:
+    """What an error says, for a person: a missing file as ``PATH: No such file or directory``."""
+    if isinstance(exc, OSError) and exc.filename is not None:
+        return f"{exc.filename}: {exc.strerror}"
+    return str(exc)
+
+
+def fail(problem: str | BaseException) -> typer.Exit:
+    """Print ``problem`` (a message, or an exception as :func:`error_text` reads it) as an error, as
+    it is (no markup read in it, no line breaks added) → exit code 2."""
+    message = problem if isinstance(problem, str) else error_text(problem)
+    error_console.print(Text.assemble(("error:", "bold red"), " ", message), soft_wrap=True)
+    return typer.Exit(code=USER_ERROR_EXIT_CODE)
+
+
+P = ParamSpec("P")
+
+
+def reports_errors(command: Callable[P, None]) -> Callable[P, None]:
+    """A command whose user errors — graphtwin's (:class:`~service.errors.GraphtwinError`) and a file
+    that cannot be read — end it with their message and exit code 2; anything else is a defect and
+    shows its traceback."""
+
+    @functools.wraps(command)
+    def run(*args: P.args, **kwargs: P.kwargs) -> None:
+        try:
+            command(*args, **kwargs)
+        except (GraphtwinError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+            raise fail(exc) from None
+
+    return run
+
+
+def open_store(store: Path, memory: bool, *, reading: bool = False) -> GraphStore:
+    """The embedded store with the ontology subsets and the signature library loaded. ``reading``:
+    the command only reads results, so a folder that holds no store is an error (a mistyped
+    ``--store`` would otherwise be a new, empty store).
+
+    :raises StoreInUseError: another process holds the store.
+    """
+    if reading and not memory and not store.is_dir():
+        raise InputError(f"no store at {store}: give --store the folder a calibration or diagnosis wrote")
+    graph_store = GraphStore.embedded(None if memory else store)
+    graph_store.ensure_ontologies()
+    ensure_signature_library(graph_store, SignatureLibrary.load())
+    return graph_store
+
+
+def model_name_for(path: Path, name: str | None) -> str:
+    """The model's name in the store: ``--name``, else the file stem (the folder named with it for
+    ``…/NAME/model.ttl``; ``model`` for a ``model.ttl`` in the current folder)."""
+    if name:
+        return name
+    return path.parent.name if path.stem == "model" and path.parent.name else path.stem
+
+
+def load_model_file(store: GraphStore, model: Path, name: str | None) -> str:
+    """Load the model file ``model`` under ``--name`` (or the name :func:`model_name_for` gives); its name.
+
+    :raises InputError: the file's name is no model name and ``--name`` was not given.
+    """
+    model_name = model_name_for(model, name)
+    if name is None:
+        try:
+            GraphStore.check_name(model_name)
+        except InputError as exc:
+            raise InputError(f"{exc}; the name comes from {model}: give one with --name") from None
+    store.load_model(model_name, model)
+    return model_name

@@ -1,0 +1,134 @@
+"""Commands that fit a model to measurements: calibrate, compare, diagnose, compare-strategies."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from service.calibration.model_data import DEFAULT_GP_INPUTS
+from service.cli.common import (
+    JsonOption, MeasurementsArgument, MemoryOption, ModelFileArgument, NameOption, OnlyWhenOption, SeedOption,
+    StartFromOption, StoreOption, TestWindowOption, TrainWindowOption, app, console, load_model_file, open_store,
+    reports_errors,
+)
+from service.cli.printing import plot_run, print_calibration, print_diagnosis, save_diagnosis_plots
+from service.data.windows import parse_window
+from service.workflows.requests import CalibrateRequest, DiagnoseRequest, checked_request
+
+__all__ = []
+
+
+@app.command("calibrate")
+@reports_errors
+def calibrate_command(
+    model: ModelFileArgument,
+    data: MeasurementsArgument,
+    train: TrainWindowOption = "/",
+    test: TestWindowOption = None,
+    method: Annotated[str, typer.Option(help="point (least squares) or bayes (KOH, PT-MCMC).")] = "point",
+    name: NameOption = None,
+    seed: SeedOption = 0,
+    plots: Annotated[Path | None, typer.Option(help="Folder for measured-vs-model plots.")] = None,
+    only_when: OnlyWhenOption = None,
+    gp_input: Annotated[list[str] | None, typer.Option(
+        help="An input of the discrepancy GP (--method bayes): 'time' (the default) or a boundary input "
+             "(node local name, IRI or CSV column); repeat for several.")] = None,
+    start_from: StartFromOption = None,
+    as_json: JsonOption = False,
+    store: StoreOption = Path("graphtwin-data"),
+    memory: MemoryOption = False,
+) -> None:
+    """Calibrate MODEL against DATA; estimates, metrics and provenance are written to the store."""
+    from service.workflows.runs import calibrate_model  # SciPy and scikit-learn load with the command, not with --help
+
+    graph_store = open_store(store, memory)
+    model_name = load_model_file(graph_store, model, name)
+    request = checked_request(CalibrateRequest, model=model_name, measurements=str(data), train=train, test=test,
+                              method=method, seed=seed, only_when=only_when or [],
+                              gp_inputs=gp_input or list(DEFAULT_GP_INPUTS), start_from=start_from)
+    outcome = calibrate_model(graph_store, request, data, progress=not as_json)
+    if plots is not None:
+        plots.mkdir(parents=True, exist_ok=True)
+        plot_run(outcome, plots / f"{outcome.record.run_id}.png")
+    if as_json:
+        console.print_json(json.dumps(outcome.record.to_dict(), default=str))
+    else:
+        print_calibration(outcome.record)
+
+
+PlotsOption = Annotated[Path, typer.Option(help="Folder for the plots (text output only).")]
+
+
+def _diagnosis_command(rank_effects: bool, doc: str):
+    """The ``diagnose`` (``rank_effects``) or ``compare`` command: the same options, the same report."""
+
+    @reports_errors
+    def command(
+        model: ModelFileArgument,
+        data: MeasurementsArgument,
+        train: TrainWindowOption,
+        test: TestWindowOption,
+        name: NameOption = None,
+        seed: SeedOption = 0,
+        as_json: JsonOption = False,
+        plots: PlotsOption = Path("graphtwin-plots"),
+        only_when: OnlyWhenOption = None,
+        start_from: StartFromOption = None,
+        store: StoreOption = Path("graphtwin-data"),
+        memory: MemoryOption = False,
+    ) -> None:
+        from service.workflows.runs import diagnose_model
+
+        graph_store = open_store(store, memory)
+        model_name = load_model_file(graph_store, model, name)
+        request = checked_request(DiagnoseRequest, model=model_name, measurements=str(data), train=train, test=test,
+                                  seed=seed, only_when=only_when or [], start_from=start_from)
+        report = diagnose_model(graph_store, request, data, rank_effects=rank_effects,
+                                on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
+        if as_json:
+            console.print_json(json.dumps(report.to_dict(), default=str))
+            return
+        print_diagnosis(report, stored=not memory)
+        console.print("plots: " + ", ".join(str(p) for p in save_diagnosis_plots(report, plots)))
+
+    command.__doc__ = doc
+    return command
+
+
+app.command("diagnose")(_diagnosis_command(
+    True, "Calibrate on TRAIN, compare on TEST, locate the failures and rank the missing effects."))
+app.command("compare")(_diagnosis_command(
+    False, "Calibrate on TRAIN, compare on TEST and locate the failures (sensor, flow path, regime, time), "
+           "without testing the effect catalog: the diagnosis' first two steps, in seconds."))
+
+
+@app.command("compare-strategies")
+@reports_errors
+def compare_strategies_command(
+    model: ModelFileArgument,
+    data: MeasurementsArgument,
+    train: TrainWindowOption = "/",
+    test: TestWindowOption = None,
+    folds: Annotated[int, typer.Option(help="Held-out blocks of the training window for cross-validation.")] = 3,
+    name: NameOption = None,
+    seed: SeedOption = 0,
+    as_json: JsonOption = False,
+    store: StoreOption = Path("graphtwin-data"),
+    memory: MemoryOption = False,
+) -> None:
+    """Joint against successive (regime by regime, Morris-planned) point calibration on TRAIN: RMSE
+    and R² per operating regime and a blocked cross-validation, so you see which converges better.
+    Nothing is written to the store."""
+    from service.calibration.successive import compare_calibration_strategies
+
+    graph_store = open_store(store, memory)
+    model_name = load_model_file(graph_store, model, name)
+    comparison = compare_calibration_strategies(graph_store, model_name, data, train=parse_window(train),
+                                                test=parse_window(test) if test else None, n_folds=folds, seed=seed)
+    if as_json:
+        console.print_json(json.dumps(comparison.to_dict(), default=str))
+        return
+    console.print(comparison.table(), markup=False, highlight=False, soft_wrap=True)  # a text table: no breaks inside numbers

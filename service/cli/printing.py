@@ -1,0 +1,166 @@
+"""How the commands print results: tables of metrics, estimates, regimes and diagnoses, notes, plots."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from rich.table import Table
+from rich.text import Text
+
+from service.cli.common import console
+from service.graph.namespaces import local_name
+from service.graph.units import unit_label
+
+if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
+    from service.calibration.record import CalibrationRecord
+    from service.calibration.run import CalibrationOutcome
+    from service.diagnosis.report import DiagnosisReport
+
+__all__ = ["print_metrics", "print_calibration", "print_regimes", "print_data_warnings", "plot_run", "print_diagnosis",
+           "save_diagnosis_plots", "with_unit"]
+
+#: A parameter key (``<component IRI>#<name>``) in a sentence, read as ``<component's node>.<name>``.
+_PARAMETER_KEY = re.compile(r"\S*/component/[^/\s]+/([^\s/#]+)#(\w+)")
+
+
+def with_unit(value: float, unit: str) -> str:
+    return f"{value:.3g} {unit_label(unit)}" if value == value else "–"
+
+
+def print_metrics(title: str, metrics: dict) -> None:
+    """Per sensor: RMSE, MAE, R², CV(RMSE), NMBE and, for a Bayesian run's prediction intervals, the
+    ACE and mean width of the 90 % one (every level: ``--json``)."""
+    intervals = any(m.coverage for m in metrics.values())
+    table = Table(title=title)
+    for column in ("sensor", "RMSE", "MAE", "R²", "CV(RMSE) %", "NMBE %", *(("ACE 90 %", "90 % width") if intervals else ()),
+                   "unit"):
+        table.add_column(column)
+    for node, m in metrics.items():
+        interval_cells = []
+        if intervals:
+            at_90 = min(m.coverage, key=lambda c: abs(c.level - 0.9), default=None)
+            interval_cells = [f"{100 * at_90.ace:+.1f}", f"{at_90.mean_width:.3g}"] if at_90 else ["–", "–"]
+        table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.mae:.3g}", f"{m.r2:.3f}", f"{m.cv_rmse_percent:.1f}",
+                      f"{m.nmbe_percent:+.1f}", *interval_cells, unit_label(m.unit))
+    console.print(table)
+
+
+def print_calibration(record: CalibrationRecord) -> None:
+    """A calibration run as tables: the estimates, the start and the sampler's convergence, the
+    metrics per window, the regimes, the notes."""
+    table = Table(title=f"Estimates ({record.method}, run {record.run_id})")
+    for column in ("component", "parameter", "estimate", "16–84 %", "unit", "identified"):
+        table.add_column(column, overflow="fold")
+    for e in record.estimates:
+        table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", e.unit,
+                      "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(r"\1.\2", "; ".join(e.reasons)))
+    console.print(table)
+    if record.diagnostics.start is not None:
+        console.print(record.diagnostics.start, markup=False, highlight=False)
+    if record.diagnostics.sampler is not None:
+        found = record.diagnostics.sampler
+        console.print(f"PT-MCMC: {'converged' if found.converged else 'NOT converged'} after {found.n_steps} steps "
+                      f"(20 × IAT: IAT {found.iat:.0f} steps; acceptance {found.acceptance:.2f})",
+                      markup=False, highlight=False)
+    for window, metrics in record.metrics.items():
+        print_metrics(f"Metrics, {window} window", metrics)
+    print_regimes(record)
+    print_data_warnings(record.diagnostics.warnings)
+
+
+def print_regimes(record: CalibrationRecord) -> None:
+    """The test-window RMSE of each target per operating regime (a run with a test window)."""
+    if not record.regimes:
+        return
+    units = {node: m.unit for node, m in record.metrics.get("test", {}).items()}
+    sensors = list(record.regimes[0]["rmse"])
+    table = Table(title=f"Test RMSE per operating regime (rule tree accuracy {record.regime_rule_accuracy:.2f})")
+    for column in ("regime", "share", *map(local_name, sensors)):
+        table.add_column(column, overflow="fold")
+    for row in record.regimes:
+        table.add_row(row["rule"], f"{100 * row['share']:.0f} %",
+                      *(with_unit(row["rmse"][n], units.get(n, "")) for n in sensors))
+    console.print(table)
+
+
+def print_data_warnings(warnings: list[str]) -> None:
+    """What reading the data, assembling the model and preparing its simulation noticed (frozen
+    points, gaps, unused columns; signature choices; a loop broken by a delay), as they are."""
+    for warning in warnings:
+        console.print(Text(f"note: {warning}", style="yellow"))
+
+
+def plot_run(outcome: CalibrationOutcome, path: Path) -> Path:
+    """Measured against model over the run's test window (its training window without one), with
+    the 90 % prediction interval of a Bayesian run; the PNG's path."""
+    from service.report.plots import plot_measured_vs_model
+
+    window = outcome.test if outcome.test is not None else outcome.train
+    key = "test" if outcome.test is not None else "train"
+    md = outcome.model_data
+    intervals = {n: levels[0.9] for n, levels in outcome.intervals.get(key, {}).items()}
+    return plot_measured_vs_model(path, md.data.timestamps[window], md.observed(window),
+                                  {"model": outcome.predictions[key]}, md.units, intervals or None,
+                                  title=f"{outcome.record.model_name}: {key} window")
+
+
+def print_diagnosis(report: DiagnosisReport, *, stored: bool = True) -> None:
+    """The diagnosis as tables and sentences; ``stored``: the run is in a store that outlives this
+    command (not ``--memory``), so its report can be made later."""
+    print_data_warnings(report.data_warnings)
+    table = Table(title="Test window: model vs measurements")
+    for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
+        table.add_column(column)
+    for node, s in report.sensors.items():
+        table.add_row(local_name(node), f"{s.rmse:.3g} {unit_label(s.unit)}", f"{s.rmse_over_noise:.1f}",
+                      f"{s.nmbe_percent:+.1f}", "[red]fails[/red]" if s.fails else "matches")
+    console.print(table)
+    for location in report.localization:
+        console.print(f"• {location.describe()}")
+    worst = next((r for r in report.regimes if r["worst"]), None)
+    if worst is not None:
+        console.print(f"Worst operating regime ({100 * worst['share']:.0f} % of the test window): {worst['rule']}  "
+                      f"[rule tree accuracy {report.regime_rule_accuracy:.2f}]")
+    for node, episodes in report.episodes.items():
+        for episode in episodes[:3]:
+            console.print(f"  {local_name(node)}: {episode.describe()}")
+    for node, signals in report.residual_dependence.items():
+        for signal in signals:
+            console.print(f"  residual of {local_name(node)}: {signal.describe(report.step_s)}")
+    if not report.effects_tested:
+        console.print(f"[bold]{report.summary}[/bold]")
+        return
+    table = Table(title="Which effect is missing (best first)")
+    for column in ("effect", "at", "score", "ΔBIC", "test error removed", "significant"):
+        table.add_column(column)
+    for e in report.effects:
+        table.add_row(e.effect, local_name(e.node), f"{e.score.statistic:.1f}", f"{e.delta_bic:.1f}",
+                      f"{100 * e.test_improvement:.0f} %", "yes" if e.significant else "no")
+    console.print(table)
+    console.print(f"[bold]{report.summary}[/bold]")
+    if stored:
+        console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis -o report.html")
+    else:
+        console.print(f"run {report.run_id} was in a throw-away store (--memory): run again with --store DIR to keep "
+                      "it and make its report (graphtwin report)")
+
+
+def save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
+    """The test window measured against the base model, and the residuals with the matching band
+    and the failure episodes, as PNGs in ``folder``."""
+    from service.report.plots import plot_measured_vs_model, plot_residuals
+
+    folder.mkdir(parents=True, exist_ok=True)
+    units = {n: s.unit for n, s in report.sensors.items()}
+    observed = report.test_observed
+    residuals = {n: observed[n] - report.base_test_prediction[n] for n in observed}
+    episodes = {n: [(e.start, e.end) for e in found] for n, found in report.episodes.items()}
+    thresholds = {n: report.failure_ratio * s.noise for n, s in report.sensors.items()}
+    return [
+        plot_measured_vs_model(folder / f"{report.run_id}-test.png", report.test_timestamps, observed,
+                               {"model": report.base_test_prediction}, units, title="Test window: measured and model"),
+        plot_residuals(folder / f"{report.run_id}-residuals.png", report.test_timestamps, residuals, units, thresholds,
+                       episodes, title="Test window: where the model fails (shaded: failure episodes)"),
+    ]

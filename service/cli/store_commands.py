@@ -1,0 +1,187 @@
+"""Commands that read the store or serve it: named queries, a model's error history, a run's report
+page, the HTTP service."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from service.cli.common import StoreOption, app, console, error_console, fail, open_store, reports_errors
+from service.cli.printing import with_unit
+from service.errors import InputError, NotFoundError
+from service.graph.namespaces import local_name
+
+__all__ = []
+
+
+@app.command("query")
+@reports_errors
+def query_command(
+    name: Annotated[str, typer.Argument(help="A query in queries/ (file name without .rq).")],
+    model: Annotated[str | None, typer.Option(help=(
+        "The model: bound to ?model in a query about results; the graphs a query about a building graph runs over."))] = None,
+    param: Annotated[list[str] | None, typer.Option(help="More bindings, VAR=VALUE.")] = None,
+    output_format: Annotated[str | None, typer.Option(
+        "--format", help="table, csv or json (full IRIs); default: a table on a terminal, CSV when piped.")] = None,
+    store: StoreOption = Path("graphtwin-data"),
+) -> None:
+    """Run a named SPARQL query over the store (e.g. calibrated-parameters --model NAME). A query that
+    names no graph (flow-edges, observed-node, measurement-link, applied-effects) reads a building
+    model: it runs over the model's graphs (model, inferences, ontologies); one about results binds
+    ?model to the name, and ?model_graph, ?inferred_graph, ?ontology_graph where it reads them."""
+    output_format = output_format or ("table" if console.is_terminal else "csv")
+    if output_format not in ("table", "csv", "json"):
+        raise InputError(f"--format {output_format!r}: give table, csv or json")
+    graph_store = open_store(store, False, reading=True)
+    if model is not None and model not in graph_store.models():
+        raise NotFoundError(f"no model {model!r} in the store {store}; it holds {', '.join(graph_store.models()) or 'none'}")
+    text = graph_store.named_query_text(name)
+    reads_a_model = not re.search(r"^[^#]*\bGRAPH\b", text, re.IGNORECASE | re.MULTILINE)  # outside comments
+    if reads_a_model and model is None:
+        raise InputError(f"query {name} reads a building model's graphs: give --model")
+    bindings = dict(_binding(p) for p in (param or []))
+    if model is not None and not reads_a_model:
+        bindings |= {"model": model} | {var: iri for var, iri in graph_store.graph_variables(model).items()
+                                        if f"?{var}" in text}
+    rows = graph_store.run_named_query(name, dataset=model if reads_a_model else None, **bindings)
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    values = [{c: row[c].value for c in columns if c in row} for row in rows]
+    if output_format == "json":
+        sys.stdout.write(json.dumps(values, indent=1) + "\n")
+    elif output_format == "csv":
+        writer = csv.DictWriter(sys.stdout, fieldnames=columns, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(values)
+    else:
+        table = Table(title=f"{name} ({len(rows)} rows)")
+        for column in columns:
+            table.add_column(column, overflow="fold")
+        for row in values:
+            table.add_row(*[local_name(v) if v.startswith("http") else v for v in (row.get(c, "") for c in columns)])
+        console.print(table)
+
+
+def _binding(text: str) -> tuple[str, str]:
+    """``VAR=VALUE`` → (var, value). :raises InputError: without ``=``."""
+    var, equals, value = text.partition("=")
+    if not equals or not var:
+        raise InputError(f"--param {text!r}: write VAR=VALUE")
+    return var, value
+
+
+@app.command("history")
+@reports_errors
+def history_command(
+    model: Annotated[str, typer.Argument(help="Model name in the store.")],
+    plot: Annotated[Path | None, typer.Option(help="Write a bar chart of the error per version here (PNG).")] = None,
+    store: StoreOption = Path("graphtwin-data"),
+) -> None:
+    """Test-window error per sensor and operating regime across the versions of a model (base,
+    base+effect, …)."""
+    from service.diagnosis.error_history import error_history
+
+    graph_store = open_store(store, False, reading=True)
+    history = error_history(graph_store, model)
+    if not history.versions:
+        raise NotFoundError(f"no calibration with a test window for model {model!r} or its versions")
+    table = Table(title=f"Test RMSE per sensor across versions of {model}")
+    table.add_column("sensor")
+    for version in history.versions:
+        table.add_column(version)
+    for sensor, values in history.rmse.items():
+        table.add_row(local_name(sensor), *[with_unit(v, history.units[sensor]) for v in values])
+    table.add_row("tested on", *history.tested_on, style="dim")
+    console.print(table)
+    if not history.comparable:
+        error_console.print("[yellow]warning:[/yellow] the versions were tested on different data or windows: their "
+                            "errors differ by that as much as by the model; calibrate them on the same test window")
+    if history.regime_rmse:
+        table = Table(title="Test RMSE per operating regime (share of the test window)")
+        for column in ("regime", "rule", "sensor", *history.versions):
+            table.add_column(column)
+        for number, (rule, sensors) in enumerate(history.regime_rmse.items()):
+            shares = history.regime_share[rule]
+            share = next((f" ({100 * s:.0f} %)" for s in shares if s == s), "")
+            for i, (sensor, values) in enumerate(sensors.items()):
+                table.add_row(str(number) if i == 0 else "", rule + share if i == 0 else "", local_name(sensor),
+                              *[with_unit(v, history.units.get(sensor, "")) for v in values])
+            table.add_section()
+        console.print(table)
+    if plot is not None:
+        from service.report.plots import plot_error_history
+
+        console.print(f"plot: {plot_error_history(plot, history)}")
+
+
+@app.command("report")
+@reports_errors
+def report_command(
+    run: Annotated[str, typer.Argument(help="Run id (printed by calibrate and diagnose; \"run\" in diagnose --json).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write.")] = Path("report.html"),
+    data: Annotated[Path | None, typer.Option(help="The run's measurement CSV (default: the file name the run "
+                                                   "recorded, in the current folder).")] = None,
+    store: StoreOption = Path("graphtwin-data"),
+) -> None:
+    """One self-contained HTML page for RUN: measured vs model per sensor, where it fails on the flow
+    topology, the operating regimes, the missing effects with their evidence, the error across versions."""
+    from service.report.page import report_html
+    from service.report.run_series import data_file_locator
+
+    if data is not None and not data.is_file():
+        raise NotFoundError(f"{data}: no such file")
+    graph_store = open_store(store, False, reading=True)
+    locate, missing = data_file_locator(data), []
+
+    def locate_noting(source: str) -> Path:
+        try:
+            return locate(source)
+        except FileNotFoundError as exc:
+            missing.append(str(exc))
+            raise
+
+    page = report_html(graph_store, run, locate_data=locate_noting)
+    output.write_text(page, encoding="utf-8")
+    console.print(f"wrote {output}")
+    for problem in dict.fromkeys(missing):
+        console.print(f"[yellow]warning:[/] {problem}: the page has no measured-vs-model plots", markup=True)
+
+
+@app.command("serve")
+@reports_errors
+def serve_command(
+    store: Annotated[Path | None, typer.Option("--store", help="Embedded store folder (default ./graphtwin-data, "
+                                                               "or GRAPHTWIN_STORE_DIR).")] = None,
+    sparql_endpoint: Annotated[str | None, typer.Option("--sparql-endpoint", help="Use this SPARQL 1.1 endpoint "
+                                                        "(Oxigraph server layout) instead of an embedded store.")] = None,
+    data_dir: Annotated[Path | None, typer.Option("--data-dir", help="Job records and measurement uploads "
+                                                  "(default ./graphtwin-service, or GRAPHTWIN_DATA_DIR).")] = None,
+    host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
+) -> None:
+    """Run the HTTP service (OpenAPI at /docs). Writes need the bearer token in GRAPHTWIN_TOKEN; the
+    other settings come from GRAPHTWIN_* variables (service/settings.py)."""
+    import uvicorn
+    from pydantic import ValidationError
+
+    from service.http.app import create_app
+    from service.settings import Settings
+
+    if store is not None and sparql_endpoint is not None:
+        raise fail("give --store or --sparql-endpoint, not both")
+    overrides = {"store_dir": store, "sparql_endpoint": sparql_endpoint, "data_dir": data_dir}
+    try:
+        settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
+    except ValidationError as exc:
+        raise fail(exc) from None
+    if settings.store_dir is None and settings.sparql_endpoint is None:
+        settings = settings.model_copy(update={"store_dir": Path("graphtwin-data")})
+    if settings.token is None:
+        error_console.print("[yellow]GRAPHTWIN_TOKEN is not set: every write will be refused.[/yellow]")
+    uvicorn.run(create_app(settings), host=host, port=port)

@@ -1,0 +1,354 @@
+"""Which effect of the catalog is missing: every applicable (effect, node) candidate refitted and judged.
+
+Each candidate is fitted on the training window plus the first half of the test window and judged on
+the second half (:func:`split_windows`), against the base model refitted on the same windows or as
+trained: score test at the null, refit (present throughout, or appearing in the test window),
+ΔBIC, test-window error removed (:mod:`service.diagnosis.ranking`), and one sentence of explanation.
+Candidates are evaluated in worker processes. The method: ``docs/diagnosis.md``, "What is missing".
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from service.calibration.model_data import ModelData
+from service.calibration.point import PointCalibrator
+from service.calibration.problem import CalibrationProblem
+from service.diagnosis.ranking import (
+    EffectEvidence, delta_bic, effective_sample_fraction, rank_evidence, score_test, weighted_test_error,
+)
+from service.graph.namespaces import local_name
+from service.graph.store import GraphStore
+from service.matching.matcher import match_signature
+from service.matching.signature import Signature
+from service.model.assembly import assemble
+from service.model.effect_splicing import EffectRequest, recorded_effects
+from service.runtime import exit_with_parent, usable_cpu_count
+
+__all__ = ["Candidate", "effect_candidates", "split_windows", "rank_catalog", "PROBE_SHARES"]
+
+#: Shares of an effect parameter's prior width probed before the refit (0 is its lower bound).
+PROBE_SHARES = (0.05, 0.15, 0.35, 0.65, 1.0)
+
+
+class Candidate(NamedTuple):
+    """An effect signature at one building node, and the model assembled with it."""
+
+    signature: Signature
+    node: str
+    model: object
+
+
+def effect_candidates(store: GraphStore, model_name: str,
+                      library: dict[str, Signature]) -> tuple[list[Candidate], list[str]]:
+    """A :class:`Candidate` for every applicable pair the model does not record already; and the
+    reasons the others do not apply."""
+    dataset = store.matching_dataset(model_name)
+    applied = set(recorded_effects(store, model_name, library))
+    candidates, skipped = [], []
+    for signature in sorted((s for s in library.values() if s.kind == "effect"), key=lambda s: s.id):
+        nodes = sorted({m[signature.splice.node] for m in match_signature(store, signature, default_graph=dataset)
+                        if m.get(signature.splice.node)})
+        if not nodes:
+            skipped.append(f"{signature.id}: its pattern ({signature.source_file.name}) matches nowhere")
+        for node in nodes:
+            if EffectRequest(signature.id, node) in applied:
+                skipped.append(f"{signature.id} at {local_name(node)}: already in the model (gt:hasEffect)")
+                continue
+            try:
+                model = assemble(store, model_name, library=library, extra_effects=[EffectRequest(signature.id, node)])
+            except ValueError as exc:
+                skipped.append(f"{signature.id} at {local_name(node)}: {str(exc).splitlines()[0]}")
+                continue
+            candidates.append(Candidate(signature, node, model))
+    return candidates, skipped
+
+
+@dataclass(frozen=True, kw_only=True)
+class _CandidateJob:
+    """What a worker needs to evaluate one candidate (picklable).
+
+    ``fit_windows``, ``run_window``, ``evaluation``: :func:`split_windows`; ``base_theta``: the base
+    refitted on the fit windows (parameter key → value) and ``base_rss`` its weighted residual sum of
+    squares there; ``train_theta`` the base as calibrated on the training window, and
+    ``train_unidentified`` the keys that training did not identify; ``sample_fraction``: n_eff/n of
+    the base residuals; ``target_scales``: the residual weights; ``base_evaluation_prediction``: the
+    better base prediction of the evaluation half; ``onset_windows``: (training windows, first half
+    of the test window) for the fit of a fault appearing in the test window; ``compared``: the
+    operating filter's steps (``ModelData.compared``).
+    """
+
+    signature: Signature
+    node: str
+    model: object
+    data: object
+    substeps: int
+    fit_windows: list[slice]
+    run_window: slice
+    evaluation: slice
+    base_theta: dict[str, float]
+    base_rss: float
+    sample_fraction: float
+    target_scales: dict[str, float]
+    base_evaluation_prediction: dict[str, np.ndarray]
+    seed: int
+    refit_max_nfev: int
+    train_theta: dict[str, float] = field(default_factory=dict)
+    train_unidentified: frozenset[str] = frozenset()
+    onset_windows: tuple[list[slice], slice] | None = None
+    compared: np.ndarray | None = None
+
+
+def split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]:
+    """(fit windows, simulated window, evaluation window) of the effect comparison: fitted on the
+    training window and the first half of the test window, judged on the second half, predicted as
+    the continuation of the run from the training start when the test follows the training, else of
+    a run over the whole test window. Steps between a training window and a later test window are
+    simulated through, not fitted."""
+    middle = test.start + (test.stop - test.start) // 2
+    evaluation = slice(middle, test.stop)
+    if train.start <= test.start <= train.stop:
+        return [slice(train.start, middle)], slice(train.start, test.stop), evaluation
+    fit = [train, slice(test.start, middle)]
+    return fit, (slice(train.start, test.stop) if test.start > train.stop else test), evaluation
+
+
+def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice, theta: np.ndarray) -> dict[str, np.ndarray]:
+    offset = evaluation.start - run_window.start
+    return {k: v[0][offset:] for k, v in md.simulate_targets(run_window, theta[None, :]).items()}
+
+
+def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None,
+                 *, active_only: bool = False) -> np.ndarray:
+    """The refit's start: a base estimate with the effect parameters at the best point of a grid
+    (the null and ``PROBE_SHARES`` of each prior width; all combinations, one simulate call), laid on
+    ``theta0`` (the base refitted on the fit windows) and on ``theta_train`` (the base as trained).
+    ``active_only`` leaves out the grid points where any effect parameter sits at its value in
+    ``theta0`` (its null): the best start with the effect switched on."""
+    axes = []
+    for column in effect_columns:
+        lo, hi = problem.lower[column], problem.upper[column]
+        axes.append(np.unique(np.clip(np.r_[theta0[column], lo + np.array(PROBE_SHARES) * (hi - lo)], lo, hi)))
+    grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T if axes else np.empty((1, 0))
+    starts = [theta0] if theta_train is None else [theta0, theta_train]
+    ensemble = np.concatenate([np.repeat(start[None, :], len(grid), axis=0) for start in starts])
+    ensemble[:, effect_columns] = np.tile(grid, (len(starts), 1))
+    cost = np.sum(problem.weighted_residuals(problem.run(ensemble)) ** 2, axis=1)
+    if active_only:
+        cost[np.any(ensemble[:, effect_columns] == theta0[effect_columns], axis=1)] = np.inf
+    return ensemble[int(np.argmin(cost))]
+
+
+def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effect_columns: list[int],
+               host: list[int] = ()):
+    """The effect fitted as a fault that appears in the test window: the base parameters held at
+    their training estimate, the effect null in the training window and fitted on the test window's
+    first half, together with the base parameters in ``host`` (columns; :func:`_host_columns`).
+    Returns (θ, standard errors, mean squared weighted residual over the training window and that half)."""
+    before, after = job.onset_windows
+    null = theta_train.copy()
+    null[effect_columns] = _null(job.model.estimated_parameters, effect_columns)
+    host = list(host)
+    free = effect_columns + host
+    whole = md.problem([*before, after], default=null, target_scales=job.target_scales)
+    unfaulted = ({} if host else
+                 {i: md.simulate_targets(w, null[None, :]) for i, w in enumerate(before)})
+
+    def simulate(theta_free: np.ndarray) -> dict[str, np.ndarray]:
+        full = np.repeat(null[None, :], len(theta_free), axis=0)
+        full[:, free] = theta_free
+        faulted = md.simulate_targets(after, full)
+        healthy = full.copy()
+        healthy[:, effect_columns] = null[effect_columns]
+        runs = [{k: np.repeat(v, len(theta_free), axis=0) for k, v in unfaulted[i].items()} if i in unfaulted
+                else md.simulate_targets(w, healthy) for i, w in enumerate(before)]
+        return {node: np.concatenate([run[node] for run in runs] + [faulted[node]], axis=1) for node in faulted}
+
+    def effect_problem(default: np.ndarray) -> CalibrationProblem:
+        return CalibrationProblem(
+            parameter_names=tuple(whole.parameter_names[c] for c in free),
+            lower=whole.lower[free], upper=whole.upper[free], simulate=simulate,
+            observed=whole.observed, target_scales=job.target_scales, units=whole.units, default=default,
+            vectorised_simulate=whole.vectorised_simulate,
+        )
+
+    at_null = null[free]
+    probe = effect_problem(at_null)
+    own = list(range(len(effect_columns)))
+    problem = effect_problem(_probe_start(probe, at_null, own))
+    # with its host as trained the effect could only overshoot: the best start with it switched on
+    # competes too, and the host's parameters get a wider screen
+    active = _probe_start(probe, at_null, own, active_only=True)[None, :] if host else None
+    calibrator = PointCalibrator(n_starts=2 if host else 1, n_candidates=32 if host else 8, random_state=job.seed,
+                                 max_nfev=job.refit_max_nfev).fit(problem, candidates=active)
+    theta = null.copy()
+    theta[free] = calibrator.theta_
+    standard_errors = np.zeros_like(theta)
+    standard_errors[free] = calibrator.standard_errors_
+    return theta, standard_errors, 2.0 * calibrator.cost_ / problem.n_observations
+
+
+def _null(refs, columns: list[int]) -> np.ndarray:
+    """The values at which the effect parameters in ``columns`` vanish."""
+    return np.array([refs[c].spec.null if refs[c].spec.null is not None else refs[c].spec.default for c in columns])
+
+
+def _host_columns(job: _CandidateJob) -> list[int]:
+    """Columns of the parameters of the component the effect is spliced into (its host) when the
+    training data identified none of them (then fitted with the effect); a host with some
+    identified parameter was exercised, and stays as trained: no columns."""
+    refs = job.model.estimated_parameters
+    effect_components = {r.component for r in refs if r.key not in job.base_theta}
+    hosts = {c.target for c in job.model.connections if c.source in effect_components} | {
+        c.source for c in job.model.connections if c.target in effect_components}
+    hosts -= effect_components
+    columns = [j for j, r in enumerate(refs) if r.component in hosts]
+    return columns if columns and all(refs[j].key in job.train_unidentified for j in columns) else []
+
+
+def _bound_note(value: float, spec) -> str:
+    """`` (at its lower/upper bound B)`` when ``value`` sits within 10⁻⁶ of the range of a bound of
+    ``spec`` (a :class:`~service.components.component.Parameter`): the data push it further than the prior allows."""
+    tolerance = 1e-6 * (spec.upper - spec.lower)
+    for side, bound in (("lower", spec.lower), ("upper", spec.upper)):
+        if abs(value - bound) <= tolerance:
+            return f" (at its {side} bound {bound:g})"
+    return ""
+
+
+def _estimate_text(name: str, value: float, standard_error: float, spec) -> str:
+    """``name = value ± se`` (with :func:`_bound_note`), or, where the standard error spans the
+    prior range or is not finite, that the data do not identify it."""
+    if not np.isfinite(standard_error) or standard_error > spec.upper - spec.lower:
+        return f"{name} = {value:.3g}, not identified (the data leave it anywhere in [{spec.lower:g}, {spec.upper:g}])"
+    return f"{name} = {value:.3g} ± {standard_error:.2g}" + _bound_note(value, spec)
+
+
+def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
+    """Score test, refit under both hypotheses, ΔBIC and the evaluation half's error before and after."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    md = ModelData(job.model, job.data, job.substeps, job.compared)
+    refs = job.model.estimated_parameters
+    effect_columns = [j for j, r in enumerate(refs) if r.key not in job.base_theta]
+    theta0 = np.array([job.base_theta.get(r.key, np.nan) for r in refs])
+    theta0[effect_columns] = _null(refs, effect_columns)
+    problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
+    score = score_test(problem, theta0, effect_columns, sample_fraction=job.sample_fraction)
+    theta_train = np.array([job.train_theta.get(r.key, theta0[j]) for j, r in enumerate(refs)])
+    problem = md.problem(job.fit_windows, default=_probe_start(problem, theta0, effect_columns, theta_train),
+                         target_scales=job.target_scales)
+    calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev)
+    calibrator.fit(problem)
+    theta, standard_errors = calibrator.theta_, calibrator.standard_errors_
+    mean_square = 2.0 * calibrator.cost_ / problem.n_observations
+    onset = "present throughout"
+    if job.onset_windows is not None and effect_columns and job.signature.can_appear:
+        onset_fit = _fit_onset(md, job, theta_train, effect_columns)
+        host = _host_columns(job)
+        if host:  # an unexercised host may hide what the effect does: fit it with the effect too
+            onset_fit = min(onset_fit, _fit_onset(md, job, theta_train, effect_columns, host), key=lambda fit: fit[2])
+        if onset_fit[2] < mean_square:
+            theta, standard_errors, mean_square = onset_fit
+            onset = "appearing in the test window"
+    n = problem.n_observations
+    # what the refit gains with the base parameters alone (the effect set back to its null) is the
+    # base model's, not the effect's: "before" is the better of the base refit and that
+    theta_null = theta.copy()
+    theta_null[effect_columns] = _null(refs, effect_columns)
+    base_rss = min(job.base_rss, float(np.sum(problem.weighted_residuals(problem.run(theta_null[None, :])) ** 2)))
+    observed = md.observed(job.evaluation)
+    null = _predict_evaluation(md, job.run_window, job.evaluation, theta_null)
+    before = min((job.base_evaluation_prediction, null),
+                 key=lambda prediction: weighted_test_error(observed, prediction, job.target_scales))
+    evidence = EffectEvidence(
+        effect=job.signature.id, effect_iri=job.signature.iri, node=job.node, label=job.signature.label,
+        parameter_names=tuple(refs[j].name for j in effect_columns), score=score,
+        delta_bic=delta_bic(base_rss, mean_square * n, job.sample_fraction * n, len(effect_columns)),
+        estimates={refs[j].name: float(theta[j]) for j in effect_columns},
+        standard_errors={refs[j].name: float(standard_errors[j]) for j in effect_columns},
+    )
+    after = _predict_evaluation(md, job.run_window, job.evaluation, theta)
+    before_error = weighted_test_error(observed, before, job.target_scales)
+    after_error = weighted_test_error(observed, after, job.target_scales)
+    evidence.test_improvement = 1.0 - after_error / before_error if before_error > 0 else 0.0
+    for node, values in observed.items():
+        mask = np.isfinite(values)
+        evidence.rmse_before[node] = float(np.sqrt(np.mean((values[mask] - before[node][mask]) ** 2)))
+        evidence.rmse_after[node] = float(np.sqrt(np.mean((values[mask] - after[node][mask]) ** 2)))
+    estimates = "; ".join(_estimate_text(refs[j].name, theta[j], standard_errors[j], refs[j].spec) for j in effect_columns)
+    _explain(evidence, job, observed, null, after, f"{estimates}; fitted as an effect {onset}")
+    return evidence
+
+
+def _explain(evidence: EffectEvidence, job: _CandidateJob, observed: dict[str, np.ndarray],
+             null: dict[str, np.ndarray], after: dict[str, np.ndarray], fit_text: str) -> None:
+    """Set the evidence's residual correlation and sentence: the sensor where the effect itself (its
+    prediction ``after`` against the same parameters with the effect at its null) removes the most
+    scaled error, how its residual correlates with what the effect adds, and ``fit_text``."""
+    def mean_square(prediction: dict[str, np.ndarray], node: str) -> float:
+        error = observed[node] - prediction[node]
+        return float(np.mean(error[np.isfinite(error)] ** 2)) if np.isfinite(error).any() else 0.0
+
+    best = max(observed, key=lambda k: (mean_square(null, k) - mean_square(after, k)) / job.target_scales[k] ** 2)
+    change = after[best] - null[best]
+    residual = observed[best] - null[best]
+    mask = np.isfinite(residual) & np.isfinite(change)
+    rho = float(np.corrcoef(residual[mask], change[mask])[0, 1]) if mask.any() and np.std(change[mask]) > 0 else 0.0
+    evidence.residual_correlation = (best, rho)
+    removed = 1.0 - mean_square(after, best) / max(mean_square(null, best), 1e-300)
+    evidence.explanation = (
+        f"residual on {local_name(best)} correlates {rho:.2f} with what {job.signature.id} at {local_name(job.node)} adds; "
+        f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "
+        f"sensors); {fit_text}"
+    )
+
+
+def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signature], base, *, seed: int,
+                 refit_max_nfev: int, workers: int | None, say) -> tuple[list[EffectEvidence], list[str]]:
+    """Every applicable (effect, node) candidate evaluated against ``base`` (a
+    :class:`~service.calibration.run.CalibrationOutcome` with a test window) and ranked, in
+    ``workers`` processes (default: one per candidate, at most the usable CPUs); returns (ranked
+    evidence, the reasons the others do not apply)."""
+    md, model = base.model_data, base.model
+    substeps, data = md.substeps, md.data
+    train_slice, test_slice = base.train, base.test
+    say("testing the effect catalog")
+    candidates, skipped = effect_candidates(store, model_name, library)
+    fit_windows, run_window, evaluation = split_windows(train_slice, test_slice)
+    scales = dict(md.problem(train_slice).target_scales)
+    say("refitting the base model on the comparison's fit windows")
+    refit = PointCalibrator(n_starts=1, n_candidates=8, random_state=seed, max_nfev=refit_max_nfev).fit(
+        md.problem(fit_windows, default=base.theta, target_scales=scales))
+    base_residuals = np.concatenate([r[np.isfinite(r)] for r in refit.residuals_.values()])
+    fraction = effective_sample_fraction(base_residuals)
+    base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, refit.theta_)}
+    # judged against the better base prediction of the evaluation half: refitted on the fit windows,
+    # or as trained (a fault in the test window's first half can bend the refit)
+    observed = md.observed(evaluation)
+    base_evaluation = min((_predict_evaluation(md, run_window, evaluation, theta) for theta in (refit.theta_, base.theta)),
+                          key=lambda prediction: weighted_test_error(observed, prediction, scales))
+    train_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, base.theta)}
+    unidentified = frozenset(e.key for e in base.record.estimates if not e.identified)
+    jobs = [
+        _CandidateJob(
+            signature=candidate.signature, node=candidate.node, model=candidate.model, data=data, substeps=substeps,
+            fit_windows=fit_windows, run_window=run_window, evaluation=evaluation, base_theta=base_theta,
+            base_rss=2.0 * refit.cost_, sample_fraction=fraction, target_scales=scales,
+            base_evaluation_prediction=base_evaluation, seed=seed, refit_max_nfev=refit_max_nfev,
+            train_theta=train_theta, train_unidentified=unidentified,
+            onset_windows=([train_slice], slice(test_slice.start, evaluation.start)), compared=md.compared,
+        )
+        for candidate in candidates
+    ]
+    workers = workers if workers is not None else min(len(jobs), usable_cpu_count())
+    if workers > 1 and len(jobs) > 1:
+        with ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent) as pool:
+            evidence = list(pool.map(_evaluate_candidate, jobs))
+    else:
+        evidence = [_evaluate_candidate(job) for job in jobs]
+    return rank_evidence(evidence), skipped

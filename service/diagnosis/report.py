@@ -1,0 +1,155 @@
+"""What a diagnosis found: :class:`DiagnosisReport`, its per-sensor verdicts, its one-sentence summary
+and its triples.
+
+:meth:`DiagnosisReport.to_dict` is the CLI's ``--json`` contract and the HTTP job result;
+:func:`diagnosis_triples` writes the report as a ``gt:DiagnosisRun`` with its ranked candidates and
+failure locations (the operating regimes and their error are the base calibration's). Errors are in
+each sensor's unit; ``cv_rmse`` and ``nmbe`` in percent. The method: ``docs/diagnosis.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyoxigraph as ox
+
+from service.calibration.triples import run_iri
+from service.diagnosis.episodes import Episode
+from service.diagnosis.localization import FailureLocation
+from service.diagnosis.ranking import EffectEvidence
+from service.diagnosis.residual_dependence import Dependence
+from service.graph.namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
+
+__all__ = ["SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorVerdict:
+    """One target sensor on the test window: its errors (``rmse``, ``mae`` in ``unit``; the
+    coefficient of variation of the RMSE and the normalised mean bias error in percent; R²), its
+    noise level σ (``unit``) and whether the model fails there (RMSE above the failure ratio × σ)."""
+
+    rmse: float
+    mae: float
+    cv_rmse_percent: float
+    nmbe_percent: float
+    r2: float
+    unit: str
+    noise: float
+    fails: bool
+
+    @property
+    def rmse_over_noise(self) -> float:
+        return self.rmse / self.noise
+
+    def to_dict(self) -> dict:
+        return {"rmse": self.rmse, "mae": self.mae, "cv_rmse": self.cv_rmse_percent, "nmbe": self.nmbe_percent,
+                "r2": self.r2, "unit": self.unit, "noise": self.noise, "rmse_over_noise": self.rmse_over_noise,
+                "fails": self.fails}
+
+
+@dataclass(frozen=True, kw_only=True)
+class DiagnosisReport:
+    """Everything ``diagnose`` found (see :meth:`to_dict` for the CLI contract).
+
+    ``regimes``: the calibration's rows (``{"regime", "rule", "share", "rmse": {sensor: value}}``)
+    with ``"worst"`` marking the one with the largest mean RMSE / noise; ``residual_dependence``: per
+    failing sensor, the (up to three) signals its residual follows, described with ``step_s`` (the
+    data's sampling interval, s); ``effects_tested``: False for ``graphtwin compare``.
+    """
+
+    model_name: str
+    run_id: str
+    sensors: dict[str, SensorVerdict]
+    localization: list[FailureLocation]
+    regimes: list[dict]
+    regime_rule_accuracy: float
+    episodes: dict[str, list[Episode]]
+    effects: list[EffectEvidence]
+    not_applicable: list[str]
+    residual_dependence: dict[str, list[Dependence]] = field(default_factory=dict)
+    step_s: float | None = None
+    effects_tested: bool = True
+    base_test_prediction: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    test_timestamps: np.ndarray | None = field(default=None, repr=False)
+    test_observed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    failure_ratio: float = 2.0
+    data_warnings: list[str] = field(default_factory=list)  # reading the data and assembling: frozen points, gaps
+
+    @property
+    def significant(self) -> list[EffectEvidence]:
+        return [e for e in self.effects if e.significant]
+
+    @property
+    def failing_sensors(self) -> list[str]:
+        return [node for node, verdict in self.sensors.items() if verdict.fails]
+
+    @property
+    def summary(self) -> str:
+        """One sentence: the missing effect and why, or that nothing is missing, or where it fails."""
+        failing = self.failing_sensors
+        if not self.effects_tested:
+            if not failing:
+                return "The model matches every sensor within its noise."
+            return (f"The model fails at {', '.join(local_name(n) for n in failing)}: see localization, regimes and "
+                    "episodes for where, residual_dependence for what the residual follows, and graphtwin diagnose "
+                    "for which effect is missing.")
+        if not self.significant:
+            if not failing:
+                return "The model matches every sensor within its noise; nothing significant is missing."
+            return (f"The model fails at {', '.join(local_name(n) for n in failing)}, but no effect in the catalog "
+                    "explains it significantly: see residual_dependence for what the residual follows.")
+        best = self.significant[0]
+        return f"Missing: {best.label} at {local_name(best.node)}. {best.explanation}."
+
+    def to_dict(self) -> dict:
+        return {
+            "model": self.model_name, "run": self.run_id, "summary": self.summary,
+            "sensors": {node: verdict.to_dict() for node, verdict in self.sensors.items()},
+            "localization": [dict(location.to_dict(), text=location.describe()) for location in self.localization],
+            "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
+            "episodes": {node: [e.to_dict() for e in found] for node, found in self.episodes.items()},
+            "effects": [e.to_dict() for e in self.effects],
+            "effects_tested": self.effects_tested,
+            "nothing_significant_missing": not self.significant if self.effects_tested else None,
+            "not_applicable": self.not_applicable,
+            "residual_dependence": {
+                node: {"signals": [d.to_dict() | {"text": d.describe(self.step_s)} for d in signals]}
+                for node, signals in self.residual_dependence.items()},
+            "data_warnings": self.data_warnings,
+        }
+
+
+def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
+    """The diagnosis as triples: a gt:DiagnosisRun with its ranked candidates and failure locations
+    (the operating regimes and their error are the base calibration's)."""
+    run = ox.NamedNode(run_iri(report.run_id).value + "/diagnosis")
+    calibration = run_iri(report.run_id)
+    dbl = lambda v: ox.Literal(repr(float(v)), datatype=XSD.double)  # noqa: E731
+    t = [ox.Triple(run, RDF.type, GT.DiagnosisRun), ox.Triple(run, RDF.type, PROV.Activity),
+         ox.Triple(run, GT.basedOnCalibration, calibration), ox.Triple(run, GT.forModel, ox.Literal(report.model_name)),
+         ox.Triple(run, RDFS.comment, ox.Literal(report.summary))]
+    node_name = distinct_local_names(item.node for item in report.effects)
+    for rank, item in enumerate(report.effects, start=1):
+        node = ox.NamedNode(f"{run.value}/candidate/{item.effect}/{node_name[item.node]}")
+        t += [ox.Triple(node, RDF.type, GT.EffectCandidate), ox.Triple(node, PROV.wasGeneratedBy, run),
+              ox.Triple(node, GT.candidateEffect, ox.NamedNode(item.effect_iri)),
+              ox.Triple(node, GT.onNode, ox.NamedNode(item.node)),
+              ox.Triple(node, GT.rank, ox.Literal(str(rank), datatype=XSD.integer)),
+              ox.Triple(node, GT.significant, ox.Literal("true" if item.significant else "false", datatype=XSD.boolean)),
+              ox.Triple(node, GT.explanation, ox.Literal(item.explanation))]
+        for predicate, value in ((GT.scoreStatistic, item.score.statistic), (GT.pValue, item.score.p_value),
+                                 (GT.deltaBic, item.delta_bic), (GT.testImprovement, item.test_improvement)):
+            if np.isfinite(value):
+                t.append(ox.Triple(node, predicate, dbl(value)))
+    for index, location in enumerate(report.localization):
+        node = ox.NamedNode(f"{run.value}/location/{index}")
+        t += [ox.Triple(node, RDF.type, GT.FailureLocation), ox.Triple(node, PROV.wasGeneratedBy, run),
+              ox.Triple(node, GT.failingSensor, ox.NamedNode(location.failing_sensor)),
+              ox.Triple(node, RDFS.comment, ox.Literal(location.describe()))]
+        if location.matching_sensor:
+            upstream = GT.failingUpstreamSensor if location.upstream_fails else GT.matchingSensor
+            t.append(ox.Triple(node, upstream, ox.NamedNode(location.matching_sensor)))
+        t += [ox.Triple(node, GT.suspect, ox.NamedNode(c)) for c in location.components]
+    return t

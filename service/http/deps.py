@@ -1,0 +1,108 @@
+"""What the routes share: the service's state, access by bearer token, bounded bodies, and the
+checks that a named model or upload exists."""
+
+from __future__ import annotations
+
+import secrets
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+from service.errors import InputError, NotFoundError
+from service.graph.store import GraphStore
+from service.http.errors import ApiError
+from service.http.uploads import MeasurementUploads
+from service.jobs.runner import JobRunner
+from service.settings import Settings
+from service.workflows.requests import FitRequest
+
+__all__ = ["Service", "ServiceDep", "ReadAccess", "WriteAccess", "read_body", "require_model", "require_fit_models"]
+
+
+@dataclass
+class Service:
+    """What the routes share: ``request.app.state.graphtwin``."""
+
+    settings: Settings
+    store: GraphStore
+    runner: JobRunner
+    uploads: MeasurementUploads
+    query_pool: ThreadPoolExecutor
+    #: the official Brick ontology's classes (``GRAPHTWIN_BRICK_ONTOLOGY``), read at start-up
+    brick_classes: frozenset[str] | None = None
+
+
+def _service(request: Request) -> Service:
+    return request.app.state.graphtwin
+
+
+ServiceDep = Annotated[Service, Depends(_service)]
+_bearer = HTTPBearer(auto_error=False, description="the service's GRAPHTWIN_TOKEN")
+Credentials = Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+
+
+def _check_token(service: Service, credentials: HTTPAuthorizationCredentials | None, what: str) -> None:
+    expected = service.settings.token
+    if expected is None:
+        raise ApiError(403, f"{what} are disabled: the service was started without GRAPHTWIN_TOKEN")
+    if credentials is None:
+        raise ApiError(401, f"{what} need a bearer token (Authorization: Bearer …)", headers={"WWW-Authenticate": "Bearer"})
+    if not secrets.compare_digest(credentials.credentials.encode("utf-8"), expected.get_secret_value().encode("utf-8")):
+        raise ApiError(401, "the bearer token is not valid", headers={"WWW-Authenticate": 'Bearer error="invalid_token"'})
+
+
+def require_write(service: ServiceDep, credentials: Credentials) -> None:
+    """Writes always need the token."""
+    _check_token(service, credentials, "writes")
+
+
+def require_read(service: ServiceDep, credentials: Credentials) -> None:
+    """Reads need the token unless ``open_reads``."""
+    if not service.settings.open_reads:
+        _check_token(service, credentials, "reads")
+
+
+WriteAccess = Depends(require_write)
+ReadAccess = Depends(require_read)
+
+
+async def read_body(request: Request, limit: int) -> bytes:
+    """The request body, refused with 413 as soon as it exceeds ``limit`` bytes."""
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        raise ApiError(413, f"the upload has {int(declared)} bytes; the limit is {limit}")
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise ApiError(413, f"the upload exceeds the limit of {limit} bytes")
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def require_model(store: GraphStore, name: str) -> str:
+    """``name`` when the store holds that model.
+
+    :raises NotFoundError: naming the models it holds.
+    """
+    try:
+        GraphStore.check_name(name)
+    except InputError:
+        raise NotFoundError(f"no model {name!r}") from None
+    if not store.has_model(name):
+        raise NotFoundError(f"no model {name!r}; known: {', '.join(store.models()) or 'none'}")
+    return name
+
+
+def require_fit_models(service: Service, request: FitRequest) -> None:
+    """The model to fit, the model its fit starts from (if any) and its measurement upload exist.
+
+    :raises NotFoundError: one of them does not.
+    """
+    require_model(service.store, request.model)
+    if request.start_from is not None:
+        require_model(service.store, request.start_from)
+    service.uploads.locate(request.measurements)

@@ -1,0 +1,112 @@
+"""``/jobs``: assemble, calibrate, diagnose and add-effect run as jobs (202 and the job at once;
+its status, progress, result and links at ``/jobs/{id}``), cancelled or resubmitted by id."""
+
+from __future__ import annotations
+
+import pyoxigraph as ox
+from fastapi import APIRouter, Response
+
+from service.components.library import SignatureLibrary
+from service.errors import InputError, NotFoundError
+from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, require_fit_models, require_model
+from service.http.errors import error_responses
+from service.http.schemas import JobList, JobPublic
+from service.jobs.records import JobRecord
+from service.workflows.effects import check_effect_version
+from service.workflows.requests import AddEffectRequest, AssembleRequest, CalibrateRequest, DiagnoseRequest, JobRequest
+
+__all__ = ["router"]
+
+router = APIRouter(tags=["jobs"])
+_JOB_ERRORS = error_responses(401, 403, 404, 422)
+
+
+def _public(record: JobRecord) -> dict:
+    data = record.to_dict()
+    data["links"] = {"self": f"/jobs/{record.id}", **record.links}
+    return data
+
+
+def _job(service: Service, job_id: str) -> JobRecord:
+    record = service.runner.get(job_id)
+    if record is None:
+        raise NotFoundError(f"no job {job_id!r}")
+    return record
+
+
+def _submit(service: Service, kind: str, request: JobRequest, response: Response) -> dict:
+    record = service.runner.submit(kind, request)
+    response.headers["Location"] = f"/jobs/{record.id}"
+    return _public(record)
+
+
+@router.post("/jobs/assemble", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
+             responses=_JOB_ERRORS)
+def submit_assemble(body: AssembleRequest, response: Response, service: ServiceDep) -> dict:
+    """Assemble a model's simulation model and write it as triples (its assembly graph)."""
+    require_model(service.store, body.model)
+    return _submit(service, "assemble", body, response)
+
+
+@router.post("/jobs/calibrate", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
+             responses=_JOB_ERRORS)
+def submit_calibrate(body: CalibrateRequest, response: Response, service: ServiceDep) -> dict:
+    """Calibrate a model against a measurement upload; estimates and metrics go to a run graph."""
+    require_fit_models(service, body)
+    return _submit(service, "calibrate", body, response)
+
+
+@router.post("/jobs/diagnose", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
+             responses=_JOB_ERRORS)
+def submit_diagnose(body: DiagnoseRequest, response: Response, service: ServiceDep) -> dict:
+    """Calibrate on train, compare on test, locate the failures and rank the missing effects."""
+    require_fit_models(service, body)
+    return _submit(service, "diagnose", body, response)
+
+
+@router.post("/jobs/add-effect", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
+             responses=error_responses(401, 403, 404, 409, 422))
+def submit_add_effect(body: AddEffectRequest, response: Response, service: ServiceDep) -> dict:
+    """Record an effect at a building node as a new model version (``version``, by default
+    ``<model>+<effect>``); 409 when that version exists with other effects."""
+    require_model(service.store, body.model)
+    library = SignatureLibrary.load()
+    library.effect(body.effect)
+    try:
+        ox.NamedNode(body.target)
+    except ValueError as exc:
+        raise InputError(f"target {body.target!r} is not an IRI: {exc}") from None
+    check_effect_version(service.store, body, library)
+    return _submit(service, "add-effect", body, response)
+
+
+@router.get("/jobs", response_model=JobList, dependencies=[ReadAccess], responses=error_responses(401, 403))
+def list_jobs(service: ServiceDep) -> dict:
+    """Every job, oldest first."""
+    records = service.runner.list()
+    return {"data": [_public(r) for r in records], "count": len(records)}
+
+
+@router.get("/jobs/{job_id}", response_model=JobPublic, dependencies=[ReadAccess],
+            responses=error_responses(401, 403, 404))
+def get_job(job_id: str, service: ServiceDep) -> dict:
+    """A job's status, progress messages, result and links."""
+    return _public(_job(service, job_id))
+
+
+@router.post("/jobs/{job_id}/cancel", response_model=JobPublic, dependencies=[WriteAccess],
+             responses=error_responses(401, 403, 404, 409))
+def cancel_job(job_id: str, service: ServiceDep) -> dict:
+    """Cancel a queued job at once; flag a running one (its results are discarded when it stops)."""
+    _job(service, job_id)
+    return _public(service.runner.cancel(job_id))
+
+
+@router.post("/jobs/{job_id}/resubmit", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
+             responses=error_responses(401, 403, 404, 409))
+def resubmit_job(job_id: str, response: Response, service: ServiceDep) -> dict:
+    """Run an ended job (interrupted, failed, cancelled…) again with the same parameters: a new job."""
+    _job(service, job_id)
+    record = service.runner.resubmit(job_id)
+    response.headers["Location"] = f"/jobs/{record.id}"
+    return _public(record)

@@ -1,0 +1,134 @@
+"""``/health``, ``/models/{name}`` (upload, read, delete, Brick report) and its measurement uploads."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+
+from service.graph.backend import EmbeddedBackend
+from service.graph.rdf_io import rdf_format
+from service.graph.store import GraphStore
+from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, read_body, require_model
+from service.http.errors import ApiError, error_responses
+from service.http.schemas import (
+    BrickReportPublic, Health, MeasurementsInfo, MeasurementsList, ModelInfo, ModelList, ModelUploaded,
+)
+from service.report.brick import brick_report
+
+__all__ = ["router"]
+
+router = APIRouter()
+_RDF_BODY = {"requestBody": {"required": True, "content": {
+    media: {"schema": {"type": "string"}} for media in ("text/turtle", "application/n-triples", "application/rdf+xml", "application/ld+json")
+}}}
+_CSV_BODY = {"requestBody": {"required": True, "content": {"text/csv": {"schema": {"type": "string"}}}}}
+
+
+@router.get("/health", response_model=Health, tags=["service"], responses=error_responses(503))
+def health(service: ServiceDep) -> dict:
+    """The service is up and its store answers."""
+    try:
+        service.store.backend.query("ASK {}")
+    except Exception as exc:
+        raise ApiError(503, f"the store does not answer: {type(exc).__name__}") from None
+    backend = "embedded" if isinstance(service.store.backend, EmbeddedBackend) else "remote"
+    return {"status": "ok", "backend": backend, "executor": service.settings.executor,
+            "jobs_active": service.runner.active_count()}
+
+
+@router.get("/models", response_model=ModelList, tags=["models"], dependencies=[ReadAccess],
+            responses=error_responses(401, 403))
+def list_models(service: ServiceDep) -> dict:
+    """The building models in the store."""
+    names = service.store.models()
+    return {"data": [{"name": n, "graph": service.store.model_graph(n).value} for n in names], "count": len(names)}
+
+
+@router.get("/models/{name}", response_model=ModelInfo, tags=["models"], dependencies=[ReadAccess],
+            responses=error_responses(401, 403, 404))
+def get_model(name: str, service: ServiceDep) -> dict:
+    """A model: its graph, sizes, whether it was assembled, its measurement uploads."""
+    store = service.store
+    require_model(store, name)
+    return {
+        "name": name, "graph": store.model_graph(name).value,
+        "triples": store.backend.triple_count(store.model_graph(name)),
+        "inferred_triples": store.backend.triple_count(store.inferred_graph(name)),
+        "assembled": store.assembly_graph(name) in store.backend.graphs(),
+        "measurements": [info["id"] for info in service.uploads.list(name)],
+    }
+
+
+def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | None) -> dict:
+    GraphStore.check_name(name)
+    fmt = rdf_format(content_type or "text/turtle")
+    loaded = store.load_model(name, data, fmt.media_type, source_name=f"model {name}")
+    return {"name": name, "graph": store.model_graph(name).value, "triples": loaded.triples, "replaced": loaded.replaced,
+            "changed": loaded.changed}
+
+
+@router.delete("/models/{name}", status_code=204, tags=["models"], dependencies=[WriteAccess],
+               responses=error_responses(401, 403, 404))
+def delete_model(name: str, service: ServiceDep) -> Response:
+    """Remove model ``name`` with its inferences and its assembly (one transaction). Its calibration
+    runs and measurement uploads stay: they describe what was done, and a model loaded again under
+    the name can use the uploads."""
+    require_model(service.store, name)
+    service.store.drop_model(name)
+    return Response(status_code=204)
+
+
+@router.get("/models/{name}/brick-report", response_model=BrickReportPublic, tags=["models"],
+            dependencies=[ReadAccess], responses=error_responses(401, 403, 404))
+def get_brick_report(name: str, service: ServiceDep) -> dict:
+    """What the Brick alignment could not use in model ``name`` (as ``graphtwin brick-report``).
+    ``official_ontology`` says whether the service knows the official Brick classes
+    (``GRAPHTWIN_BRICK_ONTOLOGY``)."""
+    require_model(service.store, name)
+    report = brick_report(service.store, name, service.brick_classes)
+    return report.to_dict() | {"official_ontology": service.brick_classes is not None}
+
+
+@router.put("/models/{name}", response_model=ModelUploaded, tags=["models"], dependencies=[WriteAccess],
+            openapi_extra=_RDF_BODY, responses=error_responses(400, 401, 403, 413, 415, 422))
+async def put_model(name: str, request: Request, response: Response, service: ServiceDep) -> dict:
+    """Upload or replace building model ``name`` (its named graph; alignment runs at once).
+    201 when new, 200 when replaced."""
+    data = await read_body(request, service.settings.max_upload_bytes)
+    uploaded = await run_in_threadpool(_load_model, service.store, name, data, request.headers.get("content-type"))
+    response.status_code = 200 if uploaded["replaced"] else 201
+    return uploaded
+
+
+def _save_measurements(service: Service, name: str, data: bytes, allow_gaps: bool) -> dict:
+    require_model(service.store, name)
+    return service.uploads.save(service.store, name, data, allow_gaps=allow_gaps)
+
+
+@router.post("/models/{name}/measurements", response_model=MeasurementsInfo, status_code=201, tags=["models"],
+             dependencies=[WriteAccess], openapi_extra=_CSV_BODY, responses=error_responses(401, 403, 404, 413, 422))
+async def post_measurements(name: str, request: Request, service: ServiceDep,
+                            allow_gaps: Annotated[bool, Query(description="accept values missing over long gaps")] = False) -> dict:
+    """Upload measurements (CSV, docs/data.md: the data contract) for model ``name``; the id names
+    them in jobs."""
+    data = await read_body(request, service.settings.max_upload_bytes)
+    return await run_in_threadpool(_save_measurements, service, name, data, allow_gaps)
+
+
+@router.get("/models/{name}/measurements", response_model=MeasurementsList, tags=["models"],
+            dependencies=[ReadAccess], responses=error_responses(401, 403, 404))
+def list_measurements(name: str, service: ServiceDep) -> dict:
+    """The measurement uploads of model ``name``."""
+    require_model(service.store, name)
+    infos = service.uploads.list(name)
+    return {"data": infos, "count": len(infos)}
+
+
+@router.delete("/models/{name}/measurements/{upload_id}", status_code=204, tags=["models"],
+               dependencies=[WriteAccess], responses=error_responses(401, 403, 404))
+def delete_measurements(name: str, upload_id: str, service: ServiceDep) -> Response:
+    """Remove a measurement upload of model ``name`` (runs made with it keep what they recorded)."""
+    service.uploads.delete(name, upload_id)
+    return Response(status_code=204)

@@ -1,0 +1,58 @@
+"""The job kinds of the HTTP service — assemble, calibrate, diagnose, add-effect — each a thin
+wrapper of its workflow (:mod:`service.workflows`) that reports progress and names its results."""
+
+from __future__ import annotations
+
+from service.components.library import SignatureLibrary
+from service.graph.store import GraphStore
+from service.jobs.work import JobKind, JobResult, WorkContext
+from service.model.summary import assembly_to_dict
+from service.workflows.effects import add_effect_version
+from service.workflows.requests import AddEffectRequest, AssembleRequest, CalibrateRequest, DiagnoseRequest
+from service.workflows.runs import assemble_model, calibrate_model, diagnose_model, result_links
+
+__all__ = ["assemble_job", "calibrate_job", "diagnose_job", "add_effect_job", "JOB_KINDS"]
+
+
+def assemble_job(store: GraphStore, request: AssembleRequest, context: WorkContext) -> JobResult:
+    """Assemble the model and write its assembly graph."""
+    context.report("matching the signature library")
+    assembled = assemble_model(store, request.model)
+    return JobResult(assembly_to_dict(assembled), {
+        "model": f"/models/{request.model}", "assembly_graph": store.assembly_graph(request.model).value,
+    })
+
+
+def calibrate_job(store: GraphStore, request: CalibrateRequest, context: WorkContext) -> JobResult:
+    """Calibrate the model on its measurement upload; the run goes to a run graph."""
+    data = context.measurements(request.measurements)
+    context.report(f"calibrating ({request.method})")
+    outcome = calibrate_model(store, request, data)
+    context.report("calibrated; writing the run")
+    return JobResult(outcome.record.to_dict(), result_links(store, request.model, outcome.record.run_id))
+
+
+def diagnose_job(store: GraphStore, request: DiagnoseRequest, context: WorkContext) -> JobResult:
+    """Diagnose the model on its measurement upload, its phases reported as progress (a cancel stops
+    it at the next phase). One worker process: the job already runs beside the server's other work
+    (or in a pool process, or on a Dask worker)."""
+    data = context.measurements(request.measurements)
+    report = diagnose_model(store, request, data, on_progress=context.report, workers=1)
+    links = result_links(store, request.model, report.run_id)
+    links["diagnosis_graph"] = store.run_graph(f"{report.run_id}-diagnosis").value
+    return JobResult(report.to_dict(), links)
+
+
+def add_effect_job(store: GraphStore, request: AddEffectRequest, context: WorkContext) -> JobResult:
+    """A new model version with the effect recorded (the model itself is not changed; a version
+    recorded with other effects is not overwritten)."""
+    added = add_effect_version(store, request, SignatureLibrary.load(), report=context.report)
+    return JobResult(added.to_dict(), {"model": f"/models/{added.version}",
+                                       "model_graph": store.model_graph(added.version).value})
+
+
+#: Every job kind of the service, by the name its route and records use.
+JOB_KINDS = {
+    "assemble": JobKind(AssembleRequest, assemble_job), "calibrate": JobKind(CalibrateRequest, calibrate_job),
+    "diagnose": JobKind(DiagnoseRequest, diagnose_job), "add-effect": JobKind(AddEffectRequest, add_effect_job),
+}

@@ -1,0 +1,122 @@
+"""Work shipped away from the server (a local process pool, a Dask cluster): the embedded on-disk
+store is opened by one process only, so the job's thread ships the graphs the job reads and its
+measurement upload (:class:`ShippedJob`), the work runs on a scratch in-memory store holding them
+(:func:`run_shipped_job`), and the graphs it wrote travel back as N-Quads for the job's one commit."""
+
+from __future__ import annotations
+
+import pickle
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pyoxigraph as ox
+
+from service.errors import GraphtwinError, NotFoundError
+from service.graph.store import GraphStore
+from service.jobs.deferred_writes import DeferredWrites
+from service.jobs.records import now
+from service.jobs.work import JobCancelled, JobResult, WorkContext
+from service.workflows.requests import AddEffectRequest, FitRequest, JobRequest, ModelRequest
+
+__all__ = ["ShippedJob", "ShippedContext", "ShippedWorkError", "run_shipped_job", "ship_job"]
+
+
+class ShippedWorkError(Exception):
+    """Shipped work raised something other than a user's error (a bug): its type and message as
+    text, since not every exception survives the way back from a pool process or a Dask worker."""
+
+
+@dataclass(frozen=True)
+class ShippedJob:
+    """Everything a job needs away from the server (picklable): its ``request``, the graphs it reads
+    (``dataset``, N-Quads) and the bytes of its measurement uploads by upload id."""
+
+    job_id: str
+    request: JobRequest
+    dataset: bytes
+    measurements: dict[str, bytes] = field(default_factory=dict)
+
+
+class ShippedContext:
+    """The work context of shipped work: progress messages are kept (they travel back with the
+    result), measurements are the shipped bytes written to ``folder``."""
+
+    cancel_requested = False
+
+    def __init__(self, job: ShippedJob, folder: Path):
+        self.job_id, self._job, self._folder = job.job_id, job, Path(folder)
+        self.messages: list[dict] = []
+
+    def report(self, message: str) -> None:
+        self.messages.append({"time": now(), "message": message})
+
+    def measurements(self, upload_id: str) -> Path:
+        if upload_id not in self._job.measurements:
+            raise NotFoundError(f"no measurement upload {upload_id!r}")
+        path = self._folder / f"{upload_id}.csv"
+        if not path.is_file():
+            path.write_bytes(self._job.measurements[upload_id])
+        return path
+
+
+def run_shipped_job(run: Callable[[GraphStore, JobRequest, WorkContext], JobResult],
+                    job: ShippedJob) -> tuple[JobResult, bytes, list[str], list[dict]]:
+    """Run ``run`` on a scratch in-memory store holding ``job.dataset``: in a pool process or on a
+    Dask worker. Returns the result, the graphs written (:meth:`DeferredWrites.shipped`) and the
+    progress messages. A user's error travels back as it is, or as a :class:`GraphtwinError` with its
+    message where its type would not unpickle; anything else as :class:`ShippedWorkError`."""
+    scratch = GraphStore.embedded(None)
+    scratch.backend.store.load(job.dataset, format=ox.RdfFormat.N_QUADS)
+    writes = DeferredWrites(scratch.backend)
+    with tempfile.TemporaryDirectory(prefix="graphtwin-job-") as folder:
+        context = ShippedContext(job, Path(folder))
+        try:
+            outcome = run(GraphStore(writes), job.request, context)
+        except (JobCancelled, FileNotFoundError):
+            raise
+        except GraphtwinError as exc:
+            if not _travels(exc):
+                raise GraphtwinError(str(exc)) from None
+            raise
+        except Exception as exc:
+            raise ShippedWorkError(f"{type(exc).__name__}: {exc}") from None
+    nquads, dropped = writes.shipped()
+    return outcome, nquads, dropped, context.messages
+
+
+def _travels(exc: BaseException) -> bool:
+    """Whether ``exc`` unpickles as it was (an error whose constructor takes more than its message does not)."""
+    try:
+        return type(pickle.loads(pickle.dumps(exc))) is type(exc)
+    except Exception:  # noqa: BLE001 (any failure to round-trip means: send it as text)
+        return False
+
+
+def ship_job(store: GraphStore, job_id: str, request: JobRequest,
+             locate_measurements: Callable[[str], Path] | None) -> ShippedJob:
+    """What :func:`run_shipped_job` needs for a job on ``store``: the graphs of the request's model
+    (``store.matching_dataset``), its measurement upload, and where the job reads another model, its
+    graphs too: ``start_from``'s, with its assembly and its calibration runs (the values it starts
+    from), and an add-effect job's version when it exists (which effects it records decides whether
+    the job may write it).
+
+    :raises NotFoundError: the upload does not exist.
+    """
+    graphs: list[ox.NamedNode] = []
+    if isinstance(request, ModelRequest):
+        graphs += store.matching_dataset(request.model)
+    if isinstance(request, FitRequest) and request.start_from and store.has_model(request.start_from):
+        graphs += [*store.matching_dataset(request.start_from), store.assembly_graph(request.start_from)]
+        graphs += [row["g"] for row in store.run_named_query("calibration-run-graphs", model=request.start_from)]
+    if isinstance(request, AddEffectRequest) and store.has_model(request.version_name):
+        graphs += store.matching_dataset(request.version_name)
+    quads = [ox.Quad(t.subject, t.predicate, t.object, graph)
+             for graph in dict.fromkeys(graphs) for t in store.graph_triples(graph)]
+    files = {}
+    if isinstance(request, FitRequest):
+        if locate_measurements is None:
+            raise NotFoundError(f"no measurement upload {request.measurements!r}: this runner keeps no uploads")
+        files[request.measurements] = Path(locate_measurements(request.measurements)).read_bytes()
+    return ShippedJob(job_id, request, ox.serialize(quads, format=ox.RdfFormat.N_QUADS), files)

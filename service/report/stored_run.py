@@ -1,0 +1,228 @@
+"""What the store holds about a run: the calibration run ``gtr:run/<run_id>`` (provenance, estimates,
+metrics, operating regimes; :mod:`service.calibration.triples`) and the diagnosis based on it, if any
+(ranked effect candidates, failure locations; :func:`service.diagnosis.report.diagnosis_triples`),
+read back by SPARQL (``queries/sensor-metrics.rq`` for the metrics)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from service.calibration.triples import run_iri
+from service.errors import NotFoundError
+from service.graph.namespaces import local_name
+from service.graph.store import GraphStore
+
+__all__ = ["StoredEstimate", "StoredRun", "StoredCandidate", "StoredLocation", "StoredDiagnosis", "read_run",
+           "read_diagnosis", "DIAGNOSIS_SUFFIX"]
+
+#: A diagnosis graph's id is its base run's id with this suffix.
+DIAGNOSIS_SUFFIX = "-diagnosis"
+
+_PREFIXES = """PREFIX gt: <https://w3id.org/graphtwin/ontology#>
+PREFIX prov: <http://www.w3.org/ns/prov#>
+PREFIX rdfs: <http://www.w3.org/2000/01/rdf-schema#>
+PREFIX dcterms: <http://purl.org/dc/terms/>
+"""
+_RUN_QUERY = _PREFIXES + """
+SELECT ?model ?version ?method ?source ?train_start ?train_end ?test_start ?test_end ?ended ?settings WHERE { GRAPH ?g {
+  ?run a gt:CalibrationRun ; gt:forModel ?model ; gt:modelVersion ?version ; gt:method ?method ;
+       gt:dataSource ?source ; gt:trainStart ?train_start ; gt:trainEnd ?train_end ; prov:endedAtTime ?ended ;
+       gt:settings ?settings .
+  OPTIONAL { ?run gt:testStart ?test_start ; gt:testEnd ?test_end }
+} }"""
+_ESTIMATES_QUERY = _PREFIXES + """SELECT ?component ?name ?node ?unit ?identified ?median ?quantile16 ?quantile84
+WHERE { GRAPH ?g {
+  ?estimate prov:wasGeneratedBy ?run ; gt:onComponent ?component ; gt:parameterName ?name ; gt:onNode ?node ;
+            gt:unit ?unit ; gt:identified ?identified .
+  OPTIONAL { ?estimate gt:median ?median }
+  OPTIONAL { ?estimate gt:quantile16 ?quantile16 }
+  OPTIONAL { ?estimate gt:quantile84 ?quantile84 }
+} } ORDER BY ?node ?name"""
+_DIAGNOSIS_QUERY = _PREFIXES + """SELECT ?diagnosis ?summary WHERE { GRAPH ?g {
+  ?diagnosis a gt:DiagnosisRun ; gt:basedOnCalibration ?run . OPTIONAL { ?diagnosis rdfs:comment ?summary }
+} }"""
+_CANDIDATES_QUERY = _PREFIXES + """
+SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value ?delta_bic ?improvement WHERE {
+  GRAPH ?g { ?candidate prov:wasGeneratedBy ?diagnosis ; gt:candidateEffect ?effect ; gt:onNode ?node ;
+                        gt:rank ?rank ; gt:significant ?significant ; gt:explanation ?explanation .
+    OPTIONAL { ?candidate gt:scoreStatistic ?score } OPTIONAL { ?candidate gt:pValue ?p_value }
+    OPTIONAL { ?candidate gt:deltaBic ?delta_bic } OPTIONAL { ?candidate gt:testImprovement ?improvement } }
+  OPTIONAL { GRAPH <https://w3id.org/graphtwin/resource/graph/signatures/library> {
+    ?effect dcterms:identifier ?id ; rdfs:label ?label } }
+} ORDER BY ?rank"""
+_REGIMES_QUERY = _PREFIXES + """SELECT ?regime ?rule ?share WHERE { GRAPH ?g {
+  ?regime a gt:OperatingRegime ; prov:wasGeneratedBy ?run ; gt:regimeRule ?rule ; gt:share ?share .
+} }"""
+_LOCATIONS_QUERY = _PREFIXES + """SELECT ?location ?failing ?matching ?text ?suspect WHERE { GRAPH ?g {
+  ?location a gt:FailureLocation ; prov:wasGeneratedBy ?diagnosis ; gt:failingSensor ?failing ; rdfs:comment ?text .
+  OPTIONAL { ?location gt:matchingSensor ?matching }
+  OPTIONAL { ?location gt:suspect ?suspect }
+} } ORDER BY ?location ?suspect"""
+
+
+def _float(row: Mapping, key: str) -> float:
+    return float(row[key].value) if key in row else float("nan")
+
+
+@dataclass(frozen=True, kw_only=True)
+class StoredEstimate:
+    """One parameter estimate of a run: ``median`` and the 16/84 % quantiles (NaN where not stored),
+    in ``unit``; ``node`` the building node of its component."""
+
+    name: str
+    node: str
+    unit: str
+    identified: bool
+    median: float
+    quantile16: float
+    quantile84: float
+
+
+@dataclass
+class StoredRun:
+    """A calibration run as stored: provenance, estimates (``component#name`` → estimate), metrics
+    (``metrics[window][sensor][metric] = value``, ``units[sensor]``) and the operating regimes of
+    its test window (``{"regime", "rule", "share", "rmse": {sensor: value}}``, by regime number)."""
+
+    run_id: str
+    model: str
+    version: str
+    method: str
+    data_source: str
+    train: tuple[str, str]
+    test: tuple[str, str] | None
+    ended: str
+    settings: dict
+    estimates: dict[str, StoredEstimate]
+    metrics: dict[str, dict[str, dict[str, float]]]
+    units: dict[str, str]
+    regimes: list[dict]
+
+
+def _run_id(run_id: str) -> str:
+    """The calibration run's id; a diagnosis graph's id (``<run>-diagnosis``) names its base run."""
+    return run_id[: -len(DIAGNOSIS_SUFFIX)] if run_id.endswith(DIAGNOSIS_SUFFIX) else run_id
+
+
+def read_run(store: GraphStore, run_id: str) -> StoredRun:
+    """The calibration run ``run_id`` (or the base run of diagnosis graph ``<run_id>-diagnosis``).
+
+    :raises NotFoundError: no such run (also for an id that cannot name a run).
+    """
+    run_id = _run_id(run_id)
+    try:
+        run = run_iri(GraphStore.check_name(run_id))
+    except ValueError:
+        raise NotFoundError(f"no run {run_id!r}: not a run id") from None
+    rows = store.query(_RUN_QUERY, substitutions={"run": run})
+    if not rows:
+        raise NotFoundError(f"no calibration run {run_id!r} in the store")
+    row = rows[0]
+    estimates = {}
+    for e in store.query(_ESTIMATES_QUERY, substitutions={"run": run}):
+        estimates[f"{e['component'].value}#{e['name'].value}"] = StoredEstimate(
+            name=e["name"].value, node=e["node"].value, unit=e["unit"].value,
+            identified=e["identified"].value == "true", median=_float(e, "median"),
+            quantile16=_float(e, "quantile16"), quantile84=_float(e, "quantile84"),
+        )
+    metrics: dict[str, dict[str, dict[str, float]]] = {}
+    units: dict[str, str] = {}
+    regimes = {r["regime"].value: {"regime": local_name(r["regime"].value), "rule": r["rule"].value,
+                                   "share": float(r["share"].value), "rmse": {}}
+               for r in store.query(_REGIMES_QUERY, substitutions={"run": run})}
+    for m in store.run_named_query("sensor-metrics", model=row["model"].value):
+        if m["run"] != run:
+            continue
+        sensor = m["sensor"].value
+        if "regime" in m:
+            regimes[m["regime"].value]["rmse"][sensor] = float(m["value"].value)
+            continue
+        metrics.setdefault(m["window"].value, {}).setdefault(sensor, {})[m["metric"].value] = float(m["value"].value)
+        if m["metric"].value == "rmse":
+            units[sensor] = m["unit"].value
+    return StoredRun(
+        run_id=run_id, model=row["model"].value, version=row["version"].value, method=row["method"].value,
+        data_source=row["source"].value, train=(row["train_start"].value, row["train_end"].value),
+        test=(row["test_start"].value, row["test_end"].value) if "test_start" in row else None,
+        ended=row["ended"].value, settings=json.loads(row["settings"].value), estimates=estimates,
+        metrics=metrics, units=units,
+        regimes=sorted(regimes.values(), key=lambda r: int(r["regime"]) if r["regime"].isdigit() else r["regime"]),
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class StoredCandidate:
+    """One ranked effect candidate of a stored diagnosis (numbers NaN where not stored)."""
+
+    effect: str
+    label: str
+    node: str
+    rank: int
+    significant: bool
+    explanation: str
+    score: float
+    p_value: float
+    delta_bic: float
+    test_improvement: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class StoredLocation:
+    """One stored failure location: the failing sensor, the sensor upstream bounding the suspects
+    (None when there is none), the sentence, and the suspect components."""
+
+    failing: str
+    matching: str | None
+    text: str
+    components: tuple[str, ...]
+
+
+@dataclass
+class StoredDiagnosis:
+    """The diagnosis based on a run: its summary, ranked candidates and failure locations."""
+
+    iri: str
+    summary: str
+    effects: list[StoredCandidate]
+    locations: list[StoredLocation]
+
+    @property
+    def failing_sensors(self) -> set[str]:
+        return {loc.failing for loc in self.locations}
+
+    @property
+    def suspects(self) -> set[str]:
+        return {c for loc in self.locations for c in loc.components}
+
+    @property
+    def matching_sensors(self) -> set[str]:
+        return {loc.matching for loc in self.locations if loc.matching}
+
+
+def read_diagnosis(store: GraphStore, run_id: str) -> StoredDiagnosis | None:
+    """The diagnosis whose ``gt:basedOnCalibration`` is run ``run_id``; None when there is none."""
+    run = run_iri(_run_id(run_id))
+    rows = store.query(_DIAGNOSIS_QUERY, substitutions={"run": run})
+    if not rows:
+        return None
+    diagnosis = rows[0]["diagnosis"]
+    bound = {"diagnosis": diagnosis}
+    effects = [StoredCandidate(
+        effect=r["id"].value if "id" in r else local_name(r["effect"].value),
+        label=r["label"].value if "label" in r else "", node=r["node"].value, rank=int(r["rank"].value),
+        significant=r["significant"].value == "true", explanation=r["explanation"].value,
+        score=_float(r, "score"), p_value=_float(r, "p_value"), delta_bic=_float(r, "delta_bic"),
+        test_improvement=_float(r, "improvement"),
+    ) for r in store.query(_CANDIDATES_QUERY, substitutions=bound)]
+    suspects: dict[str, tuple[Mapping, list[str]]] = {}  # location IRI → (its first row, its suspects)
+    for r in store.query(_LOCATIONS_QUERY, substitutions=bound):
+        _, components = suspects.setdefault(r["location"].value, (r, []))
+        if "suspect" in r:
+            components.append(r["suspect"].value)
+    locations = [StoredLocation(failing=r["failing"].value, matching=r["matching"].value if "matching" in r else None,
+                                text=r["text"].value, components=tuple(components))
+                 for r, components in suspects.values()]
+    return StoredDiagnosis(diagnosis.value, rows[0]["summary"].value if "summary" in rows[0] else "",
+                           effects, locations)

@@ -1,0 +1,126 @@
+"""The typed requests of graphtwin's work, one per kind, from the HTTP body or the CLI's options to
+the code that runs it: checked when made (model names, windows ``START/END``, operating conditions)."""
+
+from __future__ import annotations
+
+from typing import Literal, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from service.calibration.model_data import DEFAULT_GP_INPUTS
+from service.data.windows import parse_window
+from service.data.operating_filter import parse_condition
+from service.errors import InputError
+from service.graph.store import GraphStore
+
+__all__ = [
+    "JobRequest", "ModelRequest", "FitRequest", "AssembleRequest", "CalibrateRequest", "DiagnoseRequest",
+    "AddEffectRequest", "checked_request",
+]
+
+
+class JobRequest(BaseModel):
+    """Any request: unknown fields are refused (a misspelt ``start-from`` is an error, not ignored)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class ModelRequest(JobRequest):
+    """Work on one model of the store."""
+
+    model: str = Field(description="model name in the store")
+
+    @field_validator("model")
+    @classmethod
+    def _model_name(cls, value: str) -> str:
+        return GraphStore.check_name(value)
+
+
+def _check_window(value: str | None) -> str | None:
+    if value is not None:
+        parse_window(value)
+    return value
+
+
+_ONLY_WHEN = ("operating conditions COLUMN OP NUMBER in the column's unit, e.g. 'SF Spd Cmd (%) > 5': the "
+              "targets are compared only where all hold (docs/data.md: operating filter)")
+
+
+def _check_conditions(value: list[str]) -> list[str]:
+    for condition in value:
+        parse_condition(condition)
+    return value
+
+
+class AssembleRequest(ModelRequest):
+    pass
+
+
+class FitRequest(ModelRequest):
+    """What calibrate and diagnose share: the data, the seed, the operating filter, the start."""
+
+    measurements: str = Field(description="the measurements: a measurement upload's id (the CLI: the CSV's path)")
+    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random seed (numpy: 0 … 2³² − 1)")
+    only_when: list[str] = Field(default=[], description=_ONLY_WHEN)
+    start_from: str | None = Field(default=None, description=(
+        "a model in the store whose latest calibrated parameters start the fit (the version before an added "
+        "effect, say); the others start at their defaults"))
+
+    _conditions = field_validator("only_when")(_check_conditions)
+
+    @field_validator("start_from")
+    @classmethod
+    def _start_model_name(cls, value: str | None) -> str | None:
+        return GraphStore.check_name(value) if value is not None else None
+
+
+class CalibrateRequest(FitRequest):
+    train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
+    test: str | None = Field(default=None, description="test window START/END")
+    method: Literal["point", "bayes"] = "point"
+    gp_inputs: list[str] = Field(default=list(DEFAULT_GP_INPUTS), min_length=1, description=(
+        "inputs of the discrepancy GP (method bayes): 'time' and boundary inputs by node IRI, local name or "
+        "CSV column"))
+
+    _windows = field_validator("train", "test")(_check_window)
+
+
+class DiagnoseRequest(FitRequest):
+    train: str = Field(description="training window START/END")
+    test: str = Field(description="test window START/END")
+
+    _windows = field_validator("train", "test")(_check_window)
+
+
+class AddEffectRequest(ModelRequest):
+    effect: str = Field(description="effect signature id, e.g. FanMotorHeat")
+    target: str = Field(description="IRI of the building node the effect applies to")
+    version: str | None = Field(default=None, description="name of the new model version (default "
+                                "<model>+<effect>); an existing version with other effects is not overwritten (409)")
+
+    @field_validator("version")
+    @classmethod
+    def _version_name(cls, value: str | None) -> str | None:
+        return value if value is None else GraphStore.check_name(value)
+
+    @property
+    def version_name(self) -> str:
+        """The version this request writes: ``version``, by default ``<model>+<effect>``."""
+        return self.version or f"{self.model}+{self.effect}"
+
+
+R = TypeVar("R", bound=JobRequest)
+
+
+def checked_request(request_type: type[R], **fields) -> R:
+    """A request made from the CLI's options.
+
+    :raises InputError: the first invalid field, in the words of its check (a window's, a condition's).
+    """
+    try:
+        return request_type(**fields)
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        cause = error.get("ctx", {}).get("error")
+        raise InputError(str(cause) if isinstance(cause, Exception) else
+                         f"{'.'.join(map(str, error['loc']))}: {error['msg']}") from None
