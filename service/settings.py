@@ -1,29 +1,6 @@
-"""Configuration of the HTTP service, from keyword arguments or ``GRAPHTWIN_*`` environment variables.
-
-==============================  ==================================================================
-``GRAPHTWIN_DATA_DIR``          folder for job records (``jobs/``) and uploaded measurements
-                                (``measurements/``); default ``./graphtwin-service``
-``GRAPHTWIN_STORE_DIR``         the embedded Oxigraph store; default ``<data dir>/store``
-``GRAPHTWIN_SPARQL_ENDPOINT``   use an external SPARQL 1.1 endpoint (Oxigraph server layout)
-                                instead of the embedded store
-``GRAPHTWIN_ENDPOINT_TOKEN``    bearer token the service sends to that endpoint
-``GRAPHTWIN_TOKEN``             bearer token clients must send for writes (model and measurement
-                                uploads, jobs, SPARQL Update); unset: every write is refused
-``GRAPHTWIN_OPEN_READS``        ``true``: reads need no token; ``false``: they need it too
-``GRAPHTWIN_MAX_UPLOAD_BYTES``  largest accepted upload (413 above)
-``GRAPHTWIN_QUERY_TIMEOUT_S``   SPARQL query time limit, s (503 above)
-``GRAPHTWIN_MAX_RESULT_ROWS``   most rows (or triples) a query may return (422 above)
-``GRAPHTWIN_EXECUTOR``          where job work runs: ``processes`` (default: a local process pool),
-                                ``threads`` (inside the server process) or ``dask://HOST:PORT``
-                                (the workers of that Dask scheduler); see :mod:`service.jobs.runner`
-``GRAPHTWIN_JOB_WORKERS``       jobs running at once: 1 or 2 with threads or processes (they share
-                                this machine's CPU), up to 64 with a Dask cluster
-``GRAPHTWIN_BRICK_ONTOLOGY``    the official Brick ontology file (``Brick.ttl``): the Brick report
-                                (``GET /models/{name}/brick-report``) then tells an official class
-                                graphtwin does not model from a misspelt one
-==============================  ==================================================================
-
-Secrets are :class:`~pydantic.SecretStr`: ``repr``, logs and tracebacks show ``**********``.
+"""Configuration of the HTTP service and its jobs, from keyword arguments or ``GRAPHTWIN_*``
+environment variables (each variable: ``docs/http.md``, Settings). Secrets are
+:class:`~pydantic.SecretStr`: ``repr``, logs and tracebacks show ``**********``.
 """
 
 from __future__ import annotations
@@ -55,7 +32,7 @@ def check_executor(spec: str) -> str:
 
 
 class Settings(BaseSettings):
-    """Everything :func:`service.http.app.create_app` needs; see the module docstring for the variables."""
+    """Everything :func:`service.http.app.create_app` needs (the variables: ``docs/http.md``)."""
 
     model_config = SettingsConfigDict(env_prefix="GRAPHTWIN_", extra="forbid", hide_input_in_errors=True)
 

@@ -3,9 +3,9 @@ campus, both with blank nodes as IRIs (as :meth:`service.graph.store.GraphStore.
 
 import pyoxigraph as ox
 
-from service.resources import ontologies_dir
 from service.graph.blank_nodes import skolemize
 from service.graph.rdf_io import parse_rdf
+from service.resources import ontologies_dir
 from tests.bench.brick_campus import campus_turtle
 
 

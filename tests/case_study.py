@@ -2,9 +2,9 @@
 
 import pyoxigraph as ox
 
+from service.matching.signature import Signature
 from service.model.effect_recording import applied_effect_triples
 from service.resources import examples_dir
-from service.matching.signature import Signature
 
 CASE_STUDY = examples_dir() / "ventilation_case_study" / "model.ttl"
 EX = "https://example.org/ventilation-case-study#"

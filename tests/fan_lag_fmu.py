@@ -14,9 +14,9 @@ from pathlib import Path
 
 import fmpy
 
-from service.model.assembled_model import AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef
 from service.components.library import load_model_class
 from service.matching.signature import signature_from_dict
+from service.model.assembled_model import AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef
 
 __all__ = ["SOURCE", "MODEL_IDENTIFIER", "compile_fan_lag", "package_fmu", "build_fan_lag_fmu", "fan_lag_model",
            "FAN_CURVE"]

@@ -10,11 +10,11 @@ from case_study import CASE_STUDY
 from fastapi.testclient import TestClient
 from oxigraph_server import endpoint_backend, oxigraph_server  # noqa: F401 (pytest fixtures, shared with every test here)
 
+from service.components.library import SignatureLibrary
+from service.data.synthetic import generate_synthetic_data
+from service.graph.store import GraphStore
 from service.http.app import create_app
 from service.settings import Settings
-from service.components.library import SignatureLibrary
-from service.graph.store import GraphStore
-from service.data.synthetic import generate_synthetic_data
 
 TOKEN = "test-token-0123456789"
 

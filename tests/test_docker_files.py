@@ -11,7 +11,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from oxigraph_server import free_loopback_port, oxigraph_executable, oxigraph_server  # noqa: F401 (pytest fixture)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -21,13 +21,13 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
-from service.errors import CalibrationError
-from service.calibration.problem import CalibrationProblem
 from service.calibration.koh_likelihood import HyperparameterBounds, KennedyOHaganLikelihood
 from service.calibration.matern_gp import InputDistances, conditional
 from service.calibration.metrics import TargetMetrics, target_metrics
 from service.calibration.parallel_tempering import ParallelTemperingSampler, geometric_betas
 from service.calibration.point import PointCalibrator
+from service.calibration.problem import CalibrationProblem
+from service.errors import CalibrationError
 
 __all__ = ["BayesianCalibrator", "PosteriorPredictive", "default_moves"]
 

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.errors import CalibrationError
-from service.calibration.problem import CalibrationProblem
 from service.calibration.matern_gp import InputDistances, log_marginal_likelihood
+from service.calibration.problem import CalibrationProblem
+from service.errors import CalibrationError
 
 __all__ = ["HyperparameterBounds", "KennedyOHaganLikelihood", "TargetHyperparameters"]
 

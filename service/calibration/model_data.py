@@ -16,7 +16,12 @@ import numpy as np
 from service.calibration.problem import CalibrationProblem
 from service.data.measurements import MeasuredData
 from service.data.model_series import (
-    GAP_RECOVERY_S, SETTLING_S, check_mapped_parameters, model_start_memory_s, model_warmup_s, warmup_period_steps,
+    GAP_RECOVERY_S,
+    SETTLING_S,
+    check_mapped_parameters,
+    model_start_memory_s,
+    model_warmup_s,
+    warmup_period_steps,
 )
 from service.errors import CalibrationError
 from service.graph.namespaces import local_name

@@ -20,8 +20,8 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
-from service.errors import CalibrationError
 from service.calibration.problem import CalibrationProblem
+from service.errors import CalibrationError
 
 __all__ = ["PointCalibrator", "ParameterIdentifiability", "NonFiniteSimulationError"]
 

@@ -18,9 +18,9 @@ import numpy as np
 from SALib.analyze import morris as morris_analyze
 from SALib.sample import morris as morris_sample
 
-from service.errors import CalibrationError
 from service.calibration.model_data import ModelData
 from service.calibration.problem import CalibrationProblem
+from service.errors import CalibrationError
 
 __all__ = [
     "RegimeSensitivity", "morris_by_regime", "calibration_morris_by_regime", "successive_calibration_plan",

@@ -19,28 +19,32 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyoxigraph as ox
 
-from service.errors import CalibrationError
-from service.model.assembled_model import AssembledModel
-from service.model.assembly import assemble
-from service.model.wiring import without_model
-from service.model.assembly_triples import assembly_iri, assembly_triples
-from service.calibration.model_data import DEFAULT_GP_INPUTS, ModelData
-from service.data.model_series import SETTLING_S, read_model_data
-from service.calibration.record import CalibrationDiagnostics, CalibrationRecord, ParameterEstimate, SamplerConvergence
-from service.calibration.triples import calibration_triples
-from service.data.windows import Window
-from service.graph.namespaces import local_name
 from service.calibration.metrics import target_metrics
-from service.data.operating_filter import operating_mask
+from service.calibration.model_data import DEFAULT_GP_INPUTS, ModelData
 from service.calibration.point import NonFiniteSimulationError, PointCalibrator
+from service.calibration.record import CalibrationDiagnostics, CalibrationRecord, ParameterEstimate, SamplerConvergence
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
-from service.model.simulator import loop_substeps
+from service.calibration.triples import calibration_triples
+from service.data.model_series import SETTLING_S, read_model_data
+from service.data.operating_filter import operating_mask
+from service.data.windows import Window
+from service.errors import CalibrationError
+from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
+from service.model.assembled_model import AssembledModel
+from service.model.assembly import assemble
+from service.model.assembly_triples import assembly_iri, assembly_triples
+from service.model.simulator import loop_substeps
+from service.model.wiring import without_model
+
+if TYPE_CHECKING:  # the Bayesian calibrator (emcee) loads with a Bayesian run
+    from service.calibration.bayesian import BayesianCalibrator
 
 __all__ = ["CalibrationOutcome", "calibrate", "calibrated_start", "model_version",
            "fit_point", "continuation", "predict_test", "store_run"]
@@ -140,7 +144,7 @@ class CalibrationOutcome:
     test: slice | None
     predictions: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # window → node → median
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = field(default_factory=dict)
-    calibrator: object = None  # the fitted PointCalibrator or BayesianCalibrator (chains for plots)
+    calibrator: PointCalibrator | BayesianCalibrator | None = None  # the fitted calibrator (chains for plots)
     regimes: RegimeBreakdown | None = None  # the test-window error per operating regime
 
 

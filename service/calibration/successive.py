@@ -19,21 +19,25 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 
-from service.errors import CalibrationError
-from service.model.assembly import assemble
-from service.calibration.model_data import ModelData
-from service.data.model_series import read_model_data
-from service.calibration.problem import CalibrationProblem
-from service.calibration.run import predict_test
-from service.data.windows import Window
 from service.calibration.metrics import target_metrics
-from service.calibration.regimes import OperatingRegimes, per_regime_metrics
+from service.calibration.model_data import ModelData
 from service.calibration.point import PointCalibrator
+from service.calibration.problem import CalibrationProblem
 from service.calibration.regime_breakdown import fit_boundary_regimes
-from service.calibration.regime_sensitivity import RegimeSensitivity, calibration_morris_by_regime, successive_calibration_plan
-from service.model.simulator import loop_substeps
+from service.calibration.regime_sensitivity import (
+    RegimeSensitivity,
+    calibration_morris_by_regime,
+    successive_calibration_plan,
+)
+from service.calibration.regimes import OperatingRegimes, per_regime_metrics
+from service.calibration.run import predict_test
+from service.data.model_series import read_model_data
+from service.data.windows import Window
+from service.errors import CalibrationError
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
+from service.model.assembly import assemble
+from service.model.simulator import loop_substeps
 
 __all__ = [
     "CalibrationStage", "SuccessiveCalibrator", "restricted_problem", "contiguous_folds", "cross_validate",

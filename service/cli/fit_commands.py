@@ -10,8 +10,21 @@ import typer
 
 from service.calibration.model_data import DEFAULT_GP_INPUTS
 from service.cli.common import (
-    JsonOption, MeasurementsArgument, MemoryOption, ModelFileArgument, NameOption, OnlyWhenOption, SeedOption,
-    StartFromOption, StoreOption, TestWindowOption, TrainWindowOption, app, console, load_model_file, open_store,
+    JsonOption,
+    MeasurementsArgument,
+    MemoryOption,
+    ModelFileArgument,
+    NameOption,
+    OnlyWhenOption,
+    SeedOption,
+    StartFromOption,
+    StoreOption,
+    TestWindowOption,
+    TrainWindowOption,
+    app,
+    console,
+    load_model_file,
+    open_store,
     reports_errors,
 )
 from service.cli.printing import plot_run, print_calibration, print_diagnosis, save_diagnosis_plots

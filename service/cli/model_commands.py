@@ -14,8 +14,19 @@ from rich.syntax import Syntax
 from rich.table import Table
 
 from service.cli.common import (
-    JsonOption, MemoryOption, ModelFileArgument, NameOption, SeedOption, StoreOption, app, console, example_app,
-    load_model_file, open_store, reports_errors, signature_app,
+    JsonOption,
+    MemoryOption,
+    ModelFileArgument,
+    NameOption,
+    SeedOption,
+    StoreOption,
+    app,
+    console,
+    example_app,
+    load_model_file,
+    open_store,
+    reports_errors,
+    signature_app,
 )
 from service.components.library import SignatureLibrary
 from service.errors import GraphtwinError, InputError, NotFoundError

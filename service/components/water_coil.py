@@ -14,7 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.components.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_SPECIFIC_HEAT_J_PER_KG_K, ComponentModel, Parameter, Port
+from service.components.component import (
+    AIR_SPECIFIC_HEAT_J_PER_KG_K,
+    WATER_SPECIFIC_HEAT_J_PER_KG_K,
+    ComponentModel,
+    Parameter,
+    Port,
+)
 from service.components.heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
 
 __all__ = ["WaterCoil", "HeatingWaterCoil", "CoolingWaterCoil"]

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.errors import InputError
 from service.data.measurements import MeasuredData
+from service.errors import InputError
 from service.graph.units import convert
 
 __all__ = ["OperatingCondition", "parse_condition", "operating_mask"]

@@ -17,17 +17,18 @@ from pathlib import Path
 
 import numpy as np
 
-from service.errors import InputError
-from service.model.assembly import assemble
-from service.model.effect_splicing import EffectRequest
-from service.model.wiring import without_model
+from service.components.library import SignatureLibrary
 from service.data.measurements import write_csv
 from service.data.model_series import device_unit, model_warmup_s, read_model_data, warmup_period_steps
-from service.matching.signature import Signature
-from service.model.simulator import Simulator, loop_substeps, warmup_index
+from service.data.synthetic_operation import case_study_operation
+from service.errors import InputError
 from service.graph.store import GraphStore
 from service.graph.units import convert
-from service.data.synthetic_operation import case_study_operation
+from service.matching.signature import Signature
+from service.model.assembly import assemble
+from service.model.effect_splicing import EffectRequest
+from service.model.simulator import Simulator, loop_substeps, warmup_index
+from service.model.wiring import without_model
 
 __all__ = ["SyntheticTruth", "generate_synthetic_data", "NOISE_STD", "applicable_nodes"]
 
@@ -93,7 +94,7 @@ def generate_synthetic_data(
     model_name: str,
     output: Path,
     *,
-    library: dict[str, Signature],
+    library: SignatureLibrary,
     hidden_effect: str | None = None,
     node: str | None = None,
     seed: int = 0,
@@ -114,7 +115,7 @@ def generate_synthetic_data(
     :param truth: parameter key → its value in the truth (a calibration's estimates, say; keys are
         matched without their model name, so a run of the same model under another name applies);
         the others are drawn as the module docstring says.
-    :raises InputError: an unknown effect, or one that does not apply to the model; a truth key that
+    :raises UnknownEffectError: an unknown effect; :raises InputError: one that does not apply to the model; a truth key that
         is no estimated parameter of the model (with the effect); synthetic operation of fewer than two
         steps.
     """
@@ -124,10 +125,7 @@ def generate_synthetic_data(
     effect = None
     requests = []
     if hidden_effect is not None:
-        effect = library.get(hidden_effect)
-        if effect is None or effect.kind != "effect":
-            known = ", ".join(sorted(s.id for s in library.values() if s.kind == "effect"))
-            raise InputError(f"unknown effect {hidden_effect!r}; the catalog has {known}")
+        effect = library.effect(hidden_effect)
         nodes = applicable_nodes(store, model_name, effect)
         if not nodes:
             raise InputError(f"effect {hidden_effect} applies nowhere in model {model_name}")

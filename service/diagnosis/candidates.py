@@ -20,12 +20,19 @@ from service.calibration.model_data import ModelData
 from service.calibration.point import PointCalibrator
 from service.calibration.problem import CalibrationProblem
 from service.diagnosis.ranking import (
-    EffectEvidence, delta_bic, effective_sample_fraction, rank_evidence, score_test, weighted_test_error,
+    EffectEvidence,
+    delta_bic,
+    effective_sample_fraction,
+    rank_evidence,
+    score_test,
+    weighted_test_error,
 )
+from service.data.measurements import MeasuredData
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.matching.matcher import match_signature
 from service.matching.signature import Signature
+from service.model.assembled_model import AssembledModel
 from service.model.assembly import assemble
 from service.model.effect_splicing import EffectRequest, recorded_effects
 from service.runtime import exit_with_parent, usable_cpu_count
@@ -41,7 +48,7 @@ class Candidate(NamedTuple):
 
     signature: Signature
     node: str
-    model: object
+    model: AssembledModel
 
 
 def effect_candidates(store: GraphStore, model_name: str,
@@ -85,8 +92,8 @@ class _CandidateJob:
 
     signature: Signature
     node: str
-    model: object
-    data: object
+    model: AssembledModel
+    data: MeasuredData
     substeps: int
     fit_windows: list[slice]
     run_window: slice

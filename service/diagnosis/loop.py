@@ -1,7 +1,7 @@
 """The diagnosis loop: where the calibrated model fails and which physical effect is missing.
 
 :func:`diagnose` calibrates the base model on the training window (point fit), evaluates it on the
-test window and answers, per the README's loop: **compare** (RMSE, MAE, CV(RMSE), NMBE per target),
+test window and answers (docs/diagnosis.md): **compare** (RMSE, MAE, CV(RMSE), NMBE per target),
 **where** (a sensor fails when its test RMSE exceeds ``failure_ratio`` × its noise level
 :func:`noise_level`; located on the flow path, in operating regimes and in time), **what is missing**
 (the effect catalog refitted and ranked, :mod:`service.diagnosis.candidates`) and, when nothing is,
@@ -18,8 +18,8 @@ import numpy as np
 
 from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR
 from service.calibration.run import calibrate
-from service.data.windows import Window
 from service.components.library import SignatureLibrary
+from service.data.windows import Window
 from service.diagnosis.candidates import rank_catalog
 from service.diagnosis.episodes import Episode, find_episodes
 from service.diagnosis.localization import FlowTopology, localize_failures

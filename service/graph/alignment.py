@@ -25,8 +25,18 @@ import numpy as np
 import pyoxigraph as ox
 
 from service.graph.alignment_derivation import (
-    _EQUIVALENT_CLASS, _RDF_TYPE, _SUBCLASS_OF, _TYPE, _TYPE_INFIX, BlankNodeError, _aligned_part, _Context, _derived,
-    _has_blank_node, _ntriples, alignment_rules,
+    _EQUIVALENT_CLASS,
+    _RDF_TYPE,
+    _SUBCLASS_OF,
+    _TYPE,
+    _TYPE_INFIX,
+    BlankNodeError,
+    _aligned_part,
+    _Context,
+    _derived,
+    _has_blank_node,
+    _ntriples,
+    alignment_rules,
 )
 from service.graph.alignment_workers import AlignmentWorkers
 from service.graph.blank_nodes import skolemize

@@ -8,8 +8,16 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
 from service.errors import (
-    ConflictError, GraphtwinError, IncompleteModelError, InputError, MeasurementError, ModelLoadError, NotFoundError,
-    StoreError, StoreRequestError, UnsupportedFormatError,
+    ConflictError,
+    GraphtwinError,
+    IncompleteModelError,
+    InputError,
+    MeasurementError,
+    ModelLoadError,
+    NotFoundError,
+    StoreError,
+    StoreRequestError,
+    UnsupportedFormatError,
 )
 from service.http.schemas import ErrorBody
 

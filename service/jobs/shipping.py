@@ -18,7 +18,7 @@ from service.graph.store import GraphStore
 from service.jobs.deferred_writes import DeferredWrites
 from service.jobs.records import now
 from service.jobs.work import JobCancelled, JobResult, WorkContext
-from service.workflows.requests import AddEffectRequest, FitRequest, JobRequest, ModelRequest
+from service.workflows.requests import JobRequest
 
 __all__ = ["ShippedJob", "ShippedContext", "ShippedWorkError", "run_shipped_job", "ship_job"]
 
@@ -96,27 +96,16 @@ def _travels(exc: BaseException) -> bool:
 
 def ship_job(store: GraphStore, job_id: str, request: JobRequest,
              locate_measurements: Callable[[str], Path] | None) -> ShippedJob:
-    """What :func:`run_shipped_job` needs for a job on ``store``: the graphs of the request's model
-    (``store.matching_dataset``), its measurement upload, and where the job reads another model, its
-    graphs too: ``start_from``'s, with its assembly and its calibration runs (the values it starts
-    from), and an add-effect job's version when it exists (which effects it records decides whether
-    the job may write it).
+    """What :func:`run_shipped_job` needs for a job on ``store``: the graphs its request reads
+    (:meth:`~service.workflows.requests.JobRequest.graphs_read`) and the bytes of its uploads.
 
-    :raises NotFoundError: the upload does not exist.
+    :raises NotFoundError: an upload does not exist.
     """
-    graphs: list[ox.NamedNode] = []
-    if isinstance(request, ModelRequest):
-        graphs += store.matching_dataset(request.model)
-    if isinstance(request, FitRequest) and request.start_from and store.has_model(request.start_from):
-        graphs += [*store.matching_dataset(request.start_from), store.assembly_graph(request.start_from)]
-        graphs += [row["g"] for row in store.run_named_query("calibration-run-graphs", model=request.start_from)]
-    if isinstance(request, AddEffectRequest) and store.has_model(request.version_name):
-        graphs += store.matching_dataset(request.version_name)
     quads = [ox.Quad(t.subject, t.predicate, t.object, graph)
-             for graph in dict.fromkeys(graphs) for t in store.graph_triples(graph)]
+             for graph in dict.fromkeys(request.graphs_read(store)) for t in store.graph_triples(graph)]
     files = {}
-    if isinstance(request, FitRequest):
+    for upload in request.uploads():
         if locate_measurements is None:
-            raise NotFoundError(f"no measurement upload {request.measurements!r}: this runner keeps no uploads")
-        files[request.measurements] = Path(locate_measurements(request.measurements)).read_bytes()
+            raise NotFoundError(f"no measurement upload {upload!r}: this runner keeps no uploads")
+        files[upload] = Path(locate_measurements(upload)).read_bytes()
     return ShippedJob(job_id, request, ox.serialize(quads, format=ox.RdfFormat.N_QUADS), files)

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Protocol
 
 from service.graph.store import GraphStore
-from service.workflows.requests import FitRequest, JobRequest
+from service.workflows.requests import JobRequest
 
 __all__ = ["JobCancelled", "JobResult", "JobKind", "WorkContext", "public_message"]
 
@@ -55,7 +55,6 @@ class JobKind:
 def public_message(message: str, request: JobRequest) -> str:
     """``message`` with the server's file path of the job's measurement upload (where the service or a
     worker keeps it) written as the upload's id, all a client knows of it."""
-    if not isinstance(request, FitRequest) or not request.measurements:
-        return message
-    upload = request.measurements
-    return re.sub(r"\S*" + re.escape(upload) + r"\.csv", f"upload {upload}", message)
+    for upload in request.uploads():
+        message = re.sub(r"\S*" + re.escape(upload) + r"\.csv", f"upload {upload}", message)
+    return message

@@ -17,8 +17,8 @@ import pyoxigraph as ox
 
 from service.graph.namespaces import DCTERMS, GT, RDF, RDFS, XSD
 from service.graph.store import SIGNATURE_GRAPH, GraphStore
-from service.resources import signatures_dir
 from service.matching.signature import Rule, Signature
+from service.resources import signatures_dir
 
 __all__ = ["signature_triples", "library_triples", "load_signature_library_into", "ensure_signature_library"]
 

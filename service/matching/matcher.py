@@ -21,9 +21,9 @@ from typing import TYPE_CHECKING
 
 import pyoxigraph as ox
 
-from service.runtime import cyclic_gc_paused
-from service.matching.signature import Rule, Signature
 from service.matching.compiler import CompiledQuery, QueryPart, Reads, Traversal, compile_signature
+from service.matching.signature import Rule, Signature
+from service.runtime import cyclic_gc_paused
 
 if TYPE_CHECKING:
     from service.graph.backend import SparqlBackend

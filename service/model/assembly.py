@@ -28,7 +28,13 @@ from service.matching.signature import PatternTriple, Rule, Signature
 from service.model.assembled_model import AssembledModel, ComponentInstance, mapped_values_outside_bounds
 from service.model.effect_splicing import EffectRequest, recorded_effects, splice_effect
 from service.model.wiring import (
-    MatchValues, best_match_per_anchor, instantiate, modeled_nodes, short_name, split_parameters, wire,
+    MatchValues,
+    best_match_per_anchor,
+    instantiate,
+    modeled_nodes,
+    short_name,
+    split_parameters,
+    wire,
 )
 from service.runtime import cyclic_gc_paused
 

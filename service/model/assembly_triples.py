@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import pyoxigraph as ox
 
-from service.model.assembled_model import AssembledModel, ParameterRef
 from service.graph.namespaces import GT, GTR, RDF, RDFS, XSD
+from service.model.assembled_model import AssembledModel, ParameterRef
 
 __all__ = ["assembly_iri", "assembly_triples", "parameter_iri"]
 

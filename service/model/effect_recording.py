@@ -19,8 +19,8 @@ import pyoxigraph as ox
 
 from service.errors import InputError, UnsupportedFormatError
 from service.graph.namespaces import GT, GTR, PROV, RDF, RDFS, XSD, local_name
-from service.matching.signature import Signature
 from service.graph.rdf_io import rdf_format
+from service.matching.signature import Signature
 
 __all__ = ["applied_effect_iri", "applied_effect_triples", "record_effect_in_file"]
 

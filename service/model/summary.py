@@ -7,10 +7,10 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from service.model.assembled_model import AssembledModel, ParameterRef
-from service.model.wiring import without_model
 from service.graph.namespaces import distinct_local_names, namespace_of
 from service.graph.units import unit_label
+from service.model.assembled_model import AssembledModel, ParameterRef
+from service.model.wiring import without_model
 
 __all__ = ["assembly_to_dict", "print_assembly"]
 

@@ -22,8 +22,8 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from service.report.plots import plot_measured_vs_model  # noqa: E402
 from service.graph.units import unit_label  # noqa: E402
+from service.report.plots import plot_measured_vs_model  # noqa: E402
 
 if TYPE_CHECKING:
     from service.calibration.run import CalibrationOutcome

@@ -17,11 +17,11 @@ from statistics import NormalDist
 
 import numpy as np
 
-from service.errors import InputError
 from service.calibration.model_data import ModelData
 from service.calibration.run import model_version, predict_test
 from service.data.model_series import read_model_data
 from service.data.operating_filter import operating_mask
+from service.errors import InputError
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.model.assembly import assemble

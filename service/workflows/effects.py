@@ -20,9 +20,9 @@ from service.graph.namespaces import GT
 from service.graph.rdf_io import parse_rdf
 from service.graph.store import GraphStore
 from service.model.assembly import assemble
-from service.model.effect_splicing import EffectRequest, recorded_effects
 from service.model.assembly_triples import assembly_iri, assembly_triples
 from service.model.effect_recording import applied_effect_triples, record_effect_in_file
+from service.model.effect_splicing import EffectRequest, recorded_effects
 from service.workflows.requests import AddEffectRequest
 
 __all__ = ["EffectVersion", "checked_effect_triples", "check_effect_version", "add_effect_version",

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from typing import Literal, TypeVar
 
+import pyoxigraph as ox
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from service.calibration.model_data import DEFAULT_GP_INPUTS
-from service.data.windows import parse_window
 from service.data.operating_filter import parse_condition
+from service.data.windows import parse_window
 from service.errors import InputError
 from service.graph.store import GraphStore
 
@@ -24,6 +25,14 @@ class JobRequest(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
+    def graphs_read(self, store: GraphStore) -> list[ox.NamedNode]:
+        """The graphs of ``store`` the work reads: what is shipped where it runs away from the store."""
+        return []
+
+    def uploads(self) -> tuple[str, ...]:
+        """The measurement uploads the work reads, by id."""
+        return ()
+
 
 class ModelRequest(JobRequest):
     """Work on one model of the store."""
@@ -34,6 +43,9 @@ class ModelRequest(JobRequest):
     @classmethod
     def _model_name(cls, value: str) -> str:
         return GraphStore.check_name(value)
+
+    def graphs_read(self, store: GraphStore) -> list[ox.NamedNode]:
+        return store.matching_dataset(self.model)
 
 
 def _check_window(value: str | None) -> str | None:
@@ -73,6 +85,18 @@ class FitRequest(ModelRequest):
     def _start_model_name(cls, value: str | None) -> str | None:
         return GraphStore.check_name(value) if value is not None else None
 
+    def graphs_read(self, store: GraphStore) -> list[ox.NamedNode]:
+        """The model's, and the model the fit starts from with its assembly and calibration runs (the
+        values it starts from)."""
+        graphs = super().graphs_read(store)
+        if self.start_from and store.has_model(self.start_from):
+            graphs += [*store.matching_dataset(self.start_from), store.assembly_graph(self.start_from)]
+            graphs += [row["g"] for row in store.run_named_query("calibration-run-graphs", model=self.start_from)]
+        return graphs
+
+    def uploads(self) -> tuple[str, ...]:
+        return (self.measurements,)
+
 
 class CalibrateRequest(FitRequest):
     train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
@@ -107,6 +131,14 @@ class AddEffectRequest(ModelRequest):
     def version_name(self) -> str:
         """The version this request writes: ``version``, by default ``<model>+<effect>``."""
         return self.version or f"{self.model}+{self.effect}"
+
+    def graphs_read(self, store: GraphStore) -> list[ox.NamedNode]:
+        """The model's, and the version's where it exists (which effects it records decides whether
+        the work may write it)."""
+        graphs = super().graphs_read(store)
+        if store.has_model(self.version_name):
+            graphs += store.matching_dataset(self.version_name)
+        return graphs
 
 
 R = TypeVar("R", bound=JobRequest)

@@ -24,11 +24,11 @@ from brick_campus import campus_turtle, units_for_triples
 
 from service.graph.alignment import inferred_ntriples
 from service.graph.alignment_derivation import alignment_rules
-from service.runtime import usable_cpu_count
-from service.resources import ontologies_dir
-from service.graph.sparql_reads import query_reads
 from service.graph.blank_nodes import skolemize
 from service.graph.rdf_io import parse_rdf
+from service.graph.sparql_reads import query_reads
+from service.resources import ontologies_dir
+from service.runtime import usable_cpu_count
 
 GOAL_S = 10.0
 

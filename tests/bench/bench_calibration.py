@@ -30,18 +30,18 @@ from pathlib import Path
 
 import numpy as np
 
-from service.model.assembly import assemble
 from service.calibration.bayesian import BayesianCalibrator
-from service.calibration.model_data import ModelData
-from service.data.model_series import read_model_data
-from service.calibration.problem import CalibrationProblem
 from service.calibration.koh_likelihood import KennedyOHaganLikelihood
+from service.calibration.model_data import ModelData
 from service.calibration.point import PointCalibrator
-from service.resources import examples_dir
+from service.calibration.problem import CalibrationProblem
 from service.components.library import SignatureLibrary
-from service.model.simulator import loop_substeps
-from service.graph.store import GraphStore
+from service.data.model_series import read_model_data
 from service.data.synthetic import generate_synthetic_data
+from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.model.simulator import loop_substeps
+from service.resources import examples_dir
 
 TRAIN_DAY = ("2026-01-12", "2026-01-12T23:59")
 BATCH_SIZES = (1, 30, 120, 240)

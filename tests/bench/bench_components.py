@@ -11,8 +11,7 @@ import time
 
 import numpy as np
 
-from service.components.library import load_model_class
-from service.components.library import SignatureLibrary
+from service.components.library import SignatureLibrary, load_model_class
 
 _BY_NAME = {"supply_water_temperature": 65.0, "outdoor_air_temperature": 5.0, "return_air_temperature": 22.0,
             "inlet_air_temperature": 12.0, "setpoint": 21.0, "ambient_temperature": 15.0}

@@ -16,11 +16,11 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from service.calibration.run import calibrate  # noqa: E402
-from service.diagnosis.loop import diagnose  # noqa: E402
-from service.resources import examples_dir  # noqa: E402
 from service.components.library import SignatureLibrary  # noqa: E402
-from service.graph.store import GraphStore  # noqa: E402
 from service.data.synthetic import generate_synthetic_data  # noqa: E402
+from service.diagnosis.loop import diagnose  # noqa: E402
+from service.graph.store import GraphStore  # noqa: E402
+from service.resources import examples_dir  # noqa: E402
 
 
 def main() -> None:

@@ -25,13 +25,13 @@ import time
 from pathlib import Path
 
 import pyoxigraph as ox
-
-from service.runtime import cyclic_gc_paused
-from service.components.library import SignatureLibrary
-from service.matching.matcher import MatchSession, match_signature
-from service.matching.compiler import compile_signature
-from service.graph.store import GraphStore
 from campus_graph import ahus_for_triples, campus_turtle  # run as a script: tests/bench is on the path
+
+from service.components.library import SignatureLibrary
+from service.graph.store import GraphStore
+from service.matching.compiler import compile_signature
+from service.matching.matcher import MatchSession, match_signature
+from service.runtime import cyclic_gc_paused
 
 GOAL_S = 2.0
 GOAL_TRIPLES = 1_000_000

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from service.model.assembly import assemble
-from service.resources import examples_dir
-from service.model.simulator import Simulator, loop_substeps
-from service.graph.store import GraphStore
 from service.data.synthetic_operation import case_study_operation
+from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.model.simulator import Simulator, loop_substeps
+from service.resources import examples_dir
 
 
 def main() -> None:

@@ -34,14 +34,14 @@ import numpy as np
 import pyoxigraph as ox
 import uvicorn
 
-from service.http.app import create_app
-from service.model.assembly import assemble
+from service.calibration.metrics import TargetMetrics
 from service.calibration.record import CalibrationRecord, ParameterEstimate
 from service.calibration.triples import calibration_triples
-from service.calibration.metrics import TargetMetrics
+from service.graph.store import GraphStore
+from service.http.app import create_app
+from service.model.assembly import assemble
 from service.resources import examples_dir
 from service.settings import Settings
-from service.graph.store import GraphStore
 
 CASE_STUDY = examples_dir() / "ventilation_case_study" / "model.ttl"
 CASE_PREFIX = "https://example.org/ventilation-case-study#"

@@ -7,16 +7,16 @@ from __future__ import annotations
 import numpy as np
 from case_study import CASE_STUDY, EX
 
-from service.model.assembly import assemble
 from service.calibration.bayesian import BayesianCalibrator
-from service.calibration.model_data import ModelData
-from service.data.model_series import read_model_data
-from service.calibration.run import continuation
 from service.calibration.metrics import target_metrics
+from service.calibration.model_data import ModelData
+from service.calibration.run import continuation
 from service.components.library import SignatureLibrary
-from service.model.simulator import loop_substeps
-from service.graph.store import GraphStore
+from service.data.model_series import read_model_data
 from service.data.synthetic import generate_synthetic_data
+from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.model.simulator import loop_substeps
 
 TRAIN = ("2026-01-12", "2026-01-12T23:59")
 TEST = ("2026-01-13", None)

@@ -29,8 +29,8 @@ import pytest
 from case_study import EX
 from case_study_truth import STRUCTURALLY_UNIDENTIFIABLE, CaseStudyTruth, ace_at_90, identifiable
 
-from service.calibration.run import fit_point
 from service.calibration.metrics import target_metrics
+from service.calibration.run import fit_point
 
 #: The Bayesian runs go to convergence (20 × IAT) on the real case study: minutes each on one core,
 #: beyond the CI budget; they run when GRAPHTWIN_ACCEPTANCE=1 (the point-calibration checks always run).
@@ -93,7 +93,7 @@ def test_bayesian_run_converges_by_the_20_iat_rule(exact_bayes):
 @pytest.mark.slow
 @bayesian_acceptance
 @pytest.mark.xfail(strict=False, reason=(
-    "issue 4's number, not met (README, Calibration acceptance): 2 of the 4 parameters the data pin to ±5 % "
+    "issue 4's number, not met (docs/calibration.md, Acceptance on a synthetic truth): 2 of the 4 parameters the data pin to ±5 % "
     "lie inside their 68 % intervals: the PI gain and integral "
     "time, correlated, sit 2.0σ and 2.2σ off together on this noise draw; a calibrated posterior covers 68 % on "
     "average (over ten draws, coverage_study.py: 23 of 39, 59 %, the medians 0.0σ to 2.2σ off, none in a wrong basin)"))
@@ -121,7 +121,7 @@ def test_unidentifiable_parameters_have_wide_posteriors(exact, exact_point, exac
 @pytest.mark.slow
 @bayesian_acceptance
 @pytest.mark.xfail(strict=False, reason=(
-    "issue 4's number, on the edge (README, Calibration acceptance): ACE +1.0, +3.1, +1.0, +5.8 and +4.4 % "
+    "issue 4's number, on the edge (docs/calibration.md, Acceptance on a synthetic truth): ACE +1.0, +3.1, +1.0, +5.8 and +4.4 % "
     "(valve position, fan power, coil inlet water, coil outlet air, coil outlet water); over 144 test points the "
     "coverage's own standard error is 2.5 points, and the coil outlet air's was +3.7 % before the point fit's "
     "standard errors changed the sampler's start"))
@@ -152,7 +152,7 @@ def test_structure_the_model_lacks_shows_in_the_point_fit_residuals(fan_heat, ex
 @pytest.mark.slow
 @bayesian_acceptance
 @pytest.mark.xfail(strict=False, reason=(
-    "issue 4's number, on the edge (README, Calibration acceptance): ACE +2.4, +3.1, +0.3, +6.5 and +5.1 % "
+    "issue 4's number, on the edge (docs/calibration.md, Acceptance on a synthetic truth): ACE +2.4, +3.1, +0.3, +6.5 and +5.1 % "
     "(valve position, fan power, coil inlet water, coil outlet air, coil outlet water), over-covering where the "
     "discrepancy widens the intervals; +2.4, +1.7, −1.1, +4.4 and +2.4 % before the point fit's standard errors "
     "changed the sampler's start"))

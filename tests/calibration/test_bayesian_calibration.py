@@ -13,8 +13,8 @@ import pytest
 from synthetic_zone import DAY_S, NAMES, TRUTH, zone_windows
 
 from service.calibration.bayesian import BayesianCalibrator
-from service.calibration.problem import CalibrationProblem
 from service.calibration.metrics import target_metrics
+from service.calibration.problem import CalibrationProblem
 
 ESTIMATE = ("UA_W_per_K", "C_J_per_K", "heater_power_W")
 TRUE_THETA = TRUTH[[NAMES.index(name) for name in ESTIMATE]]

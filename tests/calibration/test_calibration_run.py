@@ -6,12 +6,12 @@ import pyoxigraph as ox
 import pytest
 from case_study import CASE_STUDY, EX, case_study_with_effect
 
-from service.report.calibration_plots import plot_calibration
 from service.calibration.run import calibrate
-from service.data.windows import parse_window
 from service.components.library import SignatureLibrary
-from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
+from service.data.windows import parse_window
+from service.graph.store import GraphStore
+from service.report.calibration_plots import plot_calibration
 
 TRAIN = ("2026-01-12", "2026-01-13T23:59")
 TEST = ("2026-01-14", None)
@@ -297,8 +297,8 @@ def test_metrics_of_two_sensors_sharing_a_local_name_stay_apart(point_run):
     import dataclasses
 
     from service.calibration.triples import calibration_triples
-    from service.model.effect_recording import applied_effect_iri
     from service.graph.namespaces import distinct_local_names
+    from service.model.effect_recording import applied_effect_iri
 
     record = point_run.record
     sensor = EX + "coil_outlet_air_temperature_sensor"
@@ -346,8 +346,8 @@ def test_a_model_version_starts_from_the_latest_calibration_of_another(point_run
     """``start_from``: the shared parameters start at the other model's latest calibrated values (keys
     matched without the model name), an added effect's at their defaults; the run records where it
     started."""
-    from service.model.assembly import assemble
     from service.calibration.run import calibrated_start, store_run
+    from service.model.assembly import assemble
 
     store = GraphStore.embedded(None)  # the module's store gets more runs of "case" from other tests
     store.load_model("case", CASE_STUDY)
@@ -413,10 +413,10 @@ def test_a_start_from_nothing_to_start_from_is_refused_and_writes_nothing(synthe
 def test_test_inputs_beyond_what_the_training_saw_are_a_note(synthetic):
     """The FLEXLAB heating valve's dead band was fitted just above the training day's highest command;
     the next day's commands above it made a fault-free day look failed, without a word."""
-    from service.model.assembly import assemble
     from service.calibration.model_data import ModelData
-    from service.data.model_series import read_model_data
     from service.calibration.run import inputs_beyond_training
+    from service.data.model_series import read_model_data
+    from service.model.assembly import assemble
 
     store, path, _ = synthetic
     md = ModelData(assemble(store, "case"), read_model_data(assemble(store, "case"), path))

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from service.calibration.problem import CalibrationProblem
 from service.calibration.koh_likelihood import HyperparameterBounds, KennedyOHaganLikelihood
+from service.calibration.problem import CalibrationProblem
 
 N = 30
 T = np.arange(N, dtype=float)

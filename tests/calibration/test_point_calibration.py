@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from synthetic_zone import NAMES, TRUTH, zone_windows
 
-from service.calibration.problem import CalibrationProblem
 from service.calibration.point import PointCalibrator
+from service.calibration.problem import CalibrationProblem
 
 
 @pytest.fixture(scope="module")

@@ -85,12 +85,12 @@ def test_the_warm_up_is_as_long_as_the_model_s_slowest_state_needs():
     """A day with a PI loop; none for static components (the FLEXLAB unit's coils, mixing box and
     fan); five of its slowest time constants for a sensor lag added to them. The start memory (what
     is left unscored after a guessed start) six hours with a PI loop, none without."""
+    from service.components.hot_water_loop import HotWaterLoop
+    from service.data.model_series import model_start_memory_s, model_warmup_s
+    from service.graph.store import GraphStore
     from service.model.assembly import assemble
     from service.model.effect_splicing import EffectRequest
-    from service.data.model_series import model_start_memory_s, model_warmup_s
-    from service.components.hot_water_loop import HotWaterLoop
     from service.resources import examples_dir
-    from service.graph.store import GraphStore
 
     store = GraphStore.embedded(None)
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")

@@ -13,11 +13,11 @@ from case_study import CASE_STUDY, EX
 from store_holder import held_by_another_process
 from typer.testing import CliRunner
 
-from service.model.assembly import assemble
 from service.cli import app
 from service.components.library import SignatureLibrary
-from service.matching.compiler import compile_signature
 from service.graph.store import GraphStore
+from service.matching.compiler import compile_signature
+from service.model.assembly import assemble
 
 runner = CliRunner()
 

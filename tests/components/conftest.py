@@ -18,9 +18,8 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pytest
 
-from service.components.library import load_model_class
 from service.components.component import ComponentModel, SplicedEffect
-from service.components.library import SignatureLibrary
+from service.components.library import SignatureLibrary, load_model_class
 
 #: Representative input values by port name, then by unit (simulator units).
 _BY_NAME = {

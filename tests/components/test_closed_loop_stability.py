@@ -3,9 +3,9 @@ PI-gain priors make the loop chaotic)."""
 
 import numpy as np
 
+from service.data.synthetic_operation import case_study_operation
 from service.model.assembly import assemble
 from service.model.simulator import Simulator
-from service.data.synthetic_operation import case_study_operation
 
 
 def test_no_draw_from_the_prior_oscillates_at_the_sampling_frequency(case_store):

@@ -2,9 +2,8 @@
 
 import pytest
 
-from service.components.library import load_model_class
+from service.components.library import SignatureLibrary, load_model_class
 from service.components.measuring_device import MeasuringDevice
-from service.components.library import SignatureLibrary
 
 #: Simulator unit of each quantity (signatures/README.md).
 QUANTITY_UNITS = {"temperature": "degC", "mass_flow": "kg/s", "volume_flow": "m3/s", "power": "W",

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from shared_data import SZVAV
 
-from service.model.assembly import assemble
 from service.calibration.model_data import ModelData
 from service.data.model_series import read_model_data
-from service.resources import examples_dir
 from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.resources import examples_dir
 
 EX = "https://example.org/flexlab-x3a#"
 UNIT = "http://qudt.org/vocab/unit/"

@@ -15,12 +15,13 @@ import pytest
 fmpy = pytest.importorskip("fmpy", reason="fmpy is needed to run FMU components")
 
 from fan_lag_fmu import FAN_CURVE, SOURCE, compile_fan_lag, fan_lag_model, package_fmu  # noqa: E402
-from service.model.assembled_model import ComponentInstance, Connection, ParameterRef  # noqa: E402
-from service.components.library import load_model_class
+
 from service.components.component import first_order_lag_factor  # noqa: E402
 from service.components.fan import Fan  # noqa: E402
 from service.components.fmu import fmu_model_class, live_instance_count  # noqa: E402
+from service.components.library import load_model_class  # noqa: E402
 from service.matching.signature import SignatureError, signature_from_dict  # noqa: E402
+from service.model.assembled_model import ComponentInstance, Connection, ParameterRef  # noqa: E402
 from service.model.simulator import Simulator  # noqa: E402
 
 FAN_PARAMETERS = ("nominal_air_flow", "nominal_power", "c1", "c2", "c3", "c4")

@@ -2,9 +2,9 @@
 
 import numpy as np
 
+from service.components.library import load_signature
 from service.components.measuring_device import MeasuringDevice
 from service.resources import signatures_dir
-from service.components.library import load_signature
 
 
 def test_passes_any_value_through_unchanged(run_model):

@@ -5,7 +5,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from service.data.measurements import MeasurementError, SeriesSpec, parse_timestamp, read_measurements, write_comparison_csv
+from service.data.measurements import (
+    MeasurementError,
+    SeriesSpec,
+    parse_timestamp,
+    read_measurements,
+    write_comparison_csv,
+)
 
 SPECS = {
     "https://example.org/x#sat": SeriesSpec("https://example.org/x#sat", "SAT ", "http://qudt.org/vocab/unit/DEG_F", "degC"),

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from case_study import CASE_STUDY, EX, case_study_with_effect
 
-from service.diagnosis.loop import diagnose, noise_level
 from service.components.library import SignatureLibrary
-from service.graph.store import GraphStore
 from service.data.synthetic import NOISE_STD, generate_synthetic_data
+from service.diagnosis.loop import diagnose, noise_level
+from service.graph.store import GraphStore
 
 LIBRARY = SignatureLibrary.load()
 TRAIN = ("2026-01-12", "2026-01-13T23:59")

@@ -5,7 +5,12 @@ import pytest
 
 from service.calibration.problem import CalibrationProblem
 from service.diagnosis.ranking import (
-    EffectEvidence, ScoreTest, delta_bic, effective_sample_fraction, rank_evidence, score_test,
+    EffectEvidence,
+    ScoreTest,
+    delta_bic,
+    effective_sample_fraction,
+    rank_evidence,
+    score_test,
 )
 
 T = np.linspace(0.0, 10.0, 400)

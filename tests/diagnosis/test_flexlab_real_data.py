@@ -22,8 +22,8 @@ import pytest
 from shared_data import SZVAV
 
 from service.diagnosis.loop import diagnose
-from service.resources import examples_dir
 from service.graph.store import GraphStore
+from service.resources import examples_dir
 
 EX = "https://example.org/flexlab-x3a#"
 SUPPLY = EX + "supply_air_temperature_sensor"

@@ -8,17 +8,22 @@ import numpy as np
 import pytest
 from case_study import EX
 
-from service.model.assembly import assemble
 from service.calibration.model_data import ModelData
-from service.data.model_series import read_model_data
 from service.calibration.problem import CalibrationProblem
 from service.calibration.regime_sensitivity import calibration_morris_by_regime, dominant_parameters_by_regime
-from service.components.library import SignatureLibrary
-from service.model.simulator import loop_substeps
 from service.calibration.successive import (
-    SuccessiveCalibrator, boundary_regimes, compare_strategies, contiguous_folds, cross_validate, restricted_problem,
+    SuccessiveCalibrator,
+    boundary_regimes,
+    compare_strategies,
+    contiguous_folds,
+    cross_validate,
+    restricted_problem,
 )
+from service.components.library import SignatureLibrary
+from service.data.model_series import read_model_data
 from service.data.synthetic import generate_synthetic_data
+from service.model.assembly import assemble
+from service.model.simulator import loop_substeps
 
 # --- analytic problem: y = a·x in regime 1, b·x + c·w in regime 2, 0.2·x in regime 0; d does nothing.
 LABELS = np.repeat([0, 1, 2, 1, 2], [60, 50, 50, 40, 40])

@@ -2,12 +2,11 @@
 
 import pyoxigraph as ox
 import pytest
-
 from case_study import EX
 
-from service.graph.namespaces import GT, RDF
 import service.graph.alignment_derivation
 from service.graph.alignment import inferred_triples
+from service.graph.namespaces import GT, RDF
 from service.graph.rdf_io import parse_rdf
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 

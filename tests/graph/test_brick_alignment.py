@@ -13,15 +13,15 @@ from shared_data import OFFICIAL_BRICK, SCHOOL
 
 import service.graph.alignment
 import service.graph.alignment_derivation
+from service.errors import IncompleteModelError
 from service.graph.alignment import independent_parts, inferred_ntriples, inferred_triples
 from service.graph.alignment_derivation import BlankNodeError, alignment_rules
-from service.errors import IncompleteModelError
-from service.model.assembly import assemble
-from service.resources import examples_dir, ontologies_dir
-from service.graph.sparql_reads import QueryReads
 from service.graph.blank_nodes import skolemize
 from service.graph.rdf_io import parse_rdf
+from service.graph.sparql_reads import QueryReads
 from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.resources import examples_dir, ontologies_dir
 from tests.bench.brick_campus import CAMPUS_NAMESPACE
 
 BRICK = "https://brickschema.org/schema/Brick#"

@@ -9,8 +9,8 @@ import threading
 import pyoxigraph as ox
 from case_study import CASE_STUDY
 
-from service.model.assembly import assemble
 from service.graph.store import GraphStore
+from service.model.assembly import assemble
 
 LAZY = (ox.QuerySolutions, ox.QueryTriples, ox.QueryBoolean)
 

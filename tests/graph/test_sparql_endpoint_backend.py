@@ -7,15 +7,15 @@ import threading
 
 import pyoxigraph as ox
 import pytest
-
 from case_study import CASE_STUDY, EX
 from oxigraph_server import endpoint_backend, free_loopback_port, oxigraph_server  # noqa: F401 (pytest fixtures)
-from service.model.assembly import assemble
-from service.model.summary import assembly_to_dict
+
 from service.errors import ModelLoadError, StoreRequestError, StoreUnavailableError, StoreUnreachableError
 from service.graph.backend import EmbeddedBackend
 from service.graph.endpoint import SparqlEndpointBackend
 from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.model.summary import assembly_to_dict
 
 X = "https://example.org/x#"
 G1 = ox.NamedNode("https://example.org/graph/one")

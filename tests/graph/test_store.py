@@ -5,13 +5,12 @@ import threading
 
 import pyoxigraph as ox
 import pytest
+from case_study import CASE_STUDY, EX
+from store_holder import held_by_another_process
 
 from service.errors import ModelLoadError, NotFoundError, StoreInUseError
 from service.graph.backend import STAGING, EmbeddedBackend, bind_values, insert_data_update
 from service.graph.store import ALIGNMENT_RULES_GRAPH, ONTOLOGY_GRAPH, GraphStore
-
-from case_study import CASE_STUDY, EX
-from store_holder import held_by_another_process
 
 SAREF = "https://saref.etsi.org/core/"
 BROKEN = b"""@prefix ex: <https://example.org/x#> .

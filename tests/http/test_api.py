@@ -13,16 +13,16 @@ from case_study import CASE_STUDY, EX
 from fastapi.testclient import TestClient
 from shared_data import OFFICIAL_BRICK
 
-from service.http import sparql_protocol
-from service.http.app import create_app
-from service.model.assembly import assemble
 from service.data.model_series import series_specs
-from service.jobs.records import JobRecord, JobRecords
-from service.jobs.work import JobKind, JobResult
-from service.workflows.requests import AssembleRequest
-from service.settings import Settings
 from service.errors import StoreUnavailableError
 from service.graph.store import GraphStore
+from service.http import sparql_protocol
+from service.http.app import create_app
+from service.jobs.records import JobRecord, JobRecords
+from service.jobs.work import JobKind, JobResult
+from service.model.assembly import assemble
+from service.settings import Settings
+from service.workflows.requests import AssembleRequest
 
 GT = "https://w3id.org/graphtwin/ontology#"
 RUNS_PER_GRAPH = f"""PREFIX gt: <{GT}>

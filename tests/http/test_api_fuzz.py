@@ -11,9 +11,9 @@ from hypothesis.configuration import set_hypothesis_home_dir  # noqa: E402
 from schemathesis.checks import not_a_server_error  # noqa: E402
 from schemathesis.specs.openapi.checks import response_schema_conformance  # noqa: E402
 
+from service.graph.store import GraphStore  # noqa: E402
 from service.http.app import create_app  # noqa: E402
 from service.settings import Settings  # noqa: E402
-from service.graph.store import GraphStore  # noqa: E402
 
 TOKEN = "fuzz-token-0123456789"
 EXAMPLES_PER_OPERATION = 25

@@ -16,8 +16,8 @@ from case_study import CASE_STUDY
 from oxigraph_server import free_loopback_port
 
 from service.components.library import SignatureLibrary
-from service.graph.store import GraphStore
 from service.data.synthetic import generate_synthetic_data
+from service.graph.store import GraphStore
 
 TOKEN = "fault-token-0123456789"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}

@@ -10,20 +10,23 @@ import pytest
 from case_study import CASE_STUDY, EX
 from fastapi.testclient import TestClient
 
-from service.http.app import create_app
-from service.model.assembly import assemble
 from service.errors import ConflictError, NotFoundError
+from service.graph.store import GraphStore
+from service.http.app import create_app
 from service.jobs.executors import DaskJobExecutor, ProcessJobExecutor
 from service.jobs.kinds import JOB_KINDS, add_effect_job, assemble_job, calibrate_job
 from service.jobs.records import JobRecords
 from service.jobs.runner import JobRunner
 from service.jobs.shipping import ShippedJob, run_shipped_job, ship_job
 from service.jobs.work import JobKind, JobResult
-from service.workflows.requests import (
-    AddEffectRequest, AssembleRequest, CalibrateRequest, JobRequest,
-)
+from service.model.assembly import assemble
 from service.settings import Settings
-from service.graph.store import GraphStore
+from service.workflows.requests import (
+    AddEffectRequest,
+    AssembleRequest,
+    CalibrateRequest,
+    JobRequest,
+)
 
 
 def _wait(runner: JobRunner, job_id: str, timeout_s: float = 120):
@@ -254,9 +257,9 @@ def test_a_shipped_job_reads_the_model_it_starts_from_and_the_version_it_would_w
     from case_study import case_study_with_effect
 
     from service.calibration.run import calibrate
-    from service.data.windows import parse_window
     from service.calibration.triples import run_iri
     from service.components.library import SignatureLibrary
+    from service.data.windows import parse_window
 
     first = calibrate(case_store, "case", case_csv, train=parse_window("/2026-01-12T15:50"), seed=0)
     case_store.load_model("case_again", CASE_STUDY)

@@ -12,7 +12,6 @@ from datetime import datetime, timezone
 import numpy as np
 import pyoxigraph as ox
 import pytest
-
 from pydantic import ConfigDict
 
 from service.errors import InputError, NotFoundError

@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 from service.components.component import ComponentModel, Port
+from service.components.library import SignatureLibrary, check_model_names, load_signature
 from service.graph.units import unit_spec
 from service.matching.signature import QUANTITIES, QUANTITY_UNITS, SignatureError, signature_from_dict
-from service.components.library import SignatureLibrary, check_model_names, load_signature
 
 TOP = 'id = "T"\nmodel = "service.components.fan:Fan"\nmodeled_nodes = ["fan"]\n'
 NODES = '[nodes]\nfan = { classes = ["s4bldg:Fan"] }\n'

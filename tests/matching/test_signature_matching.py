@@ -3,14 +3,13 @@
 import pyoxigraph as ox
 import pytest
 
-from service.matching import matcher as signature_matcher
-from service.resources import signatures_dir
-from service.matching.signature import signature_from_dict
-from service.components.library import load_signature
-from service.components.library import SignatureLibrary
-from service.matching.matcher import MatchSession, match_signature, missing_class_report
-from service.matching.compiler import compile_signature
+from service.components.library import SignatureLibrary, load_signature
 from service.graph.store import GraphStore
+from service.matching import matcher as signature_matcher
+from service.matching.compiler import compile_signature
+from service.matching.matcher import MatchSession, match_signature, missing_class_report
+from service.matching.signature import signature_from_dict
+from service.resources import signatures_dir
 from tests.bench.campus_graph import CAMPUS_NAMESPACE, campus_turtle
 
 X = "https://example.org/t#"

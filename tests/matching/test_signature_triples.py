@@ -4,14 +4,19 @@ import pyoxigraph as ox
 import pytest
 from case_study import EX
 
+from service.components.library import SignatureLibrary, load_signature
+from service.graph.namespaces import GT, RDF, S4BLDG
+from service.graph.store import SIGNATURE_GRAPH, GraphStore
+from service.matching.library_triples import (
+    ensure_signature_library,
+    library_triples,
+    load_signature_library_into,
+    signature_triples,
+)
+from service.matching.signature import signature_from_dict
 from service.model.assembly import assemble
 from service.model.assembly_triples import assembly_triples
-from service.graph.namespaces import GT, RDF, S4BLDG
 from service.resources import signatures_dir
-from service.matching.signature import signature_from_dict
-from service.components.library import SignatureLibrary, load_signature
-from service.matching.library_triples import library_triples, load_signature_library_into, signature_triples, ensure_signature_library
-from service.graph.store import SIGNATURE_GRAPH, GraphStore
 
 SIG = "https://w3id.org/graphtwin/resource/signature/"
 LIBRARY = SignatureLibrary.load()

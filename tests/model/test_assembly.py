@@ -5,12 +5,12 @@ import dataclasses
 import pytest
 from case_study import CASE_STUDY, EX, case_study_with_effect
 
-from service.errors import AssemblyError, IncompleteModelError
-from service.model.assembly import assemble
-from service.model.effect_splicing import EffectRequest
-from service.model.assembly_triples import assembly_triples
 from service.components.library import SignatureLibrary
+from service.errors import AssemblyError, IncompleteModelError
 from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.model.assembly_triples import assembly_triples
+from service.model.effect_splicing import EffectRequest
 
 
 def _nodes(model, components):

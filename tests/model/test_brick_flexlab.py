@@ -10,11 +10,11 @@ import pyoxigraph as ox
 import pytest
 from shared_data import SZVAV
 
-from service.model.assembly import assemble
-from service.resources import examples_dir
 from service.graph.blank_nodes import skolemize
 from service.graph.rdf_io import parse_rdf
 from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.resources import examples_dir
 
 EX = "https://example.org/flexlab-x3a#"
 

@@ -8,15 +8,15 @@ import pyoxigraph as ox
 import pytest
 from shared_data import SCHOOL
 
-from service.errors import IncompleteModelError
-from service.model.assembly import assemble
-from service.report.brick import brick_report
 from service.calibration.run import calibrate
-from service.diagnosis.loop import diagnose
-from service.model.effect_recording import applied_effect_triples
 from service.components.library import SignatureLibrary
 from service.data.synthetic import generate_synthetic_data
+from service.diagnosis.loop import diagnose
+from service.errors import IncompleteModelError
 from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.model.effect_recording import applied_effect_triples
+from service.report.brick import brick_report
 
 AHU7 = "http://openfdd.local/ahu7#"
 #: What the report asks for: an official class for the fan speed command, units for the commands.
@@ -100,7 +100,7 @@ def test_a_winter_week_compared_fails_at_the_mixed_air_with_the_fan_off(winter_c
     are boundary inputs the model matches by construction), and the worst regime is the fan off in
     the cold. With the fan off the preheat valve stands at 100 % and the mixed air sensor reads up
     to 94 °F: it sees still air warmed by the coil, not an air stream, which the mixing model cannot
-    reproduce (the README records the full diagnosis)."""
+    reproduce (docs/brick.md records the full diagnosis)."""
     report = winter_comparison
     assert not report.effects_tested and report.effects == []
     assert {n.removeprefix(AHU7) for n, s in report.sensors.items() if s.fails} == {"mat_sensor", "sat_sensor"}
@@ -191,7 +191,7 @@ def test_on_the_units_own_operation_a_hidden_recirculation_effect_is_found(store
     with the effect calibrated it (β ≈ 0.47), with sensor noise; the base model is diagnosed on it.
     The mixed air fails and the effect ranks first, significant, at the mixing section: on real
     operation the loop finds this effect when it is there (on the real data it is not significant:
-    README)."""
+    docs/brick.md)."""
     given = {e.key: e.median for e in recirculation.estimates}  # keys match without their model name
     data = tmp_path / "semi-synthetic.csv"
     generate_synthetic_data(store, "school-fixed", data, library=SignatureLibrary.load(),

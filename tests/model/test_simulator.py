@@ -5,9 +5,9 @@ import warnings
 import numpy as np
 import pytest
 
-from service.model.assembled_model import AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef
 from service.components.component import ComponentModel, Parameter, Port
 from service.matching.signature import signature_from_dict
+from service.model.assembled_model import AssembledModel, ComponentInstance, Connection, MeasurementLink, ParameterRef
 from service.model.simulator import Simulator, component_order, simulate, target_series, warmup_index
 
 
@@ -263,9 +263,9 @@ def test_a_draw_through_unit_s_coils_see_the_fan_s_air_flow_from_step_0():
     """FLEXLAB draws its air through the coils: the fan's air flow reaches them a step late (the
     cycle is broken at that flow). With constant inputs, step 0 equals every later step (before,
     the coils saw no air at step 0 and the supply air read the heating water's 60 °C)."""
+    from service.graph.store import GraphStore
     from service.model.assembly import assemble
     from service.resources import examples_dir
-    from service.graph.store import GraphStore
 
     store = GraphStore.embedded(None)
     store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")

@@ -7,10 +7,10 @@ from brick_report_model import REPORT_MODEL, REPORT_NAMESPACE
 from shared_data import OFFICIAL_BRICK
 from typer.testing import CliRunner
 
-from service.report.brick import brick_report, official_brick_classes
 from service.cli import app
-from service.resources import examples_dir
 from service.graph.store import GraphStore
+from service.report.brick import brick_report, official_brick_classes
+from service.resources import examples_dir
 
 BRICK = "https://brickschema.org/schema/Brick#"
 

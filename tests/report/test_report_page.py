@@ -7,9 +7,9 @@ sensor's metrics and figure, the suspects drawn on the topology, the regimes' ru
 effects, the error history; and the series recomputed from the stored estimates reproduce the run.
 """
 
-import gc
 import base64
 import functools
+import gc
 import html
 import io
 import re
@@ -24,25 +24,25 @@ from fastapi.testclient import TestClient
 from PIL import Image
 from typer.testing import CliRunner
 
-from service.http.app import create_app
 from service.calibration.record import CalibrationRecord
 from service.calibration.run import calibrate
 from service.calibration.triples import run_iri
 from service.cli import app as cli
+from service.components.library import SignatureLibrary
+from service.data.synthetic import generate_synthetic_data
+from service.diagnosis.error_history import error_history
 from service.diagnosis.loop import diagnose
 from service.diagnosis.report import DiagnosisReport
-from service.model.effect_recording import applied_effect_triples, record_effect_in_file
-from service.diagnosis.error_history import error_history
 from service.errors import NotFoundError
+from service.graph.store import GraphStore
+from service.http.app import create_app
+from service.matching.library_triples import ensure_signature_library
+from service.model.effect_recording import applied_effect_triples, record_effect_in_file
 from service.report.page import CONTENT_SECURITY_POLICY, report_html
 from service.report.run_series import INTERVAL_LEVEL, data_file_locator, recompute_series
 from service.report.stored_run import read_diagnosis, read_run
 from service.report.topology_svg import topology_svg
 from service.settings import Settings
-from service.components.library import SignatureLibrary
-from service.matching.library_triples import ensure_signature_library
-from service.graph.store import GraphStore
-from service.data.synthetic import generate_synthetic_data
 
 #: Named like a measurement upload (16 hex digits), so the HTTP service finds it as the run's data.
 UPLOAD_ID = "0123456789abcdef"

@@ -13,7 +13,13 @@ from service.graph.store import GraphStore
 from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, read_body, require_model
 from service.http.errors import ApiError, error_responses
 from service.http.schemas import (
-    BrickReportPublic, Health, MeasurementsInfo, MeasurementsList, ModelInfo, ModelList, ModelUploaded,
+    BrickReportPublic,
+    Health,
+    MeasurementsInfo,
+    MeasurementsList,
+    ModelInfo,
+    ModelList,
+    ModelUploaded,
 )
 from service.report.brick import brick_report
 
