@@ -1,5 +1,5 @@
-"""Process runtime helpers: usable CPUs, the cyclic garbage collector paused around bulk work, and
-pool workers that end with their parent."""
+"""Process runtime helpers: usable CPUs, the cyclic garbage collector paused around bulk work, pool
+workers that end with their parent, and a folder held by one process."""
 
 from __future__ import annotations
 
@@ -9,8 +9,12 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from typing import TextIO
 
-__all__ = ["usable_cpu_count", "cyclic_gc_paused", "exit_with_parent", "PARENT_CHECK_S"]
+from service.errors import StoreInUseError
+
+__all__ = ["usable_cpu_count", "cyclic_gc_paused", "exit_with_parent", "PARENT_CHECK_S", "lock_folder"]
 
 #: How often a pool worker looks whether its parent is still there, seconds.
 PARENT_CHECK_S = 1.0
@@ -50,3 +54,27 @@ def exit_with_parent() -> None:
         os._exit(1)  # no cleanup to wait for: the results would go to a process that is gone
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def lock_folder(folder: Path, holder: str) -> TextIO:
+    """Hold ``folder`` for this process: an exclusive lock on its ``.lock`` file for as long as the
+    returned file stays open (the kernel drops it when the process ends, however it ends).
+
+    :raises StoreInUseError: another process, or another open lock of this one, holds it.
+    """
+    import fcntl
+
+    folder.mkdir(parents=True, exist_ok=True)
+    handle = (folder / ".lock").open("a+", encoding="utf-8")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.seek(0)
+        held_by = handle.read().strip() or "another process"
+        handle.close()
+        raise StoreInUseError(f"{folder} is in use by {held_by}: one {holder} per folder") from None
+    handle.seek(0)
+    handle.truncate()
+    handle.write(f"{holder} (pid {os.getpid()})")
+    handle.flush()
+    return handle

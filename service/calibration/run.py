@@ -201,6 +201,76 @@ def calibrated_start(store: GraphStore, start_from: str, model_name: str,
     return theta, sorted(runs), note
 
 
+@dataclass(frozen=True, kw_only=True)
+class PreparedCalibration:
+    """A calibration checked and ready to fit: the model (its version first), bound to its data, the
+    windows as slices, what the run notes about them, the GP inputs, and the start."""
+
+    version: str
+    model: AssembledModel
+    model_data: ModelData
+    train: slice
+    test: slice | None
+    unscored_s: float
+    gp_nodes: tuple[str, ...]
+    window_notes: list[str]
+    start: np.ndarray | None = None
+    start_runs: list[str] | None = None
+    start_note: str | None = None
+
+
+def prepare_calibration(
+    store: GraphStore, model_name: str, data_path: Path | str, *, train: Window = (None, None),
+    test: Window | None = None, method: str = "point", substeps: int | None = None, only_when: Sequence[str] = (),
+    min_test_steps: int = 1, gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS, start_from: str | None = None,
+    data_name: str | None = None,
+) -> PreparedCalibration:
+    """Everything :func:`calibrate` checks before it fits (parameters as there; ``data_name``: what
+    messages call the data file): what a job checks at submission.
+
+    :raises CalibrationError, InputError, MeasurementError, AssemblyError: as :func:`calibrate`.
+    """
+    if method not in ("point", "bayes"):
+        raise CalibrationError(f"unknown method {method!r}: use point or bayes")
+    version = model_version(store, model_name)  # of the model calibrated, read before anything else
+    model = assemble(store, model_name)
+    data = read_model_data(model, data_path, source_name=data_name)
+    substeps = substeps or loop_substeps(model, data.step_s)
+    md = ModelData(model, data, substeps, operating_mask(data, only_when))
+    train_slice = data.window(*train)
+    test_slice = data.window(*test) if test is not None else None
+    window_notes = []
+    if test_slice is not None:
+        if test_slice.stop - test_slice.start < min_test_steps:
+            raise CalibrationError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "
+                                   f"steps of data: at least {min_test_steps} are needed")
+        overlap = min(train_slice.stop, test_slice.stop) - max(train_slice.start, test_slice.start)
+        if overlap > 0:
+            window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
+                                "partly on data the calibration fitted")
+        window_notes += inputs_beyond_training(md, train_slice, test_slice)
+    unscored_s = md.unscored_start_s(train_slice)
+    train_s = (train_slice.stop - train_slice.start) * data.step_s
+    if train_s <= unscored_s:
+        raise CalibrationError(f"the training window {train[0] or ''}/{train[1] or ''} holds {train_s / 3600:.3g} h of data, and "
+                               f"its first {unscored_s / 3600:g} h are simulated, not scored (the model's start state "
+                               f"settles): give a window longer than {unscored_s / 3600:g} h, or one starting later in the data")
+    if unscored_s > SETTLING_S:
+        window_notes.append(f"the training window's first {unscored_s / 3600:g} h are simulated, not scored: before the "
+                            "data's first step the model's start state is a guess, and its slowest loop carries it that "
+                            "long; data from before the window would let the fit use them")
+    gp_nodes = md.gp_input_nodes(gp_inputs)
+    if method == "point" and gp_nodes != DEFAULT_GP_INPUTS:
+        raise CalibrationError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
+                               "a point calibration has no discrepancy")
+    start = start_runs = start_note = None
+    if start_from is not None:
+        start, start_runs, start_note = calibrated_start(store, start_from, model_name, model)
+    return PreparedCalibration(
+        version=version, model=model, model_data=md, train=train_slice, test=test_slice, unscored_s=unscored_s,
+        gp_nodes=tuple(gp_nodes), window_notes=window_notes, start=start, start_runs=start_runs, start_note=start_note)
+
+
 def calibrate(
     store: GraphStore,
     model_name: str,
@@ -234,44 +304,15 @@ def calibrate(
     :raises InputError: a bad window, a target without measurements, NaN-only series, an unknown
         method, a ``start_from`` with nothing to start from; nothing is written to the store then.
     """
-    if method not in ("point", "bayes"):
-        raise CalibrationError(f"unknown method {method!r}: use point or bayes")
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     started = datetime.now(timezone.utc)
-    version = model_version(store, model_name)  # of the model calibrated, read before anything else
-    model = assemble(store, model_name)
-    data = read_model_data(model, data_path)
-    substeps = substeps or loop_substeps(model, data.step_s)
-    md = ModelData(model, data, substeps, operating_mask(data, only_when))
-    train_slice = data.window(*train)
-    test_slice = data.window(*test) if test is not None else None
-    window_notes = []
-    if test_slice is not None:
-        if test_slice.stop - test_slice.start < min_test_steps:
-            raise CalibrationError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "
-                                   f"steps of data: at least {min_test_steps} are needed")
-        overlap = min(train_slice.stop, test_slice.stop) - max(train_slice.start, test_slice.start)
-        if overlap > 0:
-            window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
-                                "partly on data the calibration fitted")
-        window_notes += inputs_beyond_training(md, train_slice, test_slice)
-    unscored_s = md.unscored_start_s(train_slice)
-    train_s = (train_slice.stop - train_slice.start) * data.step_s
-    if train_s <= unscored_s:
-        raise CalibrationError(f"the training window {train[0] or ''}/{train[1] or ''} holds {train_s / 3600:.3g} h of data, and "
-                               f"its first {unscored_s / 3600:g} h are simulated, not scored (the model's start state "
-                               f"settles): give a window longer than {unscored_s / 3600:g} h, or one starting later in the data")
-    if unscored_s > SETTLING_S:
-        window_notes.append(f"the training window's first {unscored_s / 3600:g} h are simulated, not scored: before the "
-                            "data's first step the model's start state is a guess, and its slowest loop carries it that "
-                            "long; data from before the window would let the fit use them")
-    gp_nodes = md.gp_input_nodes(gp_inputs)
-    if method == "point" and gp_nodes != DEFAULT_GP_INPUTS:
-        raise CalibrationError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
-                               "a point calibration has no discrepancy")
-    start = start_runs = start_note = None
-    if start_from is not None:
-        start, start_runs, start_note = calibrated_start(store, start_from, model_name, model)
+    prepared = prepare_calibration(store, model_name, data_path, train=train, test=test, method=method,
+                                   substeps=substeps, only_when=only_when, min_test_steps=min_test_steps,
+                                   gp_inputs=gp_inputs, start_from=start_from)
+    version, model, data, md = prepared.version, prepared.model, prepared.model_data.data, prepared.model_data
+    substeps, train_slice, test_slice = md.substeps, prepared.train, prepared.test
+    unscored_s, gp_nodes, window_notes = prepared.unscored_s, prepared.gp_nodes, prepared.window_notes
+    start, start_runs, start_note = prepared.start, prepared.start_runs, prepared.start_note
     problem = md.problem(train_slice, gp_inputs=gp_nodes, default=start)
     n_par = problem.n_parameters
     settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s,

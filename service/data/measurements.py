@@ -204,6 +204,12 @@ def _fill_short_gaps(values: np.ndarray, max_gap: int) -> tuple[np.ndarray, int]
 #: A position, command or speed (a fraction in the model) above this after conversion is an error:
 #: its column is in percent but declared as a fraction (BMS exports write 0–100).
 _FRACTION_MAX = 1.5
+#: Years a time stamp may lie in: a stamp outside them is a glitch of the export (9999-12-31, 1900-01-01).
+PLAUSIBLE_YEARS = (1970, 2100)
+#: The regular grid may hold this many steps a data row, or this many steps in all, whichever is more:
+#: beyond both the file is mostly one jump in time (a glitched stamp) that resampling would fill with
+#: empty steps, each costing memory in every column.
+MAX_GRID_STEPS_PER_ROW, MAX_GRID_STEPS_ANYWAY = 10, 1_000_000
 
 
 def _check_fraction(values: np.ndarray, where: str, unit: str, problems: list[str], warnings: list[str]) -> None:
@@ -222,21 +228,41 @@ def _check_fraction(values: np.ndarray, where: str, unit: str, problems: list[st
                         f"is it a fraction already? Then declare saref:isMeasuredIn unit:UNITLESS")
 
 
+def _check_grid_size(source: str, stamps: np.ndarray, step_s: float) -> None:
+    """Refuse data whose regular grid would hold more steps than :data:`MAX_GRID_STEPS_PER_ROW` a row
+    and :data:`MAX_GRID_STEPS_ANYWAY`, naming the line of its largest jump in time, before the grid
+    is built.
+
+    :raises MeasurementError: the data is mostly one jump.
+    """
+    n_grid = int((stamps[-1] - stamps[0]).astype(np.int64) // max(step_s, 1.0)) + 1
+    if n_grid <= max(MAX_GRID_STEPS_PER_ROW * stamps.size, MAX_GRID_STEPS_ANYWAY):
+        return
+    spacings = np.diff(stamps).astype(np.int64)
+    i = int(np.argmax(spacings))
+    raise MeasurementError(source, [
+        f"line {i + 3}: the time stamps jump from {stamps[i]} to {stamps[i + 1]} ({spacings[i] / step_s:.3g} steps of "
+        f"{step_s:g} s): on a regular grid the {stamps.size} rows would stand for {n_grid} steps; fix the stamp, "
+        "or cut the file at the jump"])
+
+
 def read_measurements(
     path: Path | str,
     specs: Mapping[str, SeriesSpec],
     *,
     max_gap_steps: int = 5,
     frozen_after_s: float = 12 * 3600.0,
+    source_name: str | None = None,
 ) -> MeasuredData:
     """Read and check a measurement CSV (``docs/data.md``).
 
     :param specs: node IRI → what the model needs from it.
     :param frozen_after_s: a sensor's value held exactly for this long is reported (:func:`frozen_spans`).
+    :param source_name: what messages call the file (default: its path).
     :raises MeasurementError: every problem found, with column and line.
     """
     path = Path(path)
-    source = str(path)
+    source = source_name or str(path)
     problems: list[str] = []
     warnings: list[str] = []
     try:
@@ -295,6 +321,9 @@ def read_measurements(
             stamp, with_offset = _parsed_timestamp(row[0])
             times.append(stamp)
             first_with_offset.setdefault(with_offset, (line, row[0].strip()))
+            if not PLAUSIBLE_YEARS[0] <= stamp.year <= PLAUSIBLE_YEARS[1]:
+                problems.append(f"line {line}, column {header[0]!r}: time stamp {row[0].strip()!r} lies outside the "
+                                f"years {PLAUSIBLE_YEARS[0]}–{PLAUSIBLE_YEARS[1]} (a glitch of the export?)")
         except ValueError as exc:
             problems.append(f"line {line}, column {header[0]!r}: {exc}")
             times.append(datetime.min)
@@ -351,6 +380,7 @@ def read_measurements(
     if problems:
         raise MeasurementError(source, problems)
     step_s = float(round(np.median(np.diff(stamps).astype(np.int64))))  # whole seconds, as the grid
+    _check_grid_size(source, stamps, step_s)
     for node, column in claimed.items():
         if not specs[node].holds_values:
             warnings += [f"column {header[column]!r}: {text}" for text in frozen_spans(

@@ -88,6 +88,8 @@ def warmup_period_steps(n_steps: int, step_s: float) -> int:
     return period if n_steps >= period else 1
 
 
-def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5) -> MeasuredData:
-    """Read the CSV at ``path`` for ``model`` (:func:`service.data.measurements.read_measurements`)."""
-    return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps)
+def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5,
+                    source_name: str | None = None) -> MeasuredData:
+    """Read the CSV at ``path`` for ``model`` (:func:`service.data.measurements.read_measurements`;
+    ``source_name``: what messages call the file)."""
+    return read_measurements(path, series_specs(model), max_gap_steps=max_gap_steps, source_name=source_name)

@@ -23,6 +23,7 @@ from service.jobs.kinds import JOB_KINDS
 from service.jobs.records import JobRecords
 from service.jobs.runner import JobRunner
 from service.report.brick import official_brick_classes
+from service.runtime import lock_folder
 from service.settings import Settings
 
 __all__ = ["create_app"]
@@ -44,14 +45,19 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     Job records a stopped process left queued or running are marked ``interrupted`` here.
     """
     settings = settings or Settings()
-    brick_classes = official_brick_classes(settings.brick_ontology) if settings.brick_ontology is not None else None
-    store = store if store is not None else _open_store(settings)
-    records = JobRecords(settings.jobs_dir)
-    interrupted = records.mark_interrupted()
-    if interrupted:
-        log.warning("%d job(s) were interrupted by the last stop: %s", len(interrupted), ", ".join(interrupted))
-    uploads = MeasurementUploads(settings.measurements_dir)
-    executor = job_executor(settings.executor, max_workers=settings.job_workers)
+    data_lock = lock_folder(settings.data_dir, "graphtwin serve")  # before anything of a live service is touched
+    try:
+        brick_classes = official_brick_classes(settings.brick_ontology) if settings.brick_ontology is not None else None
+        store = store if store is not None else _open_store(settings)
+        records = JobRecords(settings.jobs_dir)
+        interrupted = records.mark_interrupted()
+        if interrupted:
+            log.warning("%d job(s) were interrupted by the last stop: %s", len(interrupted), ", ".join(interrupted))
+        uploads = MeasurementUploads(settings.measurements_dir)
+        executor = job_executor(settings.executor, max_workers=settings.job_workers)
+    except BaseException:
+        data_lock.close()
+        raise
     runner = JobRunner(store, records, JOB_KINDS, max_workers=settings.job_workers, locate_measurements=uploads.locate,
                        executor=executor)
     query_pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="graphtwin-sparql")
@@ -59,8 +65,9 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     @asynccontextmanager
     async def lifespan(app: FastAPI):
         yield
-        runner.shutdown(wait=True)
+        runner.shutdown(interrupt=True)  # a stopping service ends now: running jobs are marked interrupted
         query_pool.shutdown(wait=False, cancel_futures=True)
+        data_lock.close()
 
     app = FastAPI(
         title="graphtwin", version=__version__, lifespan=lifespan,

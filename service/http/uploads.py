@@ -20,14 +20,19 @@ from service.model.assembly import assemble
 __all__ = ["MeasurementUploads"]
 
 _UPLOAD_ID = re.compile(r"^[0-9a-f]{16}$")
+_TEMPORARY_PREFIX = ".upload-"  # an upload being validated, renamed to <id>.csv when kept
 
 
 class MeasurementUploads:
     """Validated measurement CSVs: ``<root>/<model>/<id>.csv`` with ``<id>.json`` describing them."""
 
     def __init__(self, root: Path):
+        """:param root: the uploads' folder (created if missing); a half-written upload a stopped
+            service left there is removed."""
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
+        for leftover in self.root.glob(f"*/{_TEMPORARY_PREFIX}*"):
+            leftover.unlink(missing_ok=True)
 
     def save(self, store: GraphStore, model_name: str, data: bytes, *, allow_gaps: bool = False) -> dict:
         """Validate ``data`` against ``model_name``'s assembled model and keep it.
@@ -44,7 +49,7 @@ class MeasurementUploads:
         folder = self.root / model_name
         folder.mkdir(parents=True, exist_ok=True)
         upload_id = uuid.uuid4().hex[:16]
-        handle, temporary = tempfile.mkstemp(dir=folder, prefix=".upload-", suffix=".csv")
+        handle, temporary = tempfile.mkstemp(dir=folder, prefix=_TEMPORARY_PREFIX, suffix=".csv")
         try:
             with os.fdopen(handle, "wb") as out:
                 out.write(data)

@@ -12,11 +12,11 @@ is dropped) and its results are discarded. Design: ``docs/http.md``.
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 import time
 import uuid
 from collections.abc import Callable, Mapping
-from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 from service.calibration.run import model_version
@@ -77,8 +77,14 @@ class JobRunner:
         self.locate_measurements, self.executor = locate_measurements, executor
         self._lock = threading.RLock()
         self._jobs = {r.id: r for r in records.all()}
-        self._futures: dict[str, Future] = {}
-        self._executor = ThreadPoolExecutor(max_workers=max_workers, thread_name_prefix="graphtwin-job")
+        self._queue: queue.SimpleQueue[str | None] = queue.SimpleQueue()
+        self._stopping = False
+        # daemon threads: a service told to stop does not wait for a job's work to end (its record says
+        # interrupted, its pool process is terminated), as a non-daemon pool thread would make it
+        self._threads = [threading.Thread(target=self._take_jobs, name=f"graphtwin-job-{i}", daemon=True)
+                         for i in range(max_workers)]
+        for thread in self._threads:
+            thread.start()
 
     # ------------------------------------------------------------------ reading
     def get(self, job_id: str) -> JobRecord | None:
@@ -107,9 +113,11 @@ class JobRunner:
         record = JobRecord(id=uuid.uuid4().hex, kind=kind, params=json_safe(request.model_dump(mode="json")),
                            resubmitted_from=resubmitted_from)
         with self._lock:
+            if self._stopping:
+                raise JobStateError("the service is stopping: resubmit the job when it runs again")
             self._jobs[record.id] = record
             self.records.save(record)
-            self._futures[record.id] = self._executor.submit(self._run, record.id)
+            self._queue.put(record.id)
         return self.get(record.id)
 
     def resubmit(self, job_id: str) -> JobRecord:
@@ -135,8 +143,7 @@ class JobRunner:
                 raise NotFoundError(f"no job {job_id!r}")
             if record.status not in ACTIVE:
                 raise JobStateError(f"job {job_id} has already ended ({record.status})")
-            future = self._futures.get(job_id)
-            if record.status == JobStatus.QUEUED and future is not None and future.cancel():
+            if record.status == JobStatus.QUEUED:  # a job thread takes it and finds it ended
                 record.status, record.finished = JobStatus.CANCELLED, now()
                 record.progress.append({"time": now(), "message": "cancelled before it started"})
             else:
@@ -145,20 +152,27 @@ class JobRunner:
             self.records.save(record)
         return self.get(job_id)
 
-    def shutdown(self, wait: bool = True) -> None:
-        """Stop taking jobs: queued ones are marked ``interrupted``; with ``wait``, running ones end first."""
-        self._executor.shutdown(wait=False, cancel_futures=True)
+    def shutdown(self, wait: bool = True, *, interrupt: bool = False) -> None:
+        """Stop taking jobs: queued ones are marked ``interrupted``. Running ones end first (``wait``:
+        this call waits for them), or with ``interrupt`` are marked ``interrupted`` at once, their
+        shipped work dropped (a pool process terminated) and their results, should their thread still
+        finish, discarded: what a service told to stop does."""
         with self._lock:
-            for job_id, future in self._futures.items():
-                record = self._jobs[job_id]
-                if future.cancelled() and record.status == JobStatus.QUEUED:
+            self._stopping = True
+            for record in self._jobs.values():
+                if record.status == JobStatus.QUEUED or (interrupt and record.status == JobStatus.RUNNING):
+                    when = "before the job started" if record.status == JobStatus.QUEUED else "while the job ran"
                     record.status, record.finished = JobStatus.INTERRUPTED, now()
-                    record.error = "the service stopped before the job started; resubmit it"
+                    record.error, record.cancel_requested = f"the service stopped {when}; resubmit it", True
                     self.records.save(record)
-        if wait:
-            self._executor.shutdown(wait=True)
+        for _ in self._threads:
+            self._queue.put(None)
+        if interrupt or wait:
             if self.executor is not None:
                 self.executor.shutdown()
+        if wait and not interrupt:
+            for thread in self._threads:
+                thread.join()
 
     # ------------------------------------------------------------------ internals
     def _request(self, record: JobRecord) -> JobRequest:
@@ -187,6 +201,11 @@ class JobRunner:
                     "with another version name")
         return None
 
+    def _take_jobs(self) -> None:
+        """A job thread: runs queued jobs until :meth:`shutdown`."""
+        while (job_id := self._queue.get()) is not None:
+            self._run(job_id)
+
     def _progress(self, job_id: str, message: str) -> None:
         with self._lock:
             record = self._jobs[job_id]
@@ -194,8 +213,11 @@ class JobRunner:
             self.records.save(record)
 
     def _finish(self, job_id: str, status: str, *, error: str | None = None, message: str | None = None) -> None:
+        """End a job's record; a job the service's stop interrupted stays interrupted."""
         with self._lock:
             record = self._jobs[job_id]
+            if record.status == JobStatus.INTERRUPTED:
+                return
             record.status, record.finished, record.error = status, now(), error
             if message:
                 record.progress.append({"time": record.finished, "message": message})
@@ -253,17 +275,16 @@ class JobRunner:
             if record.cancel_requested:
                 self._finish(job_id, JobStatus.CANCELLED, message="cancelled; the results were discarded")
                 return
-            conflict = self._conflict(request, before, writes)
-            if conflict:
-                self._finish(job_id, JobStatus.FAILED, error=conflict, message="failed; nothing was written")
-                return
-            record.result = json_safe(outcome.result)
             try:
+                conflict = self._conflict(request, before, writes)
+                if conflict:
+                    self._finish(job_id, JobStatus.FAILED, error=conflict, message="failed; nothing was written")
+                    return
                 writes.commit()
-            except Exception as exc:
+            except Exception as exc:  # the store failed after the work was done (an endpoint gone)
                 log.exception("job %s (%s) could not write its results", job_id, kind)
-                record.result = None
-                self._finish(job_id, JobStatus.FAILED, error=f"writing the results failed: {exc}")
+                self._finish(job_id, JobStatus.FAILED, error=f"writing the results failed: {exc}",
+                             message="failed; nothing was written")
                 return
-            record.links = dict(outcome.links)
+            record.result, record.links = json_safe(outcome.result), dict(outcome.links)
             self._finish(job_id, JobStatus.SUCCEEDED, message="results written to the store")

@@ -8,7 +8,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from service.calibration.run import CalibrationOutcome, calibrate
+from service.calibration.model_data import DEFAULT_GP_INPUTS
+from service.calibration.run import CalibrationOutcome, calibrate, prepare_calibration
 from service.data.windows import parse_window
 from service.graph.store import GraphStore
 from service.model.assembled_model import AssembledModel
@@ -19,7 +20,7 @@ from service.workflows.requests import CalibrateRequest, DiagnoseRequest
 if TYPE_CHECKING:  # the diagnosis (SciPy, scikit-learn, the effect catalog) loads only when one runs
     from service.diagnosis.report import DiagnosisReport
 
-__all__ = ["assemble_model", "calibrate_model", "diagnose_model", "result_links"]
+__all__ = ["assemble_model", "calibrate_model", "diagnose_model", "check_fit_request", "result_links"]
 
 
 def assemble_model(store: GraphStore, model: str, *, max_complexity: int | None = None) -> AssembledModel:
@@ -51,6 +52,26 @@ def diagnose_model(store: GraphStore, request: DiagnoseRequest, data: Path, *,
     return diagnose(store, request.model, data, train=parse_window(request.train), test=parse_window(request.test),
                     seed=request.seed, on_progress=on_progress, workers=workers, only_when=request.only_when,
                     start_from=request.start_from, rank_effects=rank_effects)
+
+
+def check_fit_request(store: GraphStore, request: CalibrateRequest | DiagnoseRequest, data: Path, *,
+                      data_name: str | None = None) -> None:
+    """What can be checked of a calibration or diagnosis before it runs, as its run checks it: the
+    model assembles, the data fit it, the windows lie inside the data and hold enough steps, the
+    operating conditions and the GP inputs name columns, the model it starts from has a calibration
+    (:func:`~service.calibration.run.prepare_calibration`; ``data_name``: what messages call ``data``).
+
+    :raises GraphtwinError: the first problem found.
+    """
+    from service.diagnosis.loop import MIN_TEST_STEPS
+
+    diagnosis = isinstance(request, DiagnoseRequest)
+    prepare_calibration(store, request.model, data, train=parse_window(request.train),
+                        test=parse_window(request.test) if request.test else None,
+                        method="point" if diagnosis else request.method, only_when=request.only_when,
+                        min_test_steps=MIN_TEST_STEPS if diagnosis else 1,
+                        gp_inputs=DEFAULT_GP_INPUTS if diagnosis else request.gp_inputs,
+                        start_from=request.start_from, data_name=data_name)
 
 
 def result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:

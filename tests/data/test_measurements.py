@@ -283,3 +283,19 @@ def test_a_window_is_given_on_the_datas_clock(tmp_path):
     assert not local.utc and local.window("2017-09-20T02:00", "2017-09-20T05:00") == slice(2, 6)
     with pytest.raises(ValueError, match=r"give their time stamps without a UTC offset \(local time\); give it without an offset"):
         local.window(None, "2017-09-20T05:00Z")
+
+
+def test_a_glitched_time_stamp_is_refused_by_line_before_any_grid_is_built(tmp_path):
+    """A BMS export's last stamp in year 9999 made the reader build a grid from 2025 to 9999 at the
+    median step (17.8 GB before the server was killed); it is refused by line instead, as is a jump
+    in time that would leave the grid mostly empty."""
+    rows = "".join(f"2025-01-01 {h:02d}:{m:02d},20,50\n" for h in range(3) for m in range(0, 60, 10))
+    with pytest.raises(MeasurementError, match=r"line 20, column 'time': time stamp '9999-12-31 23:50' lies outside "
+                                               r"the years 1970–2100"):
+        read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows + "9999-12-31 23:50,20,50\n"), SPECS)
+    with pytest.raises(MeasurementError, match=r"line 20: the time stamps jump from 2025-01-01T02:50:00 to "
+                                               r"2060-01-01T00:00:00 \(1.84e\+06 steps of 600 s\): on a regular grid the "
+                                               r"19 rows would stand for 1840753 steps"):
+        read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows + "2060-01-01 00:00,20,50\n"), SPECS)
+    gap = read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows + "2025-01-01 05:00,20,50\n"), SPECS)
+    assert gap.n_steps == 31  # a gap of hours is resampled as before, left a gap

@@ -14,7 +14,7 @@ from fastapi.testclient import TestClient
 from shared_data import OFFICIAL_BRICK
 
 from service.data.model_series import series_specs
-from service.errors import StoreUnavailableError
+from service.errors import StoreInUseError, StoreUnavailableError
 from service.graph.store import GraphStore
 from service.http import sparql_protocol
 from service.http.app import create_app
@@ -77,7 +77,8 @@ def test_the_brick_report_of_a_model_is_served(client, auth, settings, store):
     assert client.get("/models/nope/brick-report").status_code == 404
     if not OFFICIAL_BRICK.is_file():
         pytest.skip(f"the official Brick.ttl is not at {OFFICIAL_BRICK} (../shared): the rest needs it")
-    official = settings.model_copy(update={"brick_ontology": OFFICIAL_BRICK})
+    official = settings.model_copy(update={"brick_ontology": OFFICIAL_BRICK,  # a second service: its own data dir
+                                           "data_dir": settings.data_dir.parent / "informed"})
     with TestClient(create_app(official, store=store)) as informed:
         report = informed.get("/models/brick/brick-report").json()
     classes = {c["class_iri"].rsplit("#", 1)[1]: c["needed"] for c in report["unaligned_classes"]}
@@ -173,12 +174,15 @@ def _bad_csv(case_csv, problem: str) -> str:
         rows[6][0] = rows[5][0]
     elif problem == "not a number":
         rows[4][2] = "warm"
+    elif problem == "glitched stamp":  # as BMS exports write one: the last row in year 9999
+        rows[-1][0] = "9999-12-31T23:50:00"
     return _csv_text(rows)
 
 
 @pytest.mark.parametrize("problem, expected", [
     ("extra field", "line 4: "), ("NaN", "without a value"), ("unsorted", "before the previous one"),
     ("duplicate", "duplicate time stamp"), ("not a number", "'warm' is not a number"),
+    ("glitched stamp", "lies outside the years 1970–2100"),
 ])
 def test_bad_measurements_are_refused_with_every_problem_and_change_nothing(client, auth, case_csv, store, snapshot,
                                                                            settings, problem, expected):
@@ -187,6 +191,18 @@ def test_bad_measurements_are_refused_with_every_problem_and_change_nothing(clie
     assert response.status_code == 422
     assert any(expected in p for p in response.json()["problems"]), response.json()
     assert snapshot(store) == before and not list(settings.measurements_dir.rglob("*.csv"))
+
+
+def test_an_upload_a_stopped_service_left_half_written_is_removed_at_start(settings, store):
+    """A service killed while it validated an upload leaves its temporary file; the next start removes
+    it (a kept upload and its description stay)."""
+    folder = settings.measurements_dir / "case"
+    folder.mkdir(parents=True)
+    (folder / ".upload-abc123.csv").write_text("time,x\n")
+    (folder / "0123456789abcdef.csv").write_text("time,x\n")
+    (folder / "0123456789abcdef.json").write_text("{}")
+    with TestClient(create_app(settings, store=store)):
+        assert sorted(p.name for p in folder.iterdir()) == ["0123456789abcdef.csv", "0123456789abcdef.json"]
 
 
 def test_a_model_and_an_upload_are_deleted_and_runs_stay(client, auth, case_csv, store, settings):
@@ -488,10 +504,11 @@ def test_assemble_and_add_effect_jobs_write_their_results(client, auth, store, w
         "model": "case", "effect": "ValveLeakage", "target": EX + "heating_valve", "version": "case-leak"}).json()["id"])
     assert named["status"] == "succeeded" and named["result"]["model"] == "case-leak", named
 
-    job = wait_job(client, client.post("/jobs/add-effect", headers=auth, json={
-        "model": "case", "effect": "FanMotorHeat", "target": EX + "heating_valve"}).json()["id"])
-    assert job["status"] == "failed" and "does not apply" in job["error"]
-    assert "case+FanMotorHeat" not in store.models()
+    jobs_before = len(client.get("/jobs").json()["data"])
+    refused = client.post("/jobs/add-effect", headers=auth, json={
+        "model": "case", "effect": "FanMotorHeat", "target": EX + "heating_valve"})
+    assert refused.status_code == 422 and "does not apply" in refused.json()["detail"]  # checked at submission
+    assert len(client.get("/jobs").json()["data"]) == jobs_before and "case+FanMotorHeat" not in store.models()
 
 
 def test_a_queued_job_is_cancelled_at_once_and_a_running_one_is_discarded(client, auth, store, wait_job):
@@ -619,3 +636,36 @@ def test_settings_never_show_the_token():
         Settings(token="seven77")
     assert "seven77" not in str(refused.value) and "8 non-blank characters" in str(refused.value)
     assert "a-long-secret" not in repr(Settings(token="a-long-secret"))
+
+
+@pytest.mark.parametrize("kind, fields, expected", [
+    ("calibrate", {"train": "2030-01-01/2030-01-02"}, "window 2030-01-01T00:00:00 – 2030-01-02T00:00:00 lies outside "
+                                                        "the data upload {upload}"),
+    ("calibrate", {"method": "bayes", "gp_inputs": ["time", "supply_air_flw"]}, "supply_air_flw"),
+    ("calibrate", {"gp_inputs": ["time", "supply_air_flow"]}, "a point calibration has no discrepancy"),
+    ("calibrate", {"only_when": ["no_such_column > 1"]}, "no_such_column"),
+    ("diagnose", {"train": "/2026-01-12T15:50", "test": "2026-01-12T16:00/2026-01-12T16:30"}, "at least 12 are needed"),
+])
+def test_what_a_fit_would_refuse_is_refused_at_submission(client, auth, case_csv, kind, fields, expected):
+    """A window outside the data, an unknown GP input or column, a test window too short: 422 naming
+    the upload (not the server's path), and no job queued (before, 202 and a job that failed later)."""
+    upload = _upload_csv(client, auth, case_csv.read_text()).json()["id"]
+    body = {"model": "case", "measurements": upload, "train": "/2026-01-12T15:50", "test": "2026-01-12T16:00/", **fields}
+    refused = client.post(f"/jobs/{kind}", headers=auth, json=body)
+    assert refused.status_code == 422, refused.json()
+    assert expected.format(upload=upload) in refused.json()["detail"] and "/measurements/" not in refused.json()["detail"]
+    assert client.get("/jobs").json()["count"] == 0
+
+
+def test_a_second_service_on_the_same_data_directory_refuses_to_start_and_touches_nothing(settings, store):
+    """A second `graphtwin serve` on a live service's data directory failed to bind its port, but on
+    the way marked the live service's running job interrupted on disk (with an external store nothing
+    else stopped it)."""
+    with TestClient(create_app(settings, store=store)):
+        running = JobRecord(id="ef" * 16, kind="assemble", params={"model": "case"}, status="running")
+        JobRecords(settings.jobs_dir).save(running)
+        with pytest.raises(StoreInUseError, match=r"is in use by graphtwin serve \(pid \d+\): one graphtwin serve per folder"):
+            create_app(settings, store=GraphStore.embedded(None))
+        assert JobRecords(settings.jobs_dir).load(running.id).status == "running"
+    with TestClient(create_app(settings, store=store)):  # the first one's stop released the directory
+        assert JobRecords(settings.jobs_dir).load(running.id).status == "interrupted"

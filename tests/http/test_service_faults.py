@@ -139,3 +139,32 @@ def test_a_server_killed_mid_job_restarts_with_finished_results_intact_and_the_j
     assert redone["status"] == "succeeded", redone
     assert {p["run"]["value"].rsplit("/", 1)[-1] for p in second.calibrated_parameters()} == {redone["result"]["run_id"]}
     assert set(second.graph_sizes()) == set(sizes) | {redone["links"]["run_graph"]}
+
+
+@pytest.mark.slow  # one server start, one calibration of four days started and stopped: ~15 s
+def test_sigterm_with_a_job_running_marks_it_interrupted_and_the_server_exits_within_seconds(servers, tmp_path):
+    """Before, the server stopped serving on SIGTERM but waited for the running job to end (it had to
+    be killed); now the job is marked interrupted, its pool process ended, and the server exits."""
+    from service.jobs.records import JobRecords
+
+    server = servers()
+    assert server.client.put("/models/case", content=CASE_STUDY.read_bytes(), headers=AUTH).status_code == 201
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    days = tmp_path / "four_days.csv"
+    generate_synthetic_data(store, "case", days, library=SignatureLibrary.load(), n_days=4)
+    upload = server.client.post("/models/case/measurements", content=days.read_bytes(),
+                                headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
+    job = server.client.post("/jobs/calibrate", headers=AUTH, json={"model": "case", "measurements": upload,
+                                                                     "seed": 1}).json()
+    deadline = time.monotonic() + 30
+    while not any(p["message"].startswith("sent to a local process pool")
+                  for p in server.client.get(f"/jobs/{job['id']}").json()["progress"]):
+        assert time.monotonic() < deadline, "the job did not reach the process pool"
+        time.sleep(0.02)
+    os.kill(server.process.pid, signal.SIGTERM)  # the server alone, as a process manager stops it
+    began = time.monotonic()
+    server.process.wait(timeout=20)
+    assert time.monotonic() - began < 10, "the server waited for its job"
+    record = JobRecords(tmp_path / "service" / "jobs").load(job["id"])
+    assert record.status == "interrupted" and "while the job ran" in record.error

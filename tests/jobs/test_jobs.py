@@ -14,7 +14,7 @@ import pyoxigraph as ox
 import pytest
 from pydantic import ConfigDict
 
-from service.errors import InputError, NotFoundError
+from service.errors import InputError, NotFoundError, StoreUnavailableError
 from service.graph.backend import EmbeddedBackend
 from service.graph.store import GraphStore
 from service.jobs.deferred_writes import DeferredWrites
@@ -391,3 +391,62 @@ def test_result_links_quote_a_model_name_with_a_plus():
     links = result_links(GraphStore.embedded(None), "case+FanMotorHeat", "r1")
     assert links["calibrated_parameters"] == "/queries/calibrated-parameters?model=case%2BFanMotorHeat"
     assert links["sensor_metrics"] == "/queries/sensor-metrics?model=case%2BFanMotorHeat"
+
+
+class FailingAfterWork(EmbeddedBackend):
+    """A backend whose store stops answering once ``fail`` is set (an external endpoint gone)."""
+
+    def __init__(self):
+        super().__init__(None)
+        self.fail = False
+
+    def graphs(self):
+        if self.fail:
+            raise StoreUnavailableError("the endpoint http://store:7878 answered 502")
+        return super().graphs()
+
+
+def test_a_store_that_fails_after_the_work_is_done_fails_the_job_with_the_cause(records, runners):
+    """Before, the check that the model had not changed ran outside the job's error handling: the job
+    stayed running for good, neither cancellable nor resubmittable."""
+    backend = FailingAfterWork()
+    store = GraphStore(backend)
+
+    def work(job_store, request, context):
+        job_store.write_graph(G1, [_triple(ox.NamedNode(EX + "a"), "x")])
+        backend.fail = True
+        return JobResult({})
+
+    runner = runners(store, records, _kinds(work=work))
+    done = _wait(runner, runner.submit("work", Work()).id)
+    assert done.status == "failed" and "answered 502" in done.error, done
+    backend.fail = False
+    assert backend.graphs() == [] and runner.resubmit(done.id).status in ("queued", "running")
+
+
+def test_an_interrupting_shutdown_marks_running_and_queued_jobs_and_returns_at_once(records):
+    """A service told to stop (SIGTERM) does not wait for a job's work: the running job and the queued
+    one are marked interrupted (resubmit them), and what the running work still returns is dropped."""
+    store = GraphStore.embedded(None)
+    started, release = threading.Event(), threading.Event()
+
+    def block(job_store, request, context):
+        started.set()
+        release.wait(30)
+        job_store.write_graph(G1, [_triple(ox.NamedNode(EX + "a"), "late")])
+        return JobResult({"late": True})
+
+    runner = JobRunner(store, records, _kinds(block=block))
+    running, queued = runner.submit("block", Work()), None
+    assert started.wait(10)
+    queued = runner.submit("block", Work())
+    began = time.monotonic()
+    runner.shutdown(interrupt=True)
+    assert time.monotonic() - began < 1.0
+    for job, when in ((running, "while the job ran"), (queued, "before the job started")):
+        assert records.load(job.id).status == "interrupted" and when in records.load(job.id).error
+    with pytest.raises(JobStateError, match="stopping"):
+        runner.submit("block", Work())
+    release.set()
+    time.sleep(0.3)  # the abandoned work ends: its results are not written, its record stays interrupted
+    assert store.backend.graphs() == [] and records.load(running.id).status == "interrupted"

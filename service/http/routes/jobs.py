@@ -12,8 +12,9 @@ from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, requ
 from service.http.errors import error_responses
 from service.http.schemas import JobList, JobPublic
 from service.jobs.records import JobRecord
-from service.workflows.effects import check_effect_version
+from service.workflows.effects import check_effect_version, checked_effect_triples
 from service.workflows.requests import AddEffectRequest, AssembleRequest, CalibrateRequest, DiagnoseRequest, JobRequest
+from service.workflows.runs import check_fit_request
 
 __all__ = ["router"]
 
@@ -34,6 +35,13 @@ def _job(service: Service, job_id: str) -> JobRecord:
     return record
 
 
+def _check_fit(service: Service, request: CalibrateRequest | DiagnoseRequest) -> None:
+    """404 for a model, start model or upload that does not exist; 422 for what the run would refuse."""
+    require_fit_models(service, request)
+    check_fit_request(service.store, request, service.uploads.locate(request.measurements),
+                      data_name=f"upload {request.measurements}")
+
+
 def _submit(service: Service, kind: str, request: JobRequest, response: Response) -> dict:
     record = service.runner.submit(kind, request)
     response.headers["Location"] = f"/jobs/{record.id}"
@@ -51,16 +59,18 @@ def submit_assemble(body: AssembleRequest, response: Response, service: ServiceD
 @router.post("/jobs/calibrate", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
              responses=_JOB_ERRORS)
 def submit_calibrate(body: CalibrateRequest, response: Response, service: ServiceDep) -> dict:
-    """Calibrate a model against a measurement upload; estimates and metrics go to a run graph."""
-    require_fit_models(service, body)
+    """Calibrate a model against a measurement upload; estimates and metrics go to a run graph.
+    The request is checked as the run would check it before anything is queued."""
+    _check_fit(service, body)
     return _submit(service, "calibrate", body, response)
 
 
 @router.post("/jobs/diagnose", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
              responses=_JOB_ERRORS)
 def submit_diagnose(body: DiagnoseRequest, response: Response, service: ServiceDep) -> dict:
-    """Calibrate on train, compare on test, locate the failures and rank the missing effects."""
-    require_fit_models(service, body)
+    """Calibrate on train, compare on test, locate the failures and rank the missing effects. The
+    request is checked as the run would check it before anything is queued."""
+    _check_fit(service, body)
     return _submit(service, "diagnose", body, response)
 
 
@@ -68,7 +78,8 @@ def submit_diagnose(body: DiagnoseRequest, response: Response, service: ServiceD
              responses=error_responses(401, 403, 404, 409, 422))
 def submit_add_effect(body: AddEffectRequest, response: Response, service: ServiceDep) -> dict:
     """Record an effect at a building node as a new model version (``version``, by default
-    ``<model>+<effect>``); 409 when that version exists with other effects."""
+    ``<model>+<effect>``); 409 when that version exists with other effects, 422 when the effect does
+    not apply at the node."""
     require_model(service.store, body.model)
     library = SignatureLibrary.load()
     library.effect(body.effect)
@@ -77,6 +88,7 @@ def submit_add_effect(body: AddEffectRequest, response: Response, service: Servi
     except ValueError as exc:
         raise InputError(f"target {body.target!r} is not an IRI: {exc}") from None
     check_effect_version(service.store, body, library)
+    checked_effect_triples(service.store, body.model, body.effect, body.target, library)
     return _submit(service, "add-effect", body, response)
 
 
