@@ -43,6 +43,8 @@ class Settings(BaseSettings):
     token: SecretStr | None = None
     open_reads: bool = True
     max_upload_bytes: int = Field(default=50 * 1024 * 1024, gt=0)
+    max_query_bytes: int = Field(default=1024 * 1024, gt=0)
+    max_request_bytes: int = Field(default=64 * 1024, gt=0)
     query_timeout_s: float = Field(default=30.0, gt=0)
     max_result_rows: int = Field(default=100_000, gt=0)
     executor: str = "processes"

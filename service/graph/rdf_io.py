@@ -76,6 +76,8 @@ def _parsed(data: bytes, fmt: ox.RdfFormat, source_name: str, base_iri: str | No
         raise ModelLoadError(source_name, message, exc.lineno, exc.offset) from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise ModelLoadError(source_name, str(exc)) from None
+    except MemoryError as exc:  # pyoxigraph's bound on one token or comment ("Reached the buffer maximal size")
+        raise ModelLoadError(source_name, f"a token or comment too long to parse ({exc})") from None
 
 
 def _check_well_formed_xml(data: bytes, source_name: str) -> None:

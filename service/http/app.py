@@ -16,6 +16,7 @@ from service import __version__
 from service.graph.store import GraphStore
 from service.http.deps import Service
 from service.http.errors import EXCEPTION_HANDLERS, error_responses
+from service.http.gate import RequestGate
 from service.http.routes import jobs, models, reports, sparql
 from service.http.uploads import MeasurementUploads
 from service.jobs.executors import job_executor
@@ -77,6 +78,7 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     app.state.graphtwin = Service(settings, store, runner, uploads, query_pool, brick_classes)
     for error, handler in EXCEPTION_HANDLERS.items():
         app.add_exception_handler(error, handler)
+    app.add_middleware(RequestGate, settings=settings)
     for routes in (models, sparql, jobs, reports):
         app.include_router(routes.router, responses=error_responses(422))  # every validation error has the ErrorBody shape
     return app

@@ -118,3 +118,12 @@ def test_skolemize_skips_the_iris_the_triples_and_earlier_names_hold():
     assert skolemize([ox.Triple(a, p, b)], prefix, names) == [ox.Triple(ox.NamedNode(prefix + "0"), p, ox.NamedNode(prefix + "1"))]
     assert skolemize([ox.Triple(c, p, a), ox.Triple(ox.NamedNode(prefix + "2"), p, c)], prefix, names)[0] == ox.Triple(
         ox.NamedNode(prefix + "3"), p, ox.NamedNode(prefix + "0"))
+
+
+def test_a_comment_longer_than_the_parsers_buffer_is_a_load_error_and_changes_nothing(store):
+    """A 20 MiB Turtle document that is one long comment: pyoxigraph's buffer bound raised a
+    MemoryError, which the service answered with 500."""
+    before = _snapshot(store)
+    with pytest.raises(ModelLoadError, match=r"model m: a token or comment too long to parse \(Reached the buffer"):
+        store.load_model("m", b"#" + b"x" * (20 * 1024 * 1024) + b"\n", "ttl", source_name="model m")
+    assert _snapshot(store) == before

@@ -669,3 +669,20 @@ def test_a_second_service_on_the_same_data_directory_refuses_to_start_and_touche
         assert JobRecords(settings.jobs_dir).load(running.id).status == "running"
     with TestClient(create_app(settings, store=store)):  # the first one's stop released the directory
         assert JobRecords(settings.jobs_dir).load(running.id).status == "interrupted"
+
+
+def test_a_write_without_its_token_and_an_oversize_body_are_refused_before_the_body_is_read(client, auth, settings):
+    """A 200 MiB JSON body to /jobs/calibrate without a token was buffered and parsed for 9 s before
+    its 401; a 48 MiB query of comment lines was read and parsed. Now the token is checked and the
+    body held to its route's limit before the body is read (a body that is no JSON at all shows it:
+    it is refused for the token or its size, not for its syntax)."""
+    junk = b"{" * (settings.max_request_bytes + 1)
+    refused = client.post("/jobs/calibrate", content=junk, headers={"Content-Type": "application/json"})
+    assert refused.status_code == 401 and "bearer token" in refused.json()["detail"]
+    too_big = client.post("/jobs/calibrate", content=junk, headers={**auth, "Content-Type": "application/json"})
+    assert too_big.status_code == 413 and f"the limit here is {settings.max_request_bytes}" in too_big.json()["detail"]
+    query = b"#" * (settings.max_query_bytes + 1) + b"\nASK {}"
+    assert client.post("/sparql", content=query, headers={"Content-Type": "application/sparql-query"}).status_code == 413
+    ask = client.post("/sparql", content=b"ASK {}", headers={"Content-Type": "application/sparql-query"})
+    assert ask.status_code == 200 and ask.json()["boolean"] is True
+    assert client.put("/models/x", content=b"#" * 10, headers={"Content-Type": "text/turtle"}).status_code == 401

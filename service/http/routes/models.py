@@ -10,7 +10,7 @@ from fastapi.concurrency import run_in_threadpool
 from service.graph.backend import EmbeddedBackend
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
-from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, read_body, require_model
+from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, require_model
 from service.http.errors import ApiError, error_responses
 from service.http.schemas import (
     BrickReportPublic,
@@ -102,7 +102,7 @@ def get_brick_report(name: str, service: ServiceDep) -> dict:
 async def put_model(name: str, request: Request, response: Response, service: ServiceDep) -> dict:
     """Upload or replace building model ``name`` (its named graph; alignment runs at once).
     201 when new, 200 when replaced."""
-    data = await read_body(request, service.settings.max_upload_bytes)
+    data = await request.body()  # held to the route's limit by the request gate
     uploaded = await run_in_threadpool(_load_model, service.store, name, data, request.headers.get("content-type"))
     response.status_code = 200 if uploaded["replaced"] else 201
     return uploaded
@@ -119,7 +119,7 @@ async def post_measurements(name: str, request: Request, service: ServiceDep,
                             allow_gaps: Annotated[bool, Query(description="accept values missing over long gaps")] = False) -> dict:
     """Upload measurements (CSV, docs/data.md: the data contract) for model ``name``; the id names
     them in jobs."""
-    data = await read_body(request, service.settings.max_upload_bytes)
+    data = await request.body()  # held to the route's limit by the request gate
     return await run_in_threadpool(_save_measurements, service, name, data, allow_gaps)
 
 

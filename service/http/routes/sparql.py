@@ -15,7 +15,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from service.graph.sparql_writes import written_graphs
 from service.graph.store import GraphStore
-from service.http.deps import ReadAccess, ServiceDep, WriteAccess, read_body, require_model
+from service.http.deps import ReadAccess, ServiceDep, WriteAccess, require_model
 from service.http.errors import ApiError, error_responses
 from service.http.schemas import NamedQueryList
 from service.http.sparql_protocol import SparqlQuery, answer_query, fetching_keyword, prepare_query
@@ -40,7 +40,9 @@ async def sparql_get(
     union_default_graph: Annotated[bool, Query(alias="union-default-graph")] = False,
 ) -> Response:
     """SPARQL 1.1 Protocol query by GET; read-only (results by content negotiation)."""
-    return await answer_query(service, prepare_query(query, request.headers.get("accept"), default_graph_uri, union_default_graph))
+    prepared = await run_in_threadpool(prepare_query, query, request.headers.get("accept"), default_graph_uri,
+                                       union_default_graph)  # read off the event loop: /health answers meanwhile
+    return await answer_query(service, prepared)
 
 
 @router.post("/sparql", tags=["sparql"], dependencies=[ReadAccess], responses=_SPARQL_ERRORS,
@@ -51,7 +53,7 @@ async def sparql_post(
     union_default_graph: Annotated[bool, Query(alias="union-default-graph")] = False,
 ) -> Response:
     """SPARQL 1.1 Protocol query by POST (form field ``query`` or an application/sparql-query body)."""
-    body = await read_body(request, service.settings.max_upload_bytes)
+    body = await request.body()  # held to the route's limit by the request gate
     content_type = (request.headers.get("content-type") or "").split(";")[0].strip().lower()
     graphs = list(default_graph_uri)
     if content_type == "application/sparql-query":
@@ -64,12 +66,17 @@ async def sparql_post(
     else:
         raise ApiError(415, "send the query as application/sparql-query or as the form field 'query' "
                             "(application/x-www-form-urlencoded)")
-    return await answer_query(service, prepare_query(text, request.headers.get("accept"), graphs, union_default_graph))
+    prepared = await run_in_threadpool(prepare_query, text, request.headers.get("accept"), graphs, union_default_graph)
+    return await answer_query(service, prepared)
 
 
 def _update(store: GraphStore, text: str) -> None:
-    """Run the update, then derive again the inferences of every model whose graph it can have
-    changed (:func:`~service.graph.sparql_writes.written_graphs`)."""
+    """Refuse an update that would fetch other URLs; run the others, then derive again the
+    inferences of every model whose graph it can have changed
+    (:func:`~service.graph.sparql_writes.written_graphs`). On a worker thread: it reads the text."""
+    if (keyword := fetching_keyword(text)) is not None:
+        raise ApiError(403, f"{keyword} is refused here: the service would fetch other URLs on the caller's behalf; "
+                            "load data with PUT /models/NAME")
     try:
         store.update_models(text, written_graphs(text))
     except (SyntaxError, ValueError) as exc:
@@ -87,7 +94,7 @@ async def sparql_update(request: Request, service: ServiceDep) -> Response:
     """SPARQL 1.1 Update (one transaction; a syntax error changes nothing). A model whose graph it
     changes gets its inferences derived again (the alignment rules: what the signatures match) and
     loses its assembly, as a new upload does; a model graph it drops takes them with it."""
-    body = await read_body(request, service.settings.max_upload_bytes)
+    body = await request.body()  # held to the route's limit by the request gate
     content_type = (request.headers.get("content-type") or "").split(";")[0].strip().lower()
     if content_type == "application/sparql-update":
         text = body.decode("utf-8", errors="replace")
@@ -97,9 +104,6 @@ async def sparql_update(request: Request, service: ServiceDep) -> Response:
         raise ApiError(415, "send the update as application/sparql-update or as the form field 'update'")
     if not text.strip():
         raise ApiError(400, "no update given")
-    if (keyword := fetching_keyword(text)) is not None:
-        raise ApiError(403, f"{keyword} is refused here: the service would fetch other URLs on the caller's behalf; "
-                            "load data with PUT /models/NAME")
     await run_in_threadpool(_update, service.store, text)
     return Response(status_code=204)
 
