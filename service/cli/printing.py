@@ -54,7 +54,7 @@ def print_calibration(record: CalibrationRecord) -> None:
     for column in ("component", "parameter", "estimate", "16–84 %", "unit", "identified"):
         table.add_column(column, overflow="fold")
     for e in record.estimates:
-        table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", e.unit,
+        table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", unit_label(e.unit),
                       "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(r"\1.\2", "; ".join(e.reasons)))
     console.print(table)
     if record.diagnostics.start is not None:

@@ -17,7 +17,7 @@ import numpy as np
 
 from service.errors import UnitError
 
-__all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label"]
+__all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -98,11 +98,19 @@ def unit_spec(unit: str, *, where: str = "") -> UnitSpec:
 
 
 def unit_label(unit: str) -> str:
-    """Short label for reports (``°F``, ``m³/s``); the unit text itself when unknown."""
+    """Short label for reports (``°F``, ``m³/s``; nothing for a plain number, a fraction's ``1``);
+    the unit text itself when unknown."""
     try:
-        return unit_spec(unit).label or unit
+        spec = unit_spec(unit)
     except UnitError:
         return unit
+    return "" if spec.label == "1" else spec.label or unit
+
+
+def bracketed_unit(unit: str) -> str:
+    """An axis's unit, ``[°C]``; nothing for a plain number."""
+    label = unit_label(unit)
+    return f"[{label}]" if label else ""
 
 
 def convert(values: Sequence[float] | np.ndarray, from_unit: str, to_unit: str, *, where: str = "") -> np.ndarray:

@@ -40,6 +40,7 @@ def diagnose_job(store: GraphStore, request: DiagnoseRequest, context: WorkConte
     report = diagnose_model(store, request, data, on_progress=context.report, workers=1)
     links = result_links(store, request.model, report.run_id)
     links["diagnosis_graph"] = store.run_graph(f"{report.run_id}-diagnosis").value
+    links["report"] = f"/runs/{report.run_id}-diagnosis/report"  # the diagnosis's page: fit, failures, effects
     return JobResult(report.to_dict(), links)
 
 

@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from service.graph.units import unit_label  # noqa: E402
+from service.graph.units import bracketed_unit  # noqa: E402
 from service.report.plots import plot_measured_vs_model  # noqa: E402
 
 if TYPE_CHECKING:
@@ -168,7 +168,7 @@ def plot_calibration(outcome: CalibrationOutcome, folder: Path | str, truth: np.
     calibrator = outcome.calibrator
     if record.method == "bayes" and calibrator is not None:
         units = {e.key: e.unit for e in record.estimates}
-        names = [f"{parameter_label(k)}\n[{unit_label(units.get(k, ''))}]" for k in calibrator.parameter_names_]
+        names = [f"{parameter_label(k)}\n{bracketed_unit(units.get(k, ''))}".strip() for k in calibrator.parameter_names_]
         n_theta = len(names)
         paths.append(plot_trace(folder / f"{record.run_id}-trace.png", calibrator.chain_[:, :, :n_theta], names,
                                 calibrator.convergence_.burn_in))

@@ -139,7 +139,7 @@ def _estimates_section(run: StoredRun) -> str:
     """The run's parameter estimates: median and 16–84 % interval (the point fit's ±1 standard error,
     the posterior's quantiles), unit, and whether the data identified the parameter."""
     rows = [[html.escape(local_name(e.node)), html.escape(e.name), _number(e.median, 4),
-             f"{_number(e.quantile16, 4)} – {_number(e.quantile84, 4)}", html.escape(e.unit),
+             f"{_number(e.quantile16, 4)} – {_number(e.quantile84, 4)}", html.escape(unit_label(e.unit)),
              "yes" if e.identified else '<span class="bad">no</span>'] for e in run.estimates.values()]
     return ("<h2>Parameter estimates</h2>"
             + _table(["node", "parameter", "estimate", "16–84 %", "unit", "identified"], rows, "estimates"))

@@ -17,9 +17,10 @@ import numpy as np  # noqa: E402
 
 from service.diagnosis.error_history import ErrorHistory  # noqa: E402
 from service.graph.namespaces import local_name
-from service.graph.units import unit_label  # noqa: E402
+from service.graph.units import bracketed_unit  # noqa: E402
 
 __all__ = ["plot_measured_vs_model", "plot_residuals", "plot_error_history"]
+
 
 
 def _save_time_panels(fig, axes, path: Path, title: str, legend_columns: int) -> Path:
@@ -64,7 +65,7 @@ def plot_measured_vs_model(
         for (name, prediction), color in zip(models.items(), ("tab:red", "tab:green", "tab:blue")):
             ax.plot(timestamps, prediction[sensor], color=color, lw=1.0, label=name)
         ax.set_title(local_name(sensor), fontsize=8, loc="left")  # a long name as a y label ran into the next panel's
-        ax.set_ylabel(f"[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.set_ylabel(bracketed_unit(units.get(sensor, '')), fontsize=8)
         ax.grid(alpha=0.3)
     return _save_time_panels(fig, axes, path, title, legend_columns=4)
 
@@ -91,7 +92,7 @@ def plot_residuals(
         ax.axhline(0.0, color="grey", lw=0.6)
         ax.plot(timestamps, residuals[sensor], color="black", lw=0.8, label="measured − model")
         ax.set_title(local_name(sensor), fontsize=8, loc="left")  # a long name as a y label ran into the next panel's
-        ax.set_ylabel(f"[{unit_label(units.get(sensor, ''))}]", fontsize=8)
+        ax.set_ylabel(bracketed_unit(units.get(sensor, '')), fontsize=8)
         ax.grid(alpha=0.3)
     return _save_time_panels(fig, axes, path, title, legend_columns=2)
 
@@ -111,7 +112,7 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
         ax.bar(range(len(versions)), history.rmse[sensor], color=[colours(i) for i in range(len(versions))])
         ax.set_xticks(range(len(versions)), ticks, fontsize=7)
         ax.set_title(local_name(sensor), fontsize=8)
-        ax.set_ylabel(f"test RMSE [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
+        ax.set_ylabel(f"test RMSE {bracketed_unit(history.units.get(sensor, ''))}".strip(), fontsize=8)
     if rules:
         width = 0.8 / len(versions)
         for ax, sensor in zip(axes[1], sensors):
@@ -121,7 +122,7 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
                        color=colours(i), label=version)
             ax.set_xticks(range(len(rules)), [str(j) for j in range(len(rules))], fontsize=7)
             ax.set_xlabel("regime", fontsize=7)
-            ax.set_ylabel(f"RMSE per regime [{unit_label(history.units.get(sensor, ''))}]", fontsize=8)
+            ax.set_ylabel(f"RMSE per regime {bracketed_unit(history.units.get(sensor, ''))}".strip(), fontsize=8)
         handles, labels = axes[1][0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)
     if not history.comparable:

@@ -64,3 +64,11 @@ def test_labels_for_reports():
     assert unit_label(U + "DEG_F") == "°F" and unit_label("m3/s") == "m³/s"
     assert unit_label(U + "FURLONG") == U + "FURLONG"
     assert all(spec.multiplier > 0 for spec in QUDT_UNITS.values())
+
+
+def test_a_plain_number_has_no_unit_label_in_reports():
+    """A valve position (the fraction '1') printed as '0.0194 1' and plotted over '[1]'."""
+    from service.graph.units import bracketed_unit, unit_label
+
+    assert (unit_label("1"), bracketed_unit("1")) == ("", "")
+    assert (unit_label("degC"), bracketed_unit("degC"), unit_label("%"), unit_label("1/K")) == ("°C", "[°C]", "%", "1/K")

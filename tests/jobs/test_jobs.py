@@ -293,6 +293,7 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
     assert [p["message"] for p in done.progress][1:3] == ["calibrating the base model", "testing the effect catalog"]
     assert done.links["run_graph"] == store.run_graph("m-point-0123abcd").value
     assert done.links["calibrated_parameters"] == "/queries/calibrated-parameters?model=m"
+    assert done.links["report"] == "/runs/m-point-0123abcd-diagnosis/report"  # the job leads to its page
     assert store.run_graph("m-point-0123abcd") in store.backend.graphs()
 
     store.backend.drop_graph(store.run_graph("m-point-0123abcd"))

@@ -333,6 +333,8 @@ def test_the_http_route_serves_the_page_and_refuses_unknown_runs_and_missing_tok
     auth = {"Authorization": f"Bearer {TOKEN}"}
     response = report_client.get(f"/runs/{case.report.run_id}/report", headers=auth)
     assert response.status_code == 200 and response.headers["content-type"].startswith("text/html")
+    assert response.headers["content-security-policy"] == CONTENT_SECURITY_POLICY  # as a header, not only a <meta>
+    assert response.headers["x-content-type-options"] == "nosniff"
     images = PageParser(response.text).images
     assert sum(i["class"] == "series" for i in images) == len(case.report.sensors)  # the upload was found
     assert {i["class"] for i in images} == {"series", "topology", "history"}
