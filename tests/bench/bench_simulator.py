@@ -2,7 +2,7 @@
 against a plain per-member loop over the same components (the baseline, measured in the same run).
 
 Then the FMU component (``service.components.fmu``; the test FMU ``FanLag`` compiled from
-``tests/data/fmu_src`` when ``gcc`` exists): flow sensor → FMU fan → power meter over one day of
+``tests/fixtures/fmu_src`` when ``gcc`` exists): flow sensor → FMU fan → power meter over one day of
 1-minute steps, with one FMU instance per member kept alive through the run (the module's choice)
 against re-running the model member by member (what reset-and-re-run costs: the fresh instance of
 each run costs what ``fmi2Reset`` + initialisation would).

@@ -1,4 +1,4 @@
-"""FMU components: a hand-written FMI 2.0 co-simulation FMU (tests/data/fmu_src) compiled at test
+"""FMU components: a hand-written FMI 2.0 co-simulation FMU (tests/fixtures/fmu_src) compiled at test
 time, read into a ComponentModel, checked against service.components.fan.Fan and run inside the Simulator."""
 
 import gc
