@@ -67,6 +67,24 @@ class Server:
             time.sleep(0.05)
         return job
 
+    def upload_four_days(self, folder: Path) -> str:
+        """Four days of synthetic case-study data uploaded (a calibration of several seconds: still
+        running 0.5 s in on any machine); the upload's id."""
+        store = GraphStore.embedded(None)
+        store.load_model("case", CASE_STUDY)
+        days = folder / "four_days.csv"
+        generate_synthetic_data(store, "case", days, library=SignatureLibrary.load(), n_days=4)
+        return self.client.post("/models/case/measurements", content=days.read_bytes(),
+                                headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
+
+    def wait_in_pool(self, job_id: str) -> None:
+        """Until the job's work was sent to the process pool."""
+        deadline = time.monotonic() + 30
+        while not any(p["message"].startswith("sent to a local process pool")
+                      for p in self.client.get(f"/jobs/{job_id}").json()["progress"]):
+            assert time.monotonic() < deadline, "the job did not reach the process pool"
+            time.sleep(0.02)
+
     def graph_sizes(self) -> dict[str, int]:
         rows = self.client.get("/sparql", params={"query": GRAPH_SIZES}).json()["results"]["bindings"]
         return {r["g"]["value"]: int(r["n"]["value"]) for r in rows}
@@ -100,13 +118,7 @@ def test_a_server_killed_mid_job_restarts_with_finished_results_intact_and_the_j
     assert first.client.put("/models/case", content=CASE_STUDY.read_bytes(), headers=AUTH).status_code == 201
     upload = first.client.post("/models/case/measurements", content=case_csv.read_bytes(),
                                headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
-    # the job to kill calibrates on four days (several seconds): still running 0.5 s in on any machine
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
-    days = tmp_path / "four_days.csv"
-    generate_synthetic_data(store, "case", days, library=SignatureLibrary.load(), n_days=4)
-    long_upload = first.client.post("/models/case/measurements", content=days.read_bytes(),
-                                    headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
+    long_upload = first.upload_four_days(tmp_path)  # the job to kill
     finished = first.wait_job(first.client.post("/jobs/calibrate", headers=AUTH, json={
         "model": "case", "measurements": upload, "train": SHORT_TRAIN}).json()["id"])
     assert finished["status"] == "succeeded", finished
@@ -115,11 +127,7 @@ def test_a_server_killed_mid_job_restarts_with_finished_results_intact_and_the_j
 
     killed = first.client.post("/jobs/calibrate", headers=AUTH, json={
         "model": "case", "measurements": long_upload, "seed": 1}).json()
-    deadline = time.monotonic() + 30
-    while not any(p["message"].startswith("sent to a local process pool")
-                  for p in first.client.get(f"/jobs/{killed['id']}").json()["progress"]):
-        assert time.monotonic() < deadline, "the job did not reach the process pool"
-        time.sleep(0.02)
+    first.wait_in_pool(killed["id"])
     time.sleep(0.5)  # the work is under way in its pool process
     assert first.client.get(f"/jobs/{killed['id']}").json()["status"] == "running"
     first.kill(signal.SIGKILL)
@@ -149,19 +157,9 @@ def test_sigterm_with_a_job_running_marks_it_interrupted_and_the_server_exits_wi
 
     server = servers()
     assert server.client.put("/models/case", content=CASE_STUDY.read_bytes(), headers=AUTH).status_code == 201
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
-    days = tmp_path / "four_days.csv"
-    generate_synthetic_data(store, "case", days, library=SignatureLibrary.load(), n_days=4)
-    upload = server.client.post("/models/case/measurements", content=days.read_bytes(),
-                                headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
-    job = server.client.post("/jobs/calibrate", headers=AUTH, json={"model": "case", "measurements": upload,
-                                                                     "seed": 1}).json()
-    deadline = time.monotonic() + 30
-    while not any(p["message"].startswith("sent to a local process pool")
-                  for p in server.client.get(f"/jobs/{job['id']}").json()["progress"]):
-        assert time.monotonic() < deadline, "the job did not reach the process pool"
-        time.sleep(0.02)
+    job = server.client.post("/jobs/calibrate", headers=AUTH, json={
+        "model": "case", "measurements": server.upload_four_days(tmp_path), "seed": 1}).json()
+    server.wait_in_pool(job["id"])
     os.kill(server.process.pid, signal.SIGTERM)  # the server alone, as a process manager stops it
     began = time.monotonic()
     server.process.wait(timeout=20)
