@@ -114,7 +114,7 @@ class RuleCondition:
         text = _number(value, self.range_decimals)
         if not self.unit or self.unit == "1":
             return text
-        return f"{text}{self.unit}" if self.unit in ("%", "/h", "/step") else f"{text} {self.unit}"
+        return f"{text}{self.unit}" if self.unit in ("%", "/h", "/step") else f"{text} {self.unit}".rstrip()
 
     def describe(self) -> str:
         """The condition in words: "supply fan speed > 0.31", "outdoor air temperature rising faster

@@ -80,8 +80,8 @@ def inputs_beyond_training(md: ModelData, train: slice, test: slice) -> list[str
         above, below = tested > high + margin, tested < low - margin
         if above.any() or below.any():
             unit = unit_label(md.data.units[node])
-            reach = (f"up to {tested.max():.3g} {unit} where training reached {high:.3g}" if above.any()
-                     else f"down to {tested.min():.3g} {unit} where training reached {low:.3g}")
+            reach = (f"up to {f'{tested.max():.3g} {unit}'.rstrip()} where training reached {high:.3g}" if above.any()
+                     else f"down to {f'{tested.min():.3g} {unit}'.rstrip()} where training reached {low:.3g}")
             notes.append(f"the test window drives {local_name(node)} beyond what the training window saw "
                          f"({int(above.sum() + below.sum())} steps, {reach}): predictions there rest on what "
                          "the training could not show")

@@ -144,7 +144,7 @@ def simulate_command(
 ) -> None:
     """Simulate MODEL over DATA and write each target's simulation beside its measurement."""
     from service.calibration.model_data import ModelData
-    from service.data.measurements import write_comparison_csv
+    from service.data.csv_output import write_comparison_csv
     from service.data.model_series import read_model_data
     from service.model.assembly import assemble
     from service.model.simulator import loop_substeps, target_series

@@ -24,8 +24,7 @@ from service.errors import InputError, MeasurementError
 from service.graph.namespaces import local_name
 from service.graph.units import UnitError, convert, unit_label
 
-__all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "write_csv",
-           "write_comparison_csv", "frozen_spans"]
+__all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "frozen_spans"]
 
 _MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
 _BMS_FORMATS = ("%m/%d/%Y %H:%M", "%m/%d/%y %H:%M", "%m/%d/%Y %H:%M:%S", "%m/%d/%y %H:%M:%S",
@@ -219,7 +218,7 @@ def _check_fraction(values: np.ndarray, where: str, unit: str, problems: list[st
     finite = values[np.isfinite(values)]
     if not finite.size:
         return
-    peak, label = float(np.max(np.abs(finite))), unit_label(unit)
+    peak, label = float(np.max(np.abs(finite))), unit_label(unit) or "1"
     if peak > _FRACTION_MAX:
         problems.append(f"{where}: reaches {peak:g}, but its unit ({label}) makes it a fraction (0–1): "
                         f"is it in percent? Declare saref:isMeasuredIn unit:PERCENT")
@@ -455,43 +454,6 @@ def frozen_spans(stamps: np.ndarray, values: np.ndarray, unit: str, *, min_span_
         first, last = stamps[index[start]], stamps[index[stop - 1]]
         span_s = float((last - first) / np.timedelta64(1, "s"))
         if span_s >= min_span_s and kept[start] != 0.0:
-            found.append(f"holds {kept[start]:g} {unit_label(unit)} exactly from {str(first)[:16]} to {str(last)[:16]} "
+            found.append(f"holds {f'{kept[start]:g} {unit_label(unit)}'.rstrip()} exactly from {str(first)[:16]} to {str(last)[:16]} "
                          f"({span_s / 86400.0:.1f} days): a frozen point? The model takes it as measured")
     return found
-
-
-def write_csv(path: Path, timestamps: np.ndarray, columns: Mapping[str, np.ndarray], *, decimals: int = 4) -> None:
-    """Write ``columns`` beside an ISO time column (``time``); NaN as an empty cell."""
-    with Path(path).open("w", newline="", encoding="utf-8") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["time", *columns])
-        arrays = list(columns.values())
-        for i, stamp in enumerate(timestamps):
-            cells = [str(np.datetime64(stamp, "s")).replace("T", " ")]
-            cells += ["" if not np.isfinite(a[i]) else f"{a[i]:.{decimals}f}" for a in arrays]
-            writer.writerow(cells)
-
-
-def write_comparison_csv(path: Path, data: MeasuredData, simulated: Mapping[str, np.ndarray], *, decimals: int = 4) -> None:
-    """Write every measured series beside its simulation: for each node of ``data``, its column
-    (the file's header, the file's unit) and, when ``simulated`` has the node, ``<header> (simulated)``
-    in the same unit. The result reads back with :func:`read_measurements` and the same model (the
-    simulated columns are then unclaimed columns).
-
-    :param simulated: node IRI → ``ndarray[n_steps]`` in the port unit ``data.units[node]``.
-    :raises ValueError: a simulated node without a series in ``data``, or a series of another length.
-    """
-    unknown = sorted(set(simulated) - set(data.series))
-    if unknown:
-        raise ValueError(f"simulated series for node(s) the data {data.source} does not hold: {', '.join(unknown)}")
-    columns: dict[str, np.ndarray] = {}
-    for node, measured in data.series.items():
-        header = data.columns.get(node, node)
-        unit = data.source_units.get(node, data.units[node])
-        columns[header] = convert(measured, data.units[node], unit, where=f"column {header!r}")
-        if node in simulated:
-            values = np.asarray(simulated[node], dtype=float)
-            if values.shape != (data.n_steps,):
-                raise ValueError(f"simulated series for {node} has shape {values.shape}, the data {data.n_steps} steps")
-            columns[f"{header} (simulated)"] = convert(values, data.units[node], unit, where=f"column {header!r}")
-    write_csv(path, data.timestamps, columns, decimals=decimals)

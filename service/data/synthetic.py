@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from service.components.library import SignatureLibrary
-from service.data.measurements import write_csv
+from service.data.csv_output import write_csv
 from service.data.model_series import device_unit, model_warmup_s, read_model_data, warmup_period_steps
 from service.data.synthetic_operation import case_study_operation
 from service.errors import InputError

@@ -5,12 +5,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from service.data.csv_output import write_comparison_csv
 from service.data.measurements import (
     MeasurementError,
     SeriesSpec,
     parse_timestamp,
     read_measurements,
-    write_comparison_csv,
 )
 
 SPECS = {
