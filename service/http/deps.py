@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -73,12 +74,13 @@ def require_model(store: GraphStore, name: str) -> str:
     return name
 
 
-def require_fit_models(service: Service, request: FitRequest) -> None:
-    """The model to fit, the model its fit starts from (if any) and its measurement upload exist.
+def require_fit_models(service: Service, request: FitRequest) -> Path:
+    """The model to fit, the model its fit starts from (if any) and its measurement upload exist;
+    the upload's CSV.
 
     :raises NotFoundError: one of them does not.
     """
     require_model(service.store, request.model)
     if request.start_from is not None:
         require_model(service.store, request.start_from)
-    service.uploads.locate(request.measurements)
+    return service.uploads.locate(request.measurements)

@@ -38,6 +38,11 @@ class ApiError(Exception):
         super().__init__(detail)
         self.status, self.detail, self.headers, self.extra = status, detail, headers, extra
 
+    def response(self) -> JSONResponse:
+        """This error as the response a client gets."""
+        body = ErrorBody(detail=self.detail, **self.extra).model_dump(exclude_none=True)
+        return JSONResponse(body, status_code=self.status, headers=self.headers)
+
 
 def status_of(exc: GraphtwinError) -> int:
     return next(status for kind, status in STATUSES if isinstance(exc, kind))
@@ -62,8 +67,7 @@ def _graphtwin_error_response(request: Request, exc: GraphtwinError) -> JSONResp
 
 
 def _api_error_response(request: Request, exc: ApiError) -> JSONResponse:
-    body = ErrorBody(detail=exc.detail, **exc.extra).model_dump(exclude_none=True)
-    return JSONResponse(body, status_code=exc.status, headers=exc.headers)
+    return exc.response()
 
 
 def _validation_error_response(request: Request, exc: RequestValidationError) -> JSONResponse:

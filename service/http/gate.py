@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import secrets
 
-from fastapi.responses import JSONResponse
 from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.http.errors import ApiError
-from service.http.schemas import ErrorBody
 from service.settings import Settings
 
 __all__ = ["RequestGate", "check_token"]
@@ -54,11 +52,6 @@ def _limit(settings: Settings, method: str, path: str) -> int:
     return settings.max_request_bytes
 
 
-def _refusal(error: ApiError) -> JSONResponse:
-    body = ErrorBody(detail=error.detail, **error.extra).model_dump(exclude_none=True)
-    return JSONResponse(body, status_code=error.status, headers=error.headers)
-
-
 class RequestGate:
     """ASGI middleware: refuses a write without its token, and a body over its route's limit, before
     the body is read."""
@@ -79,7 +72,7 @@ class RequestGate:
             if declared is not None and declared.isdigit() and int(declared) > limit:
                 raise ApiError(413, f"the request body has {int(declared)} bytes; the limit here is {limit}")
         except ApiError as refused:
-            await _refusal(refused)(scope, receive, send)
+            await refused.response()(scope, receive, send)
             return
         received = 0
 

@@ -38,10 +38,9 @@ def diagnose_job(store: GraphStore, request: DiagnoseRequest, context: WorkConte
     (or in a pool process, or on a Dask worker)."""
     data = context.measurements(request.measurements)
     report = diagnose_model(store, request, data, on_progress=context.report, workers=1)
-    links = result_links(store, request.model, report.run_id)
-    links["diagnosis_graph"] = store.run_graph(f"{report.run_id}-diagnosis").value
-    links["report"] = f"/runs/{report.run_id}-diagnosis/report"  # the diagnosis's page: fit, failures, effects
-    return JobResult(report.to_dict(), links)
+    diagnosis = f"{report.run_id}-diagnosis"  # its page shows the fit, the failures and the effects
+    links = result_links(store, request.model, report.run_id, page=diagnosis)
+    return JobResult(report.to_dict(), links | {"diagnosis_graph": store.run_graph(diagnosis).value})
 
 
 def add_effect_job(store: GraphStore, request: AddEffectRequest, context: WorkContext) -> JobResult:

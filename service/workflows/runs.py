@@ -74,12 +74,13 @@ def check_fit_request(store: GraphStore, request: CalibrateRequest | DiagnoseReq
                         start_from=request.start_from, data_name=data_name)
 
 
-def result_links(store: GraphStore, model: str, run_id: str) -> dict[str, str]:
-    """Where a run's results are: its graph, its report page and the named queries that read them
-    (a '+' in a model name is quoted: it would read as a space)."""
+def result_links(store: GraphStore, model: str, run_id: str, *, page: str | None = None) -> dict[str, str]:
+    """Where a run's results are: its graph, its report page (``page``'s, a diagnosis graph's, when
+    given) and the named queries that read them (a '+' in a model name is quoted: it would read as a
+    space)."""
     return {
         "run_graph": store.run_graph(run_id).value,
-        "report": f"/runs/{quote(run_id, safe='')}/report",
+        "report": f"/runs/{quote(page or run_id, safe='')}/report",
         "calibrated_parameters": f"/queries/calibrated-parameters?model={quote(model, safe='')}",
         "sensor_metrics": f"/queries/sensor-metrics?model={quote(model, safe='')}",
     }

@@ -37,8 +37,7 @@ def _job(service: Service, job_id: str) -> JobRecord:
 
 def _check_fit(service: Service, request: CalibrateRequest | DiagnoseRequest) -> None:
     """404 for a model, start model or upload that does not exist; 422 for what the run would refuse."""
-    require_fit_models(service, request)
-    check_fit_request(service.store, request, service.uploads.locate(request.measurements),
+    check_fit_request(service.store, request, require_fit_models(service, request),
                       data_name=f"upload {request.measurements}")
 
 
