@@ -4,7 +4,8 @@ A :class:`CalibrationRecord` is independent of how the estimate was made (point 
 estimated parameter gets a median and a 16–84 % interval (the Bayesian posterior quantiles, or for a
 point fit θ̂ ± one standard error of the Jacobian covariance, clipped to the prior bounds), a MAP
 (the posterior mode, or θ̂), and the identifiability verdict; every target gets its metrics on the
-training window and, when given, the test window, and there per operating regime.
+training window and, when given, the test window, and there per operating regime. A Bayesian run
+with a test window also keeps every target's posterior predictive band there (:class:`PredictiveBand`).
 """
 
 from __future__ import annotations
@@ -12,9 +13,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from datetime import datetime
 
+import numpy as np
+
 from service.calibration.metrics import TargetMetrics
 
-__all__ = ["ParameterEstimate", "SamplerConvergence", "CalibrationDiagnostics", "CalibrationRecord"]
+__all__ = ["ParameterEstimate", "SamplerConvergence", "CalibrationDiagnostics", "CalibrationRecord", "PredictiveBand",
+           "PREDICTIVE_BAND_LEVEL"]
+
+#: Two-sided level of the posterior predictive band a Bayesian run keeps (its 5–95 % quantiles).
+PREDICTIVE_BAND_LEVEL = 0.9
 
 
 @dataclass(frozen=True)
@@ -83,6 +90,18 @@ class CalibrationDiagnostics:
         return result
 
 
+@dataclass(frozen=True)
+class PredictiveBand:
+    """The posterior predictive's central ``level`` interval of one target on ``window`` (``"test"``):
+    ``lower`` and ``upper`` at every step of the window, ``ndarray[n_steps]`` in the target's unit
+    (NaN where nothing was predicted). Model at posterior draws + GP discrepancy + noise."""
+
+    window: str
+    level: float
+    lower: np.ndarray
+    upper: np.ndarray
+
+
 @dataclass
 class CalibrationRecord:
     """A finished calibration: provenance, estimates and metrics (``metrics[window][target node]``)."""
@@ -104,6 +123,8 @@ class CalibrationRecord:
     #: Test-window error per operating regime (:meth:`service.calibration.regime_breakdown.RegimeBreakdown.rows`).
     regimes: list[dict] = field(default_factory=list)
     regime_rule_accuracy: float = float("nan")
+    #: Target node → its posterior predictive band (a Bayesian run with a test window; series, not in ``to_dict``).
+    predictive_bands: dict[str, PredictiveBand] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {

@@ -27,7 +27,14 @@ import pyoxigraph as ox
 from service.calibration.metrics import target_metrics
 from service.calibration.model_data import DEFAULT_GP_INPUTS, ModelData
 from service.calibration.point import NonFiniteSimulationError, PointCalibrator
-from service.calibration.record import CalibrationDiagnostics, CalibrationRecord, ParameterEstimate, SamplerConvergence
+from service.calibration.record import (
+    PREDICTIVE_BAND_LEVEL,
+    CalibrationDiagnostics,
+    CalibrationRecord,
+    ParameterEstimate,
+    PredictiveBand,
+    SamplerConvergence,
+)
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
 from service.calibration.triples import calibration_triples
 from service.data.model_series import SETTLING_S, read_model_data
@@ -328,6 +335,7 @@ def calibrate(
         start=start_note or None)
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = {}
     regimes = None
+    bands: dict[str, PredictiveBand] = {}
     if method == "point":
         with _non_finite_named(md, train_slice, problem.default):
             calibrator = PointCalibrator(n_starts=2, n_candidates=32, random_state=seed, max_nfev=40).fit(problem)
@@ -370,6 +378,8 @@ def calibrate(
             median = {k: v[offset:] for k, v in predictive.median.items()}
             intervals["test"] = {node: {level: tuple(b[offset:] for b in predictive.interval(node, level))
                                         for level in (0.5, 0.68, 0.9, 0.95, 0.99)} for node in median}
+            bands = {node: PredictiveBand("test", PREDICTIVE_BAND_LEVEL, *levels[PREDICTIVE_BAND_LEVEL])
+                     for node, levels in intervals["test"].items()}
         else:
             median = predict_test(md, train_slice, test_slice, theta)
         predictions["test"] = median
@@ -396,6 +406,7 @@ def calibrate(
         diagnostics=diagnostics,
         regimes=regimes.rows() if regimes is not None else [],
         regime_rule_accuracy=regimes.rule_accuracy if regimes is not None else float("nan"),
+        predictive_bands=bands,
     )
     store_run(store, model, model_name, record)
     return CalibrationOutcome(record, model, md, theta, train_slice, test_slice, predictions, intervals,

@@ -4,7 +4,8 @@ All in the run's named graph ``gtr:graph/run/<id>`` (vocabulary in ``ontologies/
 the ``gt:CalibrationRun`` (``prov:Activity``: model, version, method, seed, data, windows, times,
 settings, software agent), a ``gt:Estimate`` per parameter (median, 16/84 % quantiles, MAP,
 standard error, bounds, identified), a ``gt:Metric`` per sensor, window and metric (and interval
-level), a ``gt:OperatingRegime`` per regime with the test RMSE ``gt:inRegime`` it. Parameter IRIs
+level), a ``gt:OperatingRegime`` per regime with the test RMSE ``gt:inRegime`` it, and a Bayesian run's
+``gt:PredictiveBand`` per sensor (its series as one JSON literal, :func:`band_json`). Parameter IRIs
 are the assembly's (:func:`service.model.assembly_triples.parameter_iri`). The full shape:
 ``docs/calibration.md``, *Results as triples*.
 """
@@ -18,13 +19,15 @@ from datetime import datetime
 import pyoxigraph as ox
 
 from service import __version__
-from service.calibration.record import CalibrationRecord
+from service.calibration.record import CalibrationRecord, PredictiveBand
 from service.graph.namespaces import GT, GTR, PROV, RDF, RDFS, XSD, distinct_local_names
 
-__all__ = ["run_iri", "calibration_triples", "software_agent"]
+__all__ = ["run_iri", "calibration_triples", "software_agent", "band_json", "BAND_MAX_POINTS"]
 
 #: Metrics written per sensor and window (attribute of :class:`~service.calibration.metrics.TargetMetrics`).
 METRIC_ATTRIBUTES = ("rmse", "mae", "r2", "cv_rmse_percent", "nmbe_percent", "lag1_autocorrelation")
+#: Points of a predictive band's series written at most (every ``stride``-th step; a figure is ~1200 px wide).
+BAND_MAX_POINTS = 2000
 
 
 def run_iri(run_id: str) -> ox.NamedNode:
@@ -126,7 +129,23 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
             node = ox.NamedNode(f"{run.value}/metric/test/{sensor_name[sensor]}/rmse/regime/{row['regime']}")
             t += _metric_triples(node, run, sensor, "test", "rmse", value, units.get(sensor, ""))
             t.append(ox.Triple(node, GT.inRegime, regime))
+    for sensor, band in record.predictive_bands.items():
+        node = ox.NamedNode(f"{run.value}/band/{band.window}/{sensor_name[sensor]}")
+        t += [ox.Triple(node, RDF.type, GT.PredictiveBand), ox.Triple(node, PROV.wasGeneratedBy, run),
+              ox.Triple(node, GT.onSensor, ox.NamedNode(sensor)), ox.Triple(node, GT.window, ox.Literal(band.window)),
+              ox.Triple(node, GT.bandSeries, ox.Literal(band_json(band)))]
     return t
+
+
+def band_json(band: PredictiveBand) -> str:
+    """``{"level", "stride", "lower", "upper"}``: the band at every ``stride``-th step of its window
+    (stride = ⌈n / BAND_MAX_POINTS⌉), 6 significant digits, NaN as null."""
+    stride = max(1, math.ceil(band.lower.size / BAND_MAX_POINTS))
+
+    def series(values) -> list[float | None]:
+        return [float(f"{v:.6g}") if math.isfinite(v) else None for v in values[::stride].tolist()]
+
+    return json.dumps({"level": band.level, "stride": stride, "lower": series(band.lower), "upper": series(band.upper)})
 
 
 def _metric_triples(node: ox.NamedNode, run: ox.NamedNode, sensor: str, window: str, name: str, value: float,

@@ -4,8 +4,8 @@
 (:mod:`service.report.stored_run`) and shows: per sensor the stored metrics and a figure of measured
 against modelled with an interval (:mod:`service.report.run_series`); the flow-path localisation
 drawn on the system topology (:mod:`service.report.topology_svg`); the operating regimes with the
-test RMSE per sensor in each; the ranked missing effects with their evidence; the test RMSE across
-the model's versions. Everything is in the page (base64 PNG or SVG data URIs, inline style, no
+test RMSE per sensor in each; the ranked missing effects with their evidence in words
+(:func:`evidence_words`, the numbers in a ``<details>``); the test RMSE across the model's versions. Everything is in the page (base64 PNG or SVG data URIs, inline style, no
 script) and ``CONTENT_SECURITY_POLICY`` lets the browser load nothing else. More: ``docs/report.md``.
 """
 
@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import base64
 import html
-import tempfile
+import io
 from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,13 +27,21 @@ from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
 from service.report.run_series import INTERVAL_LEVEL, INTERVAL_Z, RunSeries, recompute_series
-from service.report.stored_run import StoredDiagnosis, StoredRun, read_diagnosis, read_run
-from service.report.topology_svg import topology_svg
+from service.report.stored_run import StoredCandidate, StoredDiagnosis, StoredRun, read_diagnosis, read_run
+from service.report.topology_svg import TOPOLOGY_KEY, topology_svg
 
-__all__ = ["report_html", "CONTENT_SECURITY_POLICY"]
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["report_html", "evidence_words", "p_value_text", "CONTENT_SECURITY_POLICY", "SOME_EVIDENCE_DELTA_BIC"]
 
 #: Only inline styles and ``data:`` images: the browser refuses anything else (no request leaves the page).
 CONTENT_SECURITY_POLICY = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
+#: ΔBIC below which a candidate that removes some test-window error has "some evidence" ("positive"
+#: on Kass & Raftery's scale); "clear evidence" is the diagnosis's significance (``docs/report.md``).
+SOME_EVIDENCE_DELTA_BIC = -2.0
+#: p-values below this print as "< 10⁻⁶": smaller ones say nothing more to an engineer.
+SMALLEST_P_SHOWN = 1e-6
 
 
 def _img(data: bytes, media_type: str, alt: str, css_class: str) -> str:
@@ -40,24 +49,67 @@ def _img(data: bytes, media_type: str, alt: str, css_class: str) -> str:
     return f'<img class="{css_class}" alt="{html.escape(alt)}" src="data:{media_type};base64,{encoded}">'
 
 
-def _png(draw: Callable[[Path], Path]) -> bytes:
-    """Bytes of the PNG that ``draw(path)`` writes (the :mod:`service.report.plots` functions write files)."""
-    with tempfile.TemporaryDirectory(prefix="graphtwin-report-") as folder:
-        return Path(draw(Path(folder) / "figure.png")).read_bytes()
+def _png(fig: Figure) -> bytes:
+    """The figure as PNG bytes (closed)."""
+    from service.report.plots import save_figure
+
+    buffer = io.BytesIO()
+    save_figure(fig, buffer)
+    return buffer.getvalue()
 
 
 def _number(value: float, digits: int = 3) -> str:
     return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}g}"
 
 
-def _table(header: list[str], rows: list[list[str]], css_class: str = "") -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{cell}</td>" for cell in r) + "</tr>" for r in rows)
+def _quantity(value: float, unit: str, digits: int = 3) -> str:
+    """``0.162 °C``; a plain number's unit (``1``) shows nothing, not a trailing space."""
+    label = unit_label(unit)
+    number = _number(value, digits)
+    return f"{number} {label}" if label and number != "–" else number
+
+
+def _breakable(name: str) -> str:
+    """A node's local name, escaped, free to wrap after each underscore (``<wbr>``): a long sensor
+    name as a column header no longer widens its table past the page."""
+    return "_<wbr>".join(html.escape(part) for part in local_name(name).split("_"))
+
+
+def p_value_text(p: float) -> str:
+    """A p-value for people: two significant digits, ``< 10⁻⁶`` below :data:`SMALLEST_P_SHOWN`."""
+    if p is None or not np.isfinite(p):
+        return "–"
+    return "< 10⁻⁶" if p < SMALLEST_P_SHOWN else f"{p:.2g}"
+
+
+def evidence_words(candidate: StoredCandidate) -> str:
+    """The diagnosis's numbers in words: ``clear evidence`` (significant: ΔBIC < −10 and ≥ 20 % of
+    the evaluation half's error removed), ``some evidence`` (ΔBIC < :data:`SOME_EVIDENCE_DELTA_BIC`
+    and some of that error removed), else ``no evidence``."""
+    if candidate.significant:
+        return "clear evidence"
+    if candidate.delta_bic < SOME_EVIDENCE_DELTA_BIC and candidate.test_improvement > 0:
+        return "some evidence"
+    return "no evidence"
+
+
+def _table(header: list[str], rows: list[list[str]], css_class: str = "", rule_column: int | None = None) -> str:
+    """An HTML table; ``header`` and ``rows`` are HTML already. The ``rule_column``'s cells get class
+    ``rule`` (a regime's rule, wrapped at its conditions)."""
+    head = "".join(f"<th>{h}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f'<td class="rule">{cell}</td>' if j == rule_column else f"<td>{cell}</td>"
+                                    for j, cell in enumerate(r)) + "</tr>" for r in rows)
     return f'<table class="{css_class}"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
 
 
-def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: RunSeries | None, series_note: str) -> str:
-    from service.report.plots import plot_measured_vs_model
+def _rule(rule: str) -> str:
+    """A regime's rule, escaped, each ``or`` on a line of its own (the rules are or-ed conditions)."""
+    return html.escape(rule).replace(" or ", "<br>or ")
+
+
+def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: RunSeries | None,
+                    series_note: str) -> str:
+    from service.report.plots import measured_vs_model_figure
 
     failing = diagnosis.failing_sensors if diagnosis else set()
     rows = []
@@ -65,7 +117,7 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
         test = run.metrics.get("test", {}).get(sensor, {})
         train = run.metrics.get("train", {}).get(sensor, {})
         verdict = ('<span class="bad">yes</span>' if sensor in failing else "no") if diagnosis else "–"
-        rows.append([html.escape(local_name(sensor)), _number(train.get("rmse")), _number(test.get("rmse")),
+        rows.append([_breakable(sensor), _number(train.get("rmse")), _number(test.get("rmse")),
                      _number(test.get("mae")), _number(test.get("r2")), _number(test.get("cv_rmse_percent")),
                      _number(test.get("nmbe_percent")), html.escape(unit_label(run.units[sensor])), verdict])
     out = ["<h2>Measured against the model, per sensor</h2>",
@@ -77,16 +129,25 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
     if series is None:
         out.append(f'<p class="note">No measured-vs-model figures: {html.escape(series_note)}</p>')
         return "".join(out)
-    out.append(f'<p>{series.window.capitalize()} window. The model is simulated at the stored estimates; the band '
-               f'is the {100 * INTERVAL_LEVEL:.0f} % prediction interval '
-               f'ŷ ± {INTERVAL_Z:.3f}·s with s the sensor\'s training RMSE.</p>')
+    if series.posterior_band:
+        model_name, band_name = "model at the posterior median θ", "posterior predictive 5–95 %"
+        out.append(f"<p>{series.window.capitalize()} window. The model is simulated at the posterior median "
+                   "parameters; the band is the run's posterior predictive 5–95 % interval (the model at posterior "
+                   "draws + the discrepancy Gaussian process + measurement noise), stored with the run.</p>")
+    else:
+        model_name, band_name = "model", f"ŷ ± {INTERVAL_Z:.3f}·s (training RMSE s)"
+        out.append(f'<p>{series.window.capitalize()} window. The model is simulated at the stored estimates; the band '
+                   f'is the {100 * INTERVAL_LEVEL:.0f} % prediction interval '
+                   f'ŷ ± {INTERVAL_Z:.3f}·s with s the sensor\'s training RMSE.</p>')
     out += [f'<p class="note">{html.escape(note)}</p>' for note in series.notes]
     for sensor in series.predicted:
-        picture = _png(lambda path, s=sensor: plot_measured_vs_model(
-            path, series.timestamps, {s: series.observed[s]}, {"model": {s: series.predicted[s]}}, series.units,
-            {s: series.band[s]}, title=f"{local_name(s)}: {series.window} window, RMSE {series.rmse[s]:.3g} "
-                                       f"{unit_label(series.units[s])}", interval_level=INTERVAL_LEVEL))
-        out.append(f'<figure>{_img(picture, "image/png", f"measured vs model: {local_name(sensor)}", "series")}</figure>')
+        rmse = _quantity(series.rmse[sensor], series.units[sensor])
+        picture = _png(measured_vs_model_figure(
+            series.timestamps, {sensor: series.observed[sensor]}, {model_name: {sensor: series.predicted[sensor]}},
+            series.units, {sensor: series.band[sensor]}, title=f"{local_name(sensor)}: {series.window} window, RMSE {rmse}",
+            interval_label=band_name))
+        alt = f"measured vs model: {local_name(sensor)}"
+        out.append(f'<figure>{_img(picture, "image/png", alt, "series")}</figure>')
     return "".join(out)
 
 
@@ -101,7 +162,10 @@ def _topology_section(store: GraphStore, run: StoredRun, diagnosis: StoredDiagno
                        suspects=diagnosis.suspects if diagnosis else set(),
                        failing=diagnosis.failing_sensors if diagnosis else set(),
                        matching=diagnosis.matching_sensors if diagnosis else set(), heat_edges=heat)
-    out.append(f'<figure>{_img(svg.encode("utf-8"), "image/svg+xml", f"flow topology of {run.model}", "topology")}</figure>')
+    key = "".join(f'<li><span class="swatch" style="{style}"></span>{html.escape(meaning)}</li>'
+                  for style, meaning in TOPOLOGY_KEY)
+    out.append(f'<figure>{_img(svg.encode("utf-8"), "image/svg+xml", f"flow topology of {run.model}", "topology")}'
+               f'<figcaption><ul class="key">{key}</ul></figcaption></figure>')
     if diagnosis is None:
         out.append('<p class="note">No diagnosis is based on this run: nothing is located.</p>')
     elif not diagnosis.locations:
@@ -126,23 +190,32 @@ def _regimes_section(run: StoredRun) -> str:
     if not run.regimes:
         return out + '<p class="note">The run has no test window, so no error per regime.</p>'
     sensors = [s for s in run.metrics.get("test", {}) if any(s in r["rmse"] for r in run.regimes)]
-    rows = [[html.escape(r["regime"]), html.escape(r["rule"]), f"{100 * r['share']:.0f} %"]
-            + [f"{_number(r['rmse'][s])} {html.escape(unit_label(run.units.get(s, '')))}" if s in r["rmse"] else "–"
-               for s in sensors] for r in run.regimes]
-    header = ["regime", "rule", "share of the test window"] + [f"RMSE {local_name(s)}" for s in sensors]
+    rows = [[html.escape(r["regime"]), _rule(r["rule"]), f"{100 * r['share']:.0f} %"]
+            + [html.escape(_quantity(r["rmse"][s], run.units.get(s, ""))) if s in r["rmse"] else "–" for s in sensors]
+            for r in run.regimes]
+    header = ["regime", "rule", "share of the test window"] + [f"RMSE {_breakable(s)}" for s in sensors]
     return (out + "<p>Clusters of the boundary inputs (mini-batch k-means), each described by the rule of a "
             "shallow decision tree, and the test RMSE of every sensor in each: where the model fails.</p>"
-            + _table(header, rows, "regimes"))
+            + _table(header, rows, "regimes", rule_column=1))
 
 
 def _estimates_section(run: StoredRun) -> str:
     """The run's parameter estimates: median and 16–84 % interval (the point fit's ±1 standard error,
     the posterior's quantiles), unit, and whether the data identified the parameter."""
-    rows = [[html.escape(local_name(e.node)), html.escape(e.name), _number(e.median, 4),
+    rows = [[_breakable(e.node), _breakable(e.name), _number(e.median, 4),
              f"{_number(e.quantile16, 4)} – {_number(e.quantile84, 4)}", html.escape(unit_label(e.unit)),
              "yes" if e.identified else '<span class="bad">no</span>'] for e in run.estimates.values()]
     return ("<h2>Parameter estimates</h2>"
             + _table(["node", "parameter", "estimate", "16–84 %", "unit", "identified"], rows, "estimates"))
+
+
+def _numbers(candidate: StoredCandidate) -> str:
+    """The statistics behind the words, one click away (``<details>``: no script needed)."""
+    facts = [("ΔBIC", _number(candidate.delta_bic, 4)), ("score statistic S", _number(candidate.score)),
+             ("p-value of S", p_value_text(candidate.p_value)),
+             ("significant", "yes" if candidate.significant else "no")]
+    rows = "".join(f"<dt>{name}</dt><dd>{html.escape(value)}</dd>" for name, value in facts)
+    return f"<details><summary>numbers</summary><dl>{rows}</dl></details>"
 
 
 def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
@@ -152,20 +225,23 @@ def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
         return ("<h2>Which effect is missing</h2><p class=\"note\">The effect catalog was not tested on this run "
                 "(<code>graphtwin compare</code> locates the failures only; <code>graphtwin diagnose</code> tests the "
                 "catalog).</p>")
+    words = {"clear evidence": "good", "some evidence": "some", "no evidence": "none"}
     effects = _table(
-        ["rank", "effect", "at", "significant", "test error removed", "ΔBIC", "score", "p", "evidence"],
+        ["rank", "effect", "at", "evidence", "test error removed", "statistics", "what it explains"],
         [[str(e.rank), f'<span class="effect">{html.escape(e.effect)}</span><br>'
                        f'<small>{html.escape(e.label)}</small>',
-          html.escape(local_name(e.node)), '<span class="good">yes</span>' if e.significant else "no",
-          f"{100 * e.test_improvement:.0f} %" if np.isfinite(e.test_improvement) else "–",
-          _number(e.delta_bic, 4), _number(e.score), _number(e.p_value, 2), html.escape(e.explanation)]
+          _breakable(e.node), f'<span class="{words[evidence_words(e)]}">{evidence_words(e)}</span>',
+          f"{100 * e.test_improvement:.0f} %" if np.isfinite(e.test_improvement) else "–", _numbers(e),
+          html.escape(e.explanation)]
          for e in diagnosis.effects], "effects")
-    return (f"<h2>Which effect is missing (best first)</h2><p>Significant: ΔBIC &lt; −10 and at least 20 % of the "
-            f"test-window error removed.</p>{effects}")
+    return ("<h2>Which effect is missing (best first)</h2><p>Clear evidence: the diagnosis calls the effect "
+            "significant (ΔBIC &lt; −10 and at least 20 % of the test-window error removed); some evidence: ΔBIC "
+            f"&lt; {SOME_EVIDENCE_DELTA_BIC:g} and some of that error removed; else no evidence. The numbers are "
+            f"under <i>numbers</i>.</p>{effects}")
 
 
 def _history_section(store: GraphStore, run: StoredRun) -> str:
-    from service.report.plots import plot_error_history
+    from service.report.plots import error_history_figure
 
     history = error_history(store, run.model)
     versions, units = history.versions, history.units
@@ -174,32 +250,37 @@ def _history_section(store: GraphStore, run: StoredRun) -> str:
         return out[0] + '<p class="note">No calibration of this model with a test window is stored.</p>'
 
     def cells(values: list[float], sensor: str) -> list[str]:
-        return [f"{_number(v)} {html.escape(unit_label(units.get(sensor, '')))}" if v == v else "–" for v in values]
+        return [html.escape(_quantity(v, units.get(sensor, ""))) for v in values]
 
     out.append('<p class="note">Each version\'s latest calibration with a test window (this run\'s numbers are in the '
                'tables above where it is that calibration).</p>')
     if not history.comparable:
         out.append('<p class="note bad">The versions were tested on different data or windows: their errors differ by '
                    'that as much as by the model.</p>')
-    rows = [[html.escape(local_name(s))] + cells(values, s) for s, values in history.rmse.items()]
+    rows = [[_breakable(s)] + cells(values, s) for s, values in history.rmse.items()]
     rows.append(["tested on"] + [html.escape(t) for t in history.tested_on])
-    out.append(_table(["sensor"] + versions, rows, "history"))
+    out.append(_table(["sensor"] + [_breakable(v) for v in versions], rows, "history"))
     if history.regime_rmse:
-        rows = [[str(number), html.escape(rule), html.escape(local_name(s))] + cells(values, s)
+        rows = [[str(number), _rule(rule), _breakable(s)] + cells(values, s)
                 for number, (rule, sensors) in enumerate(history.regime_rmse.items()) for s, values in sensors.items()]
-        out.append(_table(["regime", "rule", "sensor"] + versions, rows, "history-regimes"))
-    picture = _png(lambda path: plot_error_history(path, history))
+        out.append(_table(["regime", "rule", "sensor"] + [_breakable(v) for v in versions], rows, "history-regimes",
+                          rule_column=1))
+    picture = _png(error_history_figure(history))
     out.append(f'<figure>{_img(picture, "image/png", f"test RMSE across versions of {run.model}", "history")}</figure>')
     return "".join(out)
 
 
 _STYLE = """body{font:14px/1.45 system-ui,sans-serif;margin:24px auto;max-width:1240px;color:#1d232b;padding:0 16px}
-h1{font-size:22px}h2{font-size:17px;margin-top:30px;border-bottom:1px solid #d5dae1;padding-bottom:4px}
-table{border-collapse:collapse;margin:8px 0;font-size:13px}th,td{border:1px solid #d5dae1;padding:3px 7px;
-vertical-align:top;text-align:left}th{background:#f1f4f8}.note{color:#8a4b00;background:#fff6e5;padding:6px 10px}
-figure{margin:10px 0;overflow-x:auto}img{max-width:100%}.bad{color:#b3261e;font-weight:600}
-.good{color:#2e7d32;font-weight:600}.summary{font-weight:600;background:#eef6ee;padding:8px 12px}dl{display:grid;
-grid-template-columns:max-content auto;gap:2px 14px}dt{color:#5a6472}dd{margin:0}"""
+h1{font-size:22px;overflow-wrap:anywhere}h2{font-size:17px;margin-top:30px;border-bottom:1px solid #d5dae1;
+padding-bottom:4px}table{border-collapse:collapse;margin:8px 0;font-size:13px;max-width:100%}th,td{border:1px solid
+#d5dae1;padding:3px 7px;vertical-align:top;text-align:left}th{background:#f1f4f8}td.rule{min-width:22ch;
+max-width:46ch}.note{color:#8a4b00;background:#fff6e5;padding:6px 10px}figure{margin:10px 0}img{max-width:100%}
+.bad{color:#b3261e;font-weight:600}.good{color:#2e7d32;font-weight:600}.some{color:#8a4b00;font-weight:600}
+.none{color:#5a6472}.summary{font-weight:600;background:#eef6ee;padding:8px 12px}dl{display:grid;
+grid-template-columns:max-content auto;gap:2px 14px}dt{color:#5a6472}dd{margin:0;overflow-wrap:anywhere}
+details dl{margin:4px 0;font-size:12px}summary{color:#2f5d9a;cursor:pointer}ul.key{list-style:none;padding:0;
+margin:6px 0;font-size:13px;display:flex;flex-wrap:wrap;gap:4px 18px}.swatch{display:inline-block;width:22px;
+height:12px;margin-right:6px;vertical-align:middle;box-sizing:border-box}"""
 
 
 def _start_text(start_from: dict) -> str:

@@ -1,7 +1,8 @@
 """Figures people would rather look at than read: measured vs model per sensor, and error history.
 
-matplotlib with the non-interactive Agg backend (no display needed); every function writes one PNG
-and returns its path.
+matplotlib with the non-interactive Agg backend (no display needed). Every ``*_figure`` function
+returns the figure (tests read its axes and legend), every ``plot_*`` function writes it as one PNG
+and returns the path. Legends sit outside the axes: a legend never covers data.
 """
 
 from __future__ import annotations
@@ -14,36 +15,35 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 
 from service.diagnosis.error_history import ErrorHistory  # noqa: E402
-from service.graph.namespaces import local_name
+from service.graph.namespaces import local_name  # noqa: E402
 from service.graph.units import bracketed_unit  # noqa: E402
 
-__all__ = ["plot_measured_vs_model", "plot_residuals", "plot_error_history"]
+__all__ = ["measured_vs_model_figure", "residuals_figure", "error_history_figure", "plot_measured_vs_model",
+           "plot_residuals", "plot_error_history", "save_figure"]
 
 
-
-def _save_time_panels(fig, axes, path: Path, title: str, legend_columns: int) -> Path:
-    """Legend on the first of the stacked time-series panels, the title above them all, dates slanted,
-    saved as PNG."""
-    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=legend_columns)
+def _finish_time_panels(fig: Figure, axes, title: str) -> Figure:
+    """Legend right of the first of the stacked time-series panels (outside every axes: the layout
+    narrows the panels to make room), the title above them all, dates slanted."""
+    axes[0, 0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.autofmt_xdate()
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
 
 
-def _save(fig, path: Path) -> Path:
-    """``fig`` as a PNG at ``path``, closed."""
-    path = Path(path)
-    fig.savefig(path, dpi=110)
+def save_figure(fig: Figure, path: Path | str, dpi: int = 110) -> Path:
+    """``fig`` as a PNG at ``path`` (a path or a binary file object), closed."""
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
 
 
-def plot_measured_vs_model(
-    path: Path,
+def measured_vs_model_figure(
     timestamps: np.ndarray,
     observed: Mapping[str, np.ndarray],
     models: Mapping[str, Mapping[str, np.ndarray]],
@@ -51,34 +51,40 @@ def plot_measured_vs_model(
     intervals: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
     title: str = "",
     interval_level: float = 0.9,
-) -> Path:
+    interval_label: str = "",
+) -> Figure:
     """One panel per sensor: the measurement and each named model prediction (e.g. ``before`` and
-    ``after``), with the shaded ``interval_level`` prediction interval where given."""
+    ``after``), with the shaded interval where given, labelled ``interval_label`` (default: the
+    ``interval_level`` prediction interval)."""
     sensors = list(observed)
     fig, axes = plt.subplots(len(sensors), 1, figsize=(11, 2.2 * len(sensors)), sharex=True, squeeze=False)
     for ax, sensor in zip(axes[:, 0], sensors):
         if intervals and sensor in intervals:
             low, high = intervals[sensor]
             ax.fill_between(timestamps, low, high, color="tab:blue", alpha=0.2,
-                            label=f"{100 * interval_level:.0f} % prediction interval")
+                            label=interval_label or f"{100 * interval_level:.0f} % prediction interval")
         ax.plot(timestamps, observed[sensor], color="black", lw=0.8, label="measured")
         for (name, prediction), color in zip(models.items(), ("tab:red", "tab:green", "tab:blue")):
             ax.plot(timestamps, prediction[sensor], color=color, lw=1.0, label=name)
         ax.set_title(local_name(sensor), fontsize=8, loc="left")  # a long name as a y label ran into the next panel's
         ax.set_ylabel(bracketed_unit(units.get(sensor, '')), fontsize=8)
         ax.grid(alpha=0.3)
-    return _save_time_panels(fig, axes, path, title, legend_columns=4)
+    return _finish_time_panels(fig, axes, title)
 
 
-def plot_residuals(
-    path: Path,
+def plot_measured_vs_model(path: Path, *args, **kwargs) -> Path:
+    """:func:`measured_vs_model_figure` saved as a PNG at ``path``."""
+    return save_figure(measured_vs_model_figure(*args, **kwargs), Path(path))
+
+
+def residuals_figure(
     timestamps: np.ndarray,
     residuals: Mapping[str, np.ndarray],
     units: Mapping[str, str],
     thresholds: Mapping[str, float],
     episodes: Mapping[str, list[tuple[object, object]]] | None = None,
     title: str = "",
-) -> Path:
+) -> Figure:
     """One panel per sensor: the residual y − ŷ, the band ±``thresholds[sensor]`` within which the
     model counts as matching (the diagnosis' failure threshold), and each failure episode
     (start, end) shaded: where in time the model fails."""
@@ -94,13 +100,18 @@ def plot_residuals(
         ax.set_title(local_name(sensor), fontsize=8, loc="left")  # a long name as a y label ran into the next panel's
         ax.set_ylabel(bracketed_unit(units.get(sensor, '')), fontsize=8)
         ax.grid(alpha=0.3)
-    return _save_time_panels(fig, axes, path, title, legend_columns=2)
+    return _finish_time_panels(fig, axes, title)
 
 
-def plot_error_history(path: Path, history: ErrorHistory) -> Path:
+def plot_residuals(path: Path, *args, **kwargs) -> Path:
+    """:func:`residuals_figure` saved as a PNG at ``path``."""
+    return save_figure(residuals_figure(*args, **kwargs), Path(path))
+
+
+def error_history_figure(history: ErrorHistory) -> Figure:
     """Test-window RMSE per sensor (one column each) across model versions: the error falling; with
     regimes, a second row with the RMSE per regime (regime i: the i-th rule of the history's
-    table), one bar per version."""
+    table), one bar per version, the versions' legend below every panel."""
     sensors, versions = list(history.rmse), history.versions
     rules = list(history.regime_rmse)
     rows = 2 if rules else 1
@@ -127,5 +138,10 @@ def plot_error_history(path: Path, history: ErrorHistory) -> Path:
         fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)
     if not history.comparable:
         fig.suptitle("versions tested on different data or windows: not comparable as they stand", fontsize=9, color="#b23b3b")
-    fig.tight_layout(rect=(0, 0.05 if rules else 0, 1, 1))
-    return _save(fig, path)
+    fig.tight_layout(rect=(0, 0.06 if rules else 0, 1, 1))
+    return fig
+
+
+def plot_error_history(path: Path, history: ErrorHistory) -> Path:
+    """:func:`error_history_figure` saved as a PNG at ``path``."""
+    return save_figure(error_history_figure(history), Path(path))

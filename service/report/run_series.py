@@ -2,10 +2,12 @@
 
 The model graph (its version still the run's ``gt:modelVersion``) is assembled again, the run's data
 file read, and the model simulated at the stored estimates (``gt:median``) over the stored windows
-with the stored sub-steps, as :func:`service.calibration.run.predict_test` does. The band is the
-``INTERVAL_LEVEL`` prediction interval of independent normal residuals with the training window's
-stored RMSE s: ŷ ± z·s (z₀.₉₅ = 1.645 for 90 %); a recomputed RMSE more than
-``REPRODUCTION_TOLERANCE`` from the stored one is noted.
+with the stored sub-steps, as :func:`service.calibration.run.predict_test` does. The band of a
+Bayesian run is its stored posterior predictive band (model at posterior draws + GP discrepancy +
+noise, 5–95 %); of a point fit, or a run that stores none, the ``INTERVAL_LEVEL`` prediction
+interval of independent normal residuals with the training window's stored RMSE s: ŷ ± z·s
+(z₀.₉₅ = 1.645 for 90 %). A recomputed RMSE more than ``REPRODUCTION_TOLERANCE`` from the stored one
+is noted.
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ REPRODUCTION_TOLERANCE = 0.01
 @dataclass
 class RunSeries:
     """Measured and modelled series of one window (``window`` is ``"test"`` or ``"train"``), each
-    target node's interval ``band[node] = (low, high)``, the recomputed RMSE, and ``notes``."""
+    target node's interval ``band[node] = (low, high)`` (the stored posterior predictive band when
+    ``posterior_band``, else ŷ ± z·s), the recomputed RMSE, and ``notes``."""
 
     window: str
     timestamps: np.ndarray
@@ -51,6 +54,7 @@ class RunSeries:
     rmse: dict[str, float]
     units: dict[str, str]
     notes: list[str] = field(default_factory=list)
+    posterior_band: bool = False
 
 
 def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunSeries:
@@ -83,10 +87,15 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
         predicted = {node: values[0] for node, values in md.simulate_targets(train, theta[None, :]).items()}
     observed = {node: np.where(np.isfinite(predicted[node]), values, np.nan)
                 for node, values in md.observed(window).items()}
+    stored_bands = {node: b for node, b in run.bands.items() if b.window == name}
+    posterior = bool(stored_bands) and set(predicted) <= set(stored_bands)
     band, rmse, notes = {}, {}, []
     for node, values in predicted.items():
-        s = run.metrics.get("train", {}).get(node, {}).get("rmse", float("nan"))
-        band[node] = (values - INTERVAL_Z * s, values + INTERVAL_Z * s)
+        if posterior:
+            band[node] = stored_bands[node].at_every_step(values.size)
+        else:
+            s = run.metrics.get("train", {}).get(node, {}).get("rmse", float("nan"))
+            band[node] = (values - INTERVAL_Z * s, values + INTERVAL_Z * s)
         finite = np.isfinite(observed[node]) & np.isfinite(values)
         rmse[node] = float(np.sqrt(np.mean((observed[node][finite] - values[finite]) ** 2)))
         stored = run.metrics.get(name, {}).get(node, {}).get("rmse")
@@ -95,7 +104,7 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
                          f"{stored:.4g}" + (" (a Bayesian run stores the predictive median's error; the figure "
                                             "simulates the posterior median parameters)" if run.method == "bayes"
                                             else ": the data file is not the one the run used"))
-    return RunSeries(name, data.timestamps[window], observed, predicted, band, rmse, dict(md.units), notes)
+    return RunSeries(name, data.timestamps[window], observed, predicted, band, rmse, dict(md.units), notes, posterior)
 
 
 def data_file_locator(explicit: Path | None = None, folder: Path | None = None) -> Callable[[str], Path]:

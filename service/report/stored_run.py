@@ -1,21 +1,23 @@
 """What the store holds about a run: the calibration run ``gtr:run/<run_id>`` (provenance, estimates,
-metrics, operating regimes; :mod:`service.calibration.triples`) and the diagnosis based on it, if any
-(ranked effect candidates, failure locations; :func:`service.diagnosis.report.diagnosis_triples`),
-read back by SPARQL (``queries/sensor-metrics.rq`` for the metrics)."""
+metrics, operating regimes, a Bayesian run's predictive bands; :mod:`service.calibration.triples`)
+and the diagnosis based on it, if any (ranked effect candidates, failure locations;
+:func:`service.diagnosis.report.diagnosis_triples`), read back by SPARQL (``queries/sensor-metrics.rq`` for the metrics)."""
 
 from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+import numpy as np
 
 from service.calibration.triples import run_iri
 from service.errors import NotFoundError
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 
-__all__ = ["StoredEstimate", "StoredRun", "StoredCandidate", "StoredLocation", "StoredDiagnosis", "read_run",
-           "read_diagnosis", "DIAGNOSIS_SUFFIX"]
+__all__ = ["StoredEstimate", "StoredBand", "stored_band", "StoredRun", "StoredCandidate", "StoredLocation",
+           "StoredDiagnosis", "read_run", "read_diagnosis", "DIAGNOSIS_SUFFIX"]
 
 #: A diagnosis graph's id is its base run's id with this suffix.
 DIAGNOSIS_SUFFIX = "-diagnosis"
@@ -55,6 +57,10 @@ SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value 
 _REGIMES_QUERY = _PREFIXES + """SELECT ?regime ?rule ?share WHERE { GRAPH ?g {
   ?regime a gt:OperatingRegime ; prov:wasGeneratedBy ?run ; gt:regimeRule ?rule ; gt:share ?share .
 } }"""
+_BANDS_QUERY = _PREFIXES + """SELECT ?sensor ?window ?series WHERE { GRAPH ?g {
+  ?band a gt:PredictiveBand ; prov:wasGeneratedBy ?run ; gt:onSensor ?sensor ; gt:window ?window ;
+        gt:bandSeries ?series .
+} }"""
 _LOCATIONS_QUERY = _PREFIXES + """SELECT ?location ?failing ?matching ?text ?suspect WHERE { GRAPH ?g {
   ?location a gt:FailureLocation ; prov:wasGeneratedBy ?diagnosis ; gt:failingSensor ?failing ; rdfs:comment ?text .
   OPTIONAL { ?location gt:matchingSensor ?matching }
@@ -80,11 +86,30 @@ class StoredEstimate:
     quantile84: float
 
 
+@dataclass(frozen=True, kw_only=True)
+class StoredBand:
+    """A Bayesian run's stored posterior predictive band of one sensor on ``window``: its central
+    ``level`` interval at every ``stride``-th step of the window (NaN where nothing was predicted)."""
+
+    window: str
+    level: float
+    stride: int
+    lower: np.ndarray
+    upper: np.ndarray
+
+    def at_every_step(self, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` at each of the window's ``n_steps`` steps, linear between stored steps."""
+        stored = np.arange(self.lower.size) * self.stride
+        steps = np.arange(n_steps)
+        return np.interp(steps, stored, self.lower), np.interp(steps, stored, self.upper)
+
+
 @dataclass
 class StoredRun:
     """A calibration run as stored: provenance, estimates (``component#name`` → estimate), metrics
     (``metrics[window][sensor][metric] = value``, ``units[sensor]``) and the operating regimes of
-    its test window (``{"regime", "rule", "share", "rmse": {sensor: value}}``, by regime number)."""
+    its test window (``{"regime", "rule", "share", "rmse": {sensor: value}}``, by regime number), and
+    a Bayesian run's predictive ``bands`` (sensor → :class:`StoredBand`)."""
 
     run_id: str
     model: str
@@ -99,6 +124,18 @@ class StoredRun:
     metrics: dict[str, dict[str, dict[str, float]]]
     units: dict[str, str]
     regimes: list[dict]
+    bands: dict[str, StoredBand] = field(default_factory=dict)
+
+
+def stored_band(series: str, window: str) -> StoredBand:
+    """The band of a ``gt:bandSeries`` JSON literal (:func:`service.calibration.triples.band_json`)."""
+    stored = json.loads(series)
+
+    def values(key: str) -> np.ndarray:
+        return np.array([np.nan if v is None else v for v in stored[key]], dtype=float)
+
+    return StoredBand(window=window, level=float(stored["level"]), stride=int(stored["stride"]),
+                      lower=values("lower"), upper=values("upper"))
 
 
 def _run_id(run_id: str) -> str:
@@ -149,6 +186,8 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         ended=row["ended"].value, settings=json.loads(row["settings"].value), estimates=estimates,
         metrics=metrics, units=units,
         regimes=sorted(regimes.values(), key=lambda r: int(r["regime"]) if r["regime"].isdigit() else r["regime"]),
+        bands={b["sensor"].value: stored_band(b["series"].value, b["window"].value)
+               for b in store.query(_BANDS_QUERY, substitutions={"run": run})},
     )
 
 

@@ -1,6 +1,7 @@
 """The flow topology as an SVG diagram: nodes in columns along the flow (left to right, loops cut at
 their back edges), fluid edges solid, heat edges dashed, loop edges curved back underneath, a sensor
-off the flow path below the node it observes; suspects, failing and matching sensors marked."""
+off the flow path below the node it observes; suspects, failing and matching sensors marked. The key
+(``TOPOLOGY_KEY``) is the page's text, not the image's."""
 
 from __future__ import annotations
 
@@ -13,11 +14,30 @@ import numpy as np
 from service.diagnosis.localization import FlowTopology
 from service.graph.namespaces import local_name
 
-__all__ = ["topology_svg"]
+__all__ = ["topology_svg", "TOPOLOGY_KEY"]
 
 #: Layout in px: width of a label character, label line height, box height, row pitch, gap between
 #: columns, margin; and label characters per line.
 _CHAR_PX, _LINE_PX, _BOX_H, _ROW_PX, _GAP_PX, _MARGIN, _LABEL_CHARS = 6.7, 13, 34, 50, 40, 16, 20
+
+
+#: Colours shared by the drawing and its key: suspect fill, failing red, matching green, component
+#: fill, box border, edge grey, heat orange.
+_SUSPECT, _RED, _GREEN, _FILL = "#f8c9c4", "#b3261e", "#2e7d32", "#eef2f8"
+_BORDER, _EDGE, _HEAT = "#6b7a90", "#7d8797", "#d9822b"
+#: The diagram's key, (CSS of a swatch, meaning), shown as HTML beside the image (:mod:`service.report.page`):
+#: text inside an image shrinks with it, the page's text does not.
+TOPOLOGY_KEY = (
+    (f"background:{_SUSPECT};border:2.5px solid {_RED}",
+     "suspect (between the last matching and the first failing sensor)"),
+    (f"background:#fff;border:3px solid {_RED};border-radius:8px", "failing sensor"),
+    (f"background:#fff;border:3px solid {_GREEN};border-radius:8px", "matching sensor"),
+    (f"background:{_FILL};border:1.2px solid {_BORDER}", "component"),
+    (f"background:#fff;border:1.2px solid {_BORDER};border-radius:8px", "sensor"),
+    (f"border-top:2px solid {_EDGE};height:0", "fluid flow"),
+    (f"border-top:2px dashed {_HEAT};height:0", "heat transfer"),
+    (f"border-top:2px dotted {_EDGE};height:0", "observes"),
+)
 
 
 def _layers(nodes: list[str], downstream: Mapping[str, set[str]]) -> tuple[dict[str, int], set[tuple[str, str]]]:
@@ -103,7 +123,7 @@ def topology_svg(
         x += widths[i] + _GAP_PX
     width = x - _GAP_PX + _MARGIN
     box = {n: (left[layer[n]], _MARGIN + row[n] * _ROW_PX, widths[layer[n]]) for n in layer}
-    height = _MARGIN + (max(row.values(), default=0) + 1) * _ROW_PX + 36
+    height = _MARGIN + (max(row.values(), default=0) + 1) * _ROW_PX + 24  # room for a loop curving under the last row
 
     def anchor(n: str, side: str) -> tuple[float, float]:
         x, y, w = box[n]
@@ -149,17 +169,14 @@ def topology_svg(
             f'<g class="{" ".join(classes)}" data-node="{html.escape(local_name(n))}"><title>{html.escape(n)}</title>'
             f'<rect x="{x:.0f}" y="{y:.0f}" width="{w:.0f}" height="{_BOX_H}" rx="{12 if n in sensors else 3}"/>'
             f'<text>{text}</text></g>')
-    legend = (f'<text class="legend" x="{_MARGIN}" y="{height - 14}">red: suspects (between the last matching and the '
-              f'first failing sensor) · red border: failing sensor · green border: matching sensor · rounded: sensor · '
-              f'dashed: heat transfer · dotted: observes</text>')
     style = ("text{font:11px DejaVu Sans Mono,monospace;text-anchor:middle;fill:#222}"
-             ".legend{text-anchor:start;font-size:10px;fill:#555}"
-             ".node rect{fill:#eef2f8;stroke:#6b7a90;stroke-width:1.2}.sensor rect{fill:#fff}"
-             ".suspect rect{fill:#f8c9c4;stroke:#b3261e;stroke-width:2.5}.failing rect{stroke:#b3261e;stroke-width:3}"
-             ".matching rect{stroke:#2e7d32;stroke-width:3}"
-             ".edge{fill:none;stroke:#7d8797;stroke-width:1.4}.heat{stroke:#d9822b;stroke-dasharray:6 3}"
+             f".node rect{{fill:{_FILL};stroke:{_BORDER};stroke-width:1.2}}.sensor rect{{fill:#fff}}"
+             f".suspect rect{{fill:{_SUSPECT};stroke:{_RED};stroke-width:2.5}}"
+             f".failing rect{{stroke:{_RED};stroke-width:3}}"
+             f".matching rect{{stroke:{_GREEN};stroke-width:3}}"
+             f".edge{{fill:none;stroke:{_EDGE};stroke-width:1.4}}.heat{{stroke:{_HEAT};stroke-dasharray:6 3}}"
              ".observes{stroke-dasharray:2 3}")
     return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0f}" height="{height:.0f}" '
             f'viewBox="0 0 {width:.0f} {height:.0f}"><style>{style}</style><defs><marker id="arrow" viewBox="0 0 8 8" '
             f'refX="7" refY="4" markerWidth="7" markerHeight="7" orient="auto"><path d="M0,0 L8,4 L0,8 z" '
-            f'fill="#7d8797"/></marker></defs>{"".join(parts)}{legend}</svg>')
+            f'fill="{_EDGE}"/></marker></defs>{"".join(parts)}</svg>')

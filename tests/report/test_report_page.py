@@ -38,7 +38,7 @@ from service.graph.store import GraphStore
 from service.http.app import create_app
 from service.matching.library_triples import ensure_signature_library
 from service.model.effect_recording import applied_effect_triples, record_effect_in_file
-from service.report.page import CONTENT_SECURITY_POLICY, report_html
+from service.report.page import CONTENT_SECURITY_POLICY, p_value_text, report_html
 from service.report.run_series import INTERVAL_LEVEL, data_file_locator, recompute_series
 from service.report.stored_run import read_diagnosis, read_run
 from service.report.topology_svg import topology_svg
@@ -224,10 +224,15 @@ def test_the_regimes_and_the_ranked_effects_with_their_evidence_are_listed(case,
     assert [(row[0], row[1].split()[0], row[2]) for row in effects] == [
         (str(rank), e.effect, _short(e.node)) for rank, e in enumerate(case.report.effects, start=1)]
     best = effects[0]
-    assert best[1].startswith("ValveLeakage") and best[2] == "heating_valve" and best[3] == "yes"
+    assert best[1].startswith("ValveLeakage") and best[2] == "heating_valve" and best[3] == "clear evidence"
     assert best[4] == f"{100 * case.report.effects[0].test_improvement:.0f} %"
     assert best[-1] == case.report.effects[0].explanation
     assert case.report.summary in html.unescape(page)
+    # the statistics one click away: in a <details> of the row, the p-value readable
+    first = case.report.effects[0]
+    assert best[5].startswith("numbers") and f"ΔBIC{first.delta_bic:.4g}score statistic S" in best[5]
+    assert f"p-value of S{p_value_text(first.score.p_value)}significantyes" in best[5]
+    assert page.count("<details><summary>numbers</summary>") == len(effects)
 
 
 def test_the_error_history_compares_the_model_versions(case, page):
