@@ -11,8 +11,9 @@ from collections.abc import Sequence
 
 __all__ = [
     "GraphtwinError", "InputError", "ModelLoadError", "SignatureError", "AssemblyError", "IncompleteModelError",
-    "MeasurementError", "UnsupportedFormatError", "UnitError", "CalibrationError", "UnknownEffectError", "NotFoundError", "ConflictError",
-    "StoreError", "StoreInUseError", "StoreUnavailableError", "StoreUnreachableError", "StoreRequestError",
+    "MeasurementError", "UnsupportedFormatError", "UnitError", "CalibrationError", "UnknownEffectError", "ResultTooLargeError",
+    "NotFoundError", "ConflictError", "StoreError", "StoreInUseError", "StoreUnavailableError", "StoreUnreachableError",
+    "QueryTimeoutError", "StoreRequestError",
 ]
 
 
@@ -80,6 +81,10 @@ class UnknownEffectError(InputError):
         super().__init__(f"no effect {effect!r}; the catalog has {', '.join(self.catalog)}")
 
 
+class ResultTooLargeError(InputError):
+    """A query's answer has more rows or triples than the service's limit."""
+
+
 class NotFoundError(GraphtwinError, LookupError):
     """No model, run, job, upload or query of that name."""
 
@@ -106,6 +111,10 @@ class StoreUnavailableError(StoreError, RuntimeError):
 
 class StoreUnreachableError(StoreUnavailableError, ConnectionError):
     """No connection to the external endpoint, or no answer within the timeout; the message names the URL."""
+
+
+class QueryTimeoutError(StoreError):
+    """A read query ran past the service's time limit; the message says whether it was stopped."""
 
 
 class StoreRequestError(StoreError, ValueError):

@@ -47,6 +47,9 @@ class Settings(BaseSettings):
     max_request_bytes: int = Field(default=64 * 1024, gt=0)
     query_timeout_s: float = Field(default=30.0, gt=0)
     max_result_rows: int = Field(default=100_000, gt=0)
+    query_workers: int = Field(default=2, ge=1, le=32)
+    query_queue: int = Field(default=4, ge=0, le=1000)
+    max_queries_per_client: int = Field(default=2, ge=1)
     executor: str = "processes"
     job_workers: int = Field(default=1, ge=1, le=64)
     brick_ontology: Path | None = None

@@ -10,10 +10,12 @@ SPARQL 1.1 endpoint. Write strategies and their reasons: ``docs/graph-store.md``
 
 from __future__ import annotations
 
+import os
 import re
 import threading
 import uuid
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -167,6 +169,11 @@ def _nquads(graphs: Mapping[ox.NamedNode, list[bytes]]) -> bytes:
 STAGING = f"{GTR}staging/"
 
 
+#: Write-ahead log growth after which the embedded store on disk flushes its memtable, bytes: at most
+#: ~2 s of log replay when the store is opened again (``docs/graph-store.md``, Restart).
+FLUSH_AFTER_WAL_BYTES = 32 * 2**20
+
+
 class EmbeddedBackend:
     """pyoxigraph :class:`~pyoxigraph.Store` on disk under ``path`` (created if missing), or in memory.
 
@@ -180,6 +187,12 @@ class EmbeddedBackend:
     def __init__(self, path: Path | None = None):
         self.path = Path(path) if path is not None else None
         self._write_lock = threading.RLock()
+        #: writes made since the store was opened (each under ``_write_lock``): a checkpoint of an
+        #: older generation misses one
+        self.generation = 0
+        #: write-ahead log bytes written after which a write is followed by a flush (RocksDB replays the
+        #: unflushed log when the store is opened again: ~50 ms per MB, ``docs/graph-store.md``, Restart)
+        self.flush_after_wal_bytes = FLUSH_AFTER_WAL_BYTES
         if self.path is not None:
             self.path.mkdir(parents=True, exist_ok=True)
             self.store = _open_store(self.path)
@@ -187,6 +200,7 @@ class EmbeddedBackend:
             self.store = ox.Store()
         for graph in [g for g in self.store.named_graphs() if g.value.startswith(STAGING)]:
             self.store.remove_graph(graph)
+        self._wal_at_flush = self._wal_bytes() if self.path is not None else 0
 
     def query(self, sparql, *, substitutions=None, default_graph=None):
         kwargs = {}
@@ -194,8 +208,44 @@ class EmbeddedBackend:
             kwargs["default_graph"] = list(default_graph)
         return _rows(query_bound(self.store, sparql, substitutions, **kwargs))
 
-    def update(self, sparql):
+    @contextmanager
+    def _writing(self) -> Iterator[None]:
+        """The write lock held around one write, the generation moved after it (even a failed write
+        may have changed the store: pyoxigraph's bulk loads are not transactions); on disk, the
+        memtable flushed when the write-ahead log grew by :attr:`flush_after_wal_bytes`."""
         with self._write_lock:
+            try:
+                yield
+            finally:
+                self.generation += 1
+                if self.path is not None:
+                    self._flush_when_the_log_grew()
+
+    def _flush_when_the_log_grew(self) -> None:
+        wal = self._wal_bytes()
+        if wal - self._wal_at_flush > self.flush_after_wal_bytes:
+            self.store.flush()
+            self._wal_at_flush = self._wal_bytes()
+        else:
+            self._wal_at_flush = min(self._wal_at_flush, wal)  # RocksDB removed logs it had flushed
+
+    def _wal_bytes(self) -> int:
+        """The size of RocksDB's write-ahead logs (``*.log``) in the store's folder, bytes."""
+        return sum(entry.stat().st_size for entry in os.scandir(self.path) if entry.name.endswith(".log"))
+
+    def checkpoint(self, folder: Path) -> int:
+        """A RocksDB checkpoint of the on-disk store in ``folder`` (which must not exist): hard links to
+        its files, cheap (``docs/graph-store.md``, Read snapshots); the generation it holds.
+
+        :raises OSError: the store is in memory, or RocksDB cannot write the checkpoint."""
+        if self.path is None:
+            raise OSError("an in-memory store has no checkpoint")
+        with self._write_lock:
+            self.store.backup(str(folder))
+            return self.generation
+
+    def update(self, sparql):
+        with self._writing():
             self.store.update(sparql)
 
     def replace_graph(self, graph, triples):
@@ -208,7 +258,7 @@ class EmbeddedBackend:
         moves them into place; on disk one ``DROP`` + ``INSERT DATA`` update (``docs/graph-store.md``,
         Writes)."""
         texts = {g: [chunk for chunk in ntriples_chunks(t) if chunk] for g, t in graphs.items()}
-        with self._write_lock:
+        with self._writing():
             if not any(self.store.contains_named_graph(g) for g in texts):
                 self.store.load(_nquads(texts), ox.RdfFormat.N_QUADS, lenient=True)  # Oxigraph wrote the lines
                 return
@@ -260,7 +310,7 @@ class EmbeddedBackend:
         return len(triples)
 
     def drop_graph(self, graph):
-        with self._write_lock:
+        with self._writing():
             if self.store.contains_named_graph(graph):
                 self.store.remove_graph(graph)
 

@@ -56,25 +56,30 @@ class SparqlEndpointBackend:
     :param store_url: the graph store protocol endpoint (used by :meth:`dump`).
     :param token: sent as ``Authorization: Bearer <token>`` (an endpoint behind an auth proxy).
     :param timeout_s: limit for each of connecting, sending and reading one request, seconds.
+    :param query_timeout_s: the same for a query (the service's query time limit: the endpoint's
+        HTTP timeout is what stops a query there); ``timeout_s`` when None.
 
     One ``httpx.Client`` (a connection pool, safe to share between threads) serves every request;
     :meth:`close` it, or use the backend as a context manager.
     """
 
     def __init__(self, query_url: str, update_url: str, store_url: str, token: str | None = None,
-                 timeout_s: float = 30):
+                 timeout_s: float = 30, query_timeout_s: float | None = None):
         self.query_url = query_url
         self.update_url = update_url
         self.store_url = store_url
         self.timeout_s = timeout_s
+        self.query_timeout_s = query_timeout_s if query_timeout_s is not None else timeout_s
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.client = httpx.Client(headers=headers, timeout=timeout_s)
 
     @classmethod
-    def for_oxigraph_server(cls, base_url: str, token: str | None = None, timeout_s: float = 30) -> SparqlEndpointBackend:
+    def for_oxigraph_server(cls, base_url: str, token: str | None = None, timeout_s: float = 30,
+                            query_timeout_s: float | None = None) -> SparqlEndpointBackend:
         """An ``oxigraph serve`` at ``base_url`` (e.g. ``http://oxigraph:7878``)."""
         base = base_url.rstrip("/")
-        return cls(f"{base}/query", f"{base}/update", f"{base}/store", token=token, timeout_s=timeout_s)
+        return cls(f"{base}/query", f"{base}/update", f"{base}/store", token=token, timeout_s=timeout_s,
+                   query_timeout_s=query_timeout_s)
 
     def close(self) -> None:
         self.client.close()
@@ -97,11 +102,12 @@ class SparqlEndpointBackend:
         :raises StoreUnavailableError: any other failing status (the URL and the status).
         :raises StoreUnreachableError: no connection, or no answer within the timeout (the URL).
         """
+        timeout_s = self.query_timeout_s if what == "query" else self.timeout_s
         try:
-            response = self.client.request(method, url, **kwargs)
+            response = self.client.request(method, url, timeout=timeout_s, **kwargs)
         except httpx.TimeoutException as exc:
             raise StoreUnreachableError(
-                f"SPARQL endpoint {url}: the {what} got no answer within {self.timeout_s:g} s ({exc})") from None
+                f"SPARQL endpoint {url}: the {what} got no answer within {timeout_s:g} s ({exc})") from None
         except httpx.TransportError as exc:
             raise StoreUnreachableError(f"cannot reach SPARQL endpoint {url} ({what}): {exc}") from None
         if response.status_code == 404 and missing_ok:

@@ -91,9 +91,10 @@ class GraphStore:
         return cls(EmbeddedBackend(path))
 
     @classmethod
-    def remote(cls, url: str, token: str | None = None) -> GraphStore:
-        """An external SPARQL 1.1 endpoint (Oxigraph server layout: ``/query``, ``/update``, ``/store``)."""
-        return cls(SparqlEndpointBackend.for_oxigraph_server(url, token=token))
+    def remote(cls, url: str, token: str | None = None, query_timeout_s: float | None = None) -> GraphStore:
+        """An external SPARQL 1.1 endpoint (Oxigraph server layout: ``/query``, ``/update``, ``/store``);
+        ``query_timeout_s`` its queries' HTTP timeout (30 s when None)."""
+        return cls(SparqlEndpointBackend.for_oxigraph_server(url, token=token, query_timeout_s=query_timeout_s))
 
     # ------------------------------------------------------------------ graph names
     @staticmethod

@@ -7,14 +7,14 @@ with uvicorn. Writes need ``Authorization: Bearer <GRAPHTWIN_TOKEN>``; reads too
 from __future__ import annotations
 
 import logging
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
 from service import __version__
+from service.graph.query_reader import QueryReader
 from service.graph.store import GraphStore
-from service.http.deps import Service
+from service.http.deps import ReadAdmission, Service
 from service.http.errors import EXCEPTION_HANDLERS, error_responses
 from service.http.gate import RequestGate
 from service.http.routes import jobs, models, reports, sparql
@@ -35,7 +35,7 @@ log = logging.getLogger("graphtwin.api")
 def _open_store(settings: Settings) -> GraphStore:
     if settings.sparql_endpoint:
         token = settings.endpoint_token.get_secret_value() if settings.endpoint_token is not None else None
-        return GraphStore.remote(settings.sparql_endpoint, token=token)
+        return GraphStore.remote(settings.sparql_endpoint, token=token, query_timeout_s=settings.query_timeout_s)
     return GraphStore.embedded(settings.store_path)
 
 
@@ -61,13 +61,15 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
         raise
     runner = JobRunner(store, records, JOB_KINDS, max_workers=settings.job_workers, locate_measurements=uploads.locate,
                        executor=executor)
-    query_pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="graphtwin-sparql")
+    reads = QueryReader(store.backend, workers=settings.query_workers, timeout_s=settings.query_timeout_s,
+                        max_rows=settings.max_result_rows)  # on disk: worker processes, started now
+    admission = ReadAdmission(settings.query_workers + settings.query_queue, settings.max_queries_per_client)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
         yield
         runner.shutdown(interrupt=True)  # a stopping service ends now: running jobs are marked interrupted
-        query_pool.shutdown(wait=False, cancel_futures=True)
+        reads.close()
         data_lock.close()
 
     app = FastAPI(
@@ -75,7 +77,7 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
         description="Semantic HVAC models in, calibrated simulation models and missing-physics diagnoses out. "
                     "Writes need `Authorization: Bearer <token>`.",
     )
-    app.state.graphtwin = Service(settings, store, runner, uploads, query_pool, brick_classes)
+    app.state.graphtwin = Service(settings, store, runner, uploads, reads, admission, brick_classes)
     for error, handler in EXCEPTION_HANDLERS.items():
         app.add_exception_handler(error, handler)
     app.add_middleware(RequestGate, settings=settings)

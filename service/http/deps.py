@@ -1,9 +1,13 @@
-"""What the routes share: the service's state, access by bearer token, and the checks that a named
-model or upload exists."""
+"""What the routes share: the service's state, access by bearer token, the limits on concurrent reads,
+and the checks that a named model or upload exists."""
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+import hashlib
+import threading
+from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
@@ -12,14 +16,64 @@ from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from service.errors import InputError, NotFoundError
+from service.graph.query_reader import QueryReader
 from service.graph.store import GraphStore
+from service.http.errors import ApiError
 from service.http.gate import check_token
 from service.http.uploads import MeasurementUploads
 from service.jobs.runner import JobRunner
 from service.settings import Settings
 from service.workflows.requests import FitRequest
 
-__all__ = ["Service", "ServiceDep", "ReadAccess", "WriteAccess", "require_model", "require_fit_models"]
+__all__ = ["ReadAdmission", "Service", "ServiceDep", "ReadAccess", "WriteAccess", "require_model", "require_fit_models"]
+
+
+_RETRY_AFTER_S = "1"  # a place frees as soon as any read ends
+
+
+class ReadAdmission:
+    """At most ``total`` reads at once (the query workers and a short queue) and ``per_client`` of
+    one client: by its address, and by its bearer token when it gives one. A read over either limit
+    is refused at once (429 with ``Retry-After``) rather than queued behind the others."""
+
+    def __init__(self, total: int, per_client: int) -> None:
+        self.total, self.per_client = total, per_client
+        self._lock = threading.Lock()
+        self._running = 0
+        self._by_client: Counter[str] = Counter()
+
+    @staticmethod
+    def clients(request: Request) -> list[str]:
+        """The keys ``request`` counts against: its address, and a digest of its token when it gives one."""
+        keys = [f"address {request.client.host if request.client else 'unknown'}"]
+        scheme, _, token = (request.headers.get("authorization") or "").partition(" ")
+        if scheme.lower() == "bearer" and token.strip():
+            keys.append("token " + hashlib.sha256(token.strip().encode()).hexdigest())
+        return keys
+
+    @contextmanager
+    def admitted(self, clients: list[str]) -> Iterator[None]:
+        """Hold a place for one read of ``clients`` while it runs.
+
+        :raises ApiError: 429 when the service or one of ``clients`` is at its limit."""
+        with self._lock:
+            if self._running >= self.total:
+                raise ApiError(429, f"the service runs {self.total} SPARQL reads already (its limit): retry shortly",
+                               headers={"Retry-After": _RETRY_AFTER_S})
+            if any(self._by_client[key] >= self.per_client for key in clients):
+                raise ApiError(429, f"at most {self.per_client} SPARQL reads of one client at once: wait for "
+                                    "your others to end", headers={"Retry-After": _RETRY_AFTER_S})
+            self._running += 1
+            self._by_client.update(clients)
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._running -= 1
+                self._by_client.subtract(clients)
+                for key in clients:
+                    if self._by_client[key] <= 0:
+                        del self._by_client[key]
 
 
 @dataclass
@@ -30,7 +84,8 @@ class Service:
     store: GraphStore
     runner: JobRunner
     uploads: MeasurementUploads
-    query_pool: ThreadPoolExecutor
+    reads: QueryReader
+    read_admission: ReadAdmission
     #: the official Brick ontology's classes (``GRAPHTWIN_BRICK_ONTOLOGY``), read at start-up
     brick_classes: frozenset[str] | None = None
 

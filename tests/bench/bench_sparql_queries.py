@@ -140,8 +140,8 @@ def http_service(store: GraphStore, folder: Path):
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     # a query time limit far above any latency measured here: a slow query is measured, not refused
-    app = create_app(Settings(data_dir=folder, executor="threads", max_result_rows=10_000, query_timeout_s=3600),
-                     store=store)
+    app = create_app(Settings(data_dir=folder, executor="threads", max_result_rows=10_000, query_timeout_s=3600,
+                              max_queries_per_client=16), store=store)  # every client here has one address
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()

@@ -15,8 +15,8 @@ from shared_data import OFFICIAL_BRICK
 
 from service.data.model_series import series_specs
 from service.errors import StoreInUseError, StoreUnavailableError
+from service.graph import query_reader
 from service.graph.store import GraphStore
-from service.http import sparql_protocol
 from service.http.app import create_app
 from service.jobs.records import JobRecord, JobRecords
 from service.jobs.work import JobKind, JobResult
@@ -391,7 +391,7 @@ def test_a_model_name_longer_than_a_file_name_can_be_is_refused(client, auth):
 
 def test_a_query_over_the_time_limit_gets_503(tmp_path, store, monkeypatch):
     release = threading.Event()
-    monkeypatch.setattr(sparql_protocol, "_execute", lambda *args: release.wait(30) and b"")
+    monkeypatch.setattr(query_reader, "backend_answer", lambda *args: release.wait(30) and b"")
     try:
         with TestClient(create_app(Settings(data_dir=tmp_path, query_timeout_s=0.2), store=store)) as client:
             response = client.get("/sparql", params={"query": "ASK {}"})
@@ -404,7 +404,7 @@ def test_a_failing_sparql_endpoint_gets_503(tmp_path, store, monkeypatch):
     def endpoint_fails(*args):
         raise StoreUnavailableError("SPARQL endpoint http://127.0.0.1:7878/query failed on the query (HTTP 500): boom")
 
-    monkeypatch.setattr(sparql_protocol, "_execute", endpoint_fails)
+    monkeypatch.setattr(query_reader, "backend_answer", endpoint_fails)
     with TestClient(create_app(Settings(data_dir=tmp_path, executor="threads"), store=store)) as client:
         response = client.get("/sparql", params={"query": "ASK {}"})
         assert response.status_code == 503 and "(HTTP 500): boom" in response.json()["detail"]
@@ -562,7 +562,16 @@ def test_a_running_record_is_interrupted_when_the_app_starts(tmp_path):
     assert settings.store_path.is_dir()
 
 
-def test_concurrent_queries_during_a_calibration_never_see_half_a_run(client, auth, store, case_csv, wait_job):
+@pytest.fixture
+def roomy_client(settings, store):
+    """The service admitting 20 reads of one client at once (a TestClient's requests all come from one address)."""
+    roomy = settings.model_copy(update={"max_queries_per_client": 20, "query_queue": 20})
+    with TestClient(create_app(roomy, store=store)) as client:
+        yield client
+
+
+def test_concurrent_queries_during_a_calibration_never_see_half_a_run(roomy_client, auth, store, case_csv, wait_job):
+    client = roomy_client
     upload = _upload_csv(client, auth, case_csv.read_text()).json()["id"]
     n_estimates = len(assemble(store, "case").estimated_parameters)
     job = client.post("/jobs/calibrate", headers=auth, json={

@@ -29,7 +29,7 @@ def app(tmp_path):
                               max_result_rows=200, max_upload_bytes=200_000), store=store)
     yield app
     app.state.graphtwin.runner.shutdown(wait=True)
-    app.state.graphtwin.query_pool.shutdown(wait=True)
+    app.state.graphtwin.reads.close()
     set_hypothesis_home_dir(None)
 
 

@@ -24,7 +24,7 @@ from service.resources import queries_dir
 __all__ = ["router"]
 
 router = APIRouter()
-_SPARQL_ERRORS = error_responses(400, 401, 403, 406, 413, 415, 422, 503)
+_SPARQL_ERRORS = error_responses(400, 401, 403, 406, 413, 415, 422, 429, 503)
 _QUERY_BODY = {"requestBody": {"content": {
     "application/sparql-query": {"schema": {"type": "string"}},
     "application/x-www-form-urlencoded": {"schema": {"type": "object", "properties": {
@@ -42,7 +42,7 @@ async def sparql_get(
     """SPARQL 1.1 Protocol query by GET; read-only (results by content negotiation)."""
     prepared = await run_in_threadpool(prepare_query, query, request.headers.get("accept"), default_graph_uri,
                                        union_default_graph)  # read off the event loop: /health answers meanwhile
-    return await answer_query(service, prepared)
+    return await answer_query(service, prepared, request)
 
 
 @router.post("/sparql", tags=["sparql"], dependencies=[ReadAccess], responses=_SPARQL_ERRORS,
@@ -67,7 +67,7 @@ async def sparql_post(
         raise ApiError(415, "send the query as application/sparql-query or as the form field 'query' "
                             "(application/x-www-form-urlencoded)")
     prepared = await run_in_threadpool(prepare_query, text, request.headers.get("accept"), graphs, union_default_graph)
-    return await answer_query(service, prepared)
+    return await answer_query(service, prepared, request)
 
 
 def _update(store: GraphStore, text: str) -> None:
@@ -148,7 +148,7 @@ def list_queries() -> dict:
     return {"data": items, "count": len(items)}
 
 
-@router.get("/queries/{name}", tags=["queries"], dependencies=[ReadAccess], responses=error_responses(401, 403, 404, 406, 422, 503))
+@router.get("/queries/{name}", tags=["queries"], dependencies=[ReadAccess], responses=error_responses(401, 403, 404, 406, 422, 429, 503))
 async def run_named_query(
     name: str, request: Request, service: ServiceDep,
     dataset: Annotated[str | None, Query(description="model whose graphs are the default graph")] = None,
@@ -169,4 +169,4 @@ async def run_named_query(
         default_graph = service.store.matching_dataset(dataset)
     query = prepare_query(described["text"], request.headers.get("accept"), [], False)
     return await answer_query(service, SparqlQuery(query.text, query.form, query.media_type, default_graph,
-                                         substitutions=bindings or None))
+                                                   substitutions=bindings or None), request)
