@@ -114,8 +114,10 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True) -> None:
     for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
         table.add_column(column)
     for node, s in report.sensors.items():
+        verdict = ("[red]fails[/red]" if s.fails else
+                   "[yellow]the missing effect shows[/yellow]" if s.shows_missing_effect else "matches")
         table.add_row(local_name(node), f"{s.rmse:.3g} {unit_label(s.unit)}", f"{s.rmse_over_noise:.1f}",
-                      f"{s.nmbe_percent:+.1f}", "[red]fails[/red]" if s.fails else "matches")
+                      f"{s.nmbe_percent:+.1f}", verdict)
     console.print(table)
     for location in report.localization:
         console.print(f"• {location.describe()}")
@@ -140,6 +142,10 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True) -> None:
                       f"{100 * e.test_improvement:.0f} %", "yes" if e.significant else "no")
     console.print(table)
     console.print(f"[bold]{report.summary}[/bold]")
+    for lookalike in report.indistinguishable:
+        console.print(f"  {lookalike.effect.effect} at {local_name(lookalike.effect.node)} would be told apart by:")
+        for text in lookalike.would_separate:
+            console.print(f"    – {text}")
     if stored:
         console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis -o report.html")
     else:

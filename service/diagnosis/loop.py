@@ -12,6 +12,7 @@ also written to the store as triples. The method in full: ``docs/diagnosis.md``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,11 +21,13 @@ from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCU
 from service.calibration.run import calibrate
 from service.components.library import SignatureLibrary
 from service.data.windows import Window
-from service.diagnosis.candidates import rank_catalog
+from service.diagnosis.candidates import rank_catalog, split_windows
 from service.diagnosis.episodes import Episode, find_episodes
 from service.diagnosis.localization import FlowTopology, localize_failures
+from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
 from service.diagnosis.report import DiagnosisReport, SensorVerdict, diagnosis_triples
 from service.diagnosis.residual_dependence import Dependence, residual_dependence
+from service.diagnosis.separation import indistinguishable
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
@@ -101,8 +104,20 @@ def diagnose(
             nmbe_percent=metrics.nmbe_percent, r2=metrics.r2, unit=md.units[node], noise=sigma,
             fails=bool(metrics.rmse > failure_ratio * sigma),
         )
+    ranked, skipped = (rank_catalog(store, model_name, library, base, seed=seed, refit_max_nfev=refit_max_nfev,
+                                    workers=workers, say=say)
+                       if rank_effects else ([], []))
+    answer = next((e for e in ranked if e.significant), None)
+    lookalikes = []
+    if answer is not None:  # one story: where the missing effect shows, a failure is located
+        sensors = {node: replace(verdict, shows_missing_effect=answer.error_removed_at(node) >= MIN_TEST_IMPROVEMENT)
+                   for node, verdict in sensors.items()}
+        say("telling the answer from its look-alikes")
+        _, run_window, evaluation = split_windows(base.train, test_slice)
+        lookalikes = indistinguishable(answer, ranked, md, run_window, evaluation,
+                                       {node: verdict.noise for node, verdict in sensors.items()})
     say("locating the failures")
-    matches = {md.node_of[c]: True for c in model.boundary_inputs} | {n: not s.fails for n, s in sensors.items()}
+    matches = {md.node_of[c]: True for c in model.boundary_inputs} | {n: not s.located for n, s in sensors.items()}
     localization = localize_failures(
         FlowTopology.from_store(store, model_name), matches, [md.node_of[c] for c in model.boundary_inputs + model.targets],
         carries=_carried_down(residuals, md.units, {node: s.noise for node, s in sensors.items()}, failure_ratio))
@@ -114,9 +129,6 @@ def diagnose(
         if found:
             episodes[node] = found
 
-    ranked, skipped = (rank_catalog(store, model_name, library, base, seed=seed, refit_max_nfev=refit_max_nfev,
-                                    workers=workers, say=say)
-                       if rank_effects else ([], []))
     failing = [n for n, s in sensors.items() if s.fails]
     dependence = (_residual_dependence(base, failing, residuals)
                   if failing and not any(e.significant for e in ranked) else {})
@@ -127,6 +139,7 @@ def diagnose(
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, step_s=data.step_s,
         base_test_prediction=predicted, effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice],
         test_observed=observed, failure_ratio=failure_ratio, data_warnings=list(base.record.diagnostics.warnings),
+        indistinguishable=lookalikes,
     )
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
     return report

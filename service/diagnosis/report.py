@@ -19,6 +19,7 @@ from service.diagnosis.episodes import Episode
 from service.diagnosis.localization import FailureLocation
 from service.diagnosis.ranking import EffectEvidence
 from service.diagnosis.residual_dependence import Dependence
+from service.diagnosis.separation import Lookalike
 from service.graph.namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 
 __all__ = ["SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
@@ -28,7 +29,10 @@ __all__ = ["SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
 class SensorVerdict:
     """One target sensor on the test window: its errors (``rmse``, ``mae`` in ``unit``; the
     coefficient of variation of the RMSE and the normalised mean bias error in percent; R²), its
-    noise level σ (``unit``) and whether the model fails there (RMSE above the failure ratio × σ)."""
+    noise level σ (``unit``), whether the model fails there (RMSE above the failure ratio × σ) and
+    whether the answer's missing effect shows there (it removes at least
+    :data:`~service.diagnosis.ranking.MIN_TEST_IMPROVEMENT` of the sensor's held-out error): either
+    locates a failure at the sensor."""
 
     rmse: float
     mae: float
@@ -38,6 +42,11 @@ class SensorVerdict:
     unit: str
     noise: float
     fails: bool
+    shows_missing_effect: bool = False
+
+    @property
+    def located(self) -> bool:
+        return self.fails or self.shows_missing_effect
 
     @property
     def rmse_over_noise(self) -> float:
@@ -46,7 +55,7 @@ class SensorVerdict:
     def to_dict(self) -> dict:
         return {"rmse": self.rmse, "mae": self.mae, "cv_rmse": self.cv_rmse_percent, "nmbe": self.nmbe_percent,
                 "r2": self.r2, "unit": self.unit, "noise": self.noise, "rmse_over_noise": self.rmse_over_noise,
-                "fails": self.fails}
+                "fails": self.fails, "shows_missing_effect": self.shows_missing_effect}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,10 +85,16 @@ class DiagnosisReport:
     test_observed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     failure_ratio: float = 2.0
     data_warnings: list[str] = field(default_factory=list)  # reading the data and assembling: frozen points, gaps
+    indistinguishable: list[Lookalike] = field(default_factory=list)  # significant, tied with the answer
 
     @property
     def significant(self) -> list[EffectEvidence]:
         return [e for e in self.effects if e.significant]
+
+    @property
+    def answer(self) -> EffectEvidence | None:
+        """The missing effect: the first significant candidate of the ranking, or None."""
+        return next(iter(self.significant), None)
 
     @property
     def failing_sensors(self) -> list[str]:
@@ -100,8 +115,14 @@ class DiagnosisReport:
                 return "The model matches every sensor within its noise; nothing significant is missing."
             return (f"The model fails at {', '.join(local_name(n) for n in failing)}, but no effect in the catalog "
                     "explains it significantly: see residual_dependence for what the residual follows.")
-        best = self.significant[0]
-        return f"Missing: {best.label} at {local_name(best.node)}. {best.explanation}."
+        best = self.answer
+        explanation = best.explanation[:1].upper() + best.explanation[1:]
+        sentence = f"Missing: {best.label} at {local_name(best.node)}. {explanation}."
+        if self.indistinguishable:
+            sentence += (" Indistinguishable on these data: "
+                         + "; ".join(f"{e.effect.label} at {local_name(e.effect.node)}" for e in self.indistinguishable)
+                         + " (see indistinguishable for what would separate them).")
+        return sentence
 
     def to_dict(self) -> dict:
         return {
@@ -111,6 +132,8 @@ class DiagnosisReport:
             "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
             "episodes": {node: [e.to_dict() for e in found] for node, found in self.episodes.items()},
             "effects": [e.to_dict() for e in self.effects],
+            "answer": self.answer.to_dict() if self.answer is not None else None,
+            "indistinguishable": [lookalike.to_dict() for lookalike in self.indistinguishable],
             "effects_tested": self.effects_tested,
             "nothing_significant_missing": not self.significant if self.effects_tested else None,
             "not_applicable": self.not_applicable,
@@ -139,6 +162,12 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
               ox.Triple(node, GT.rank, ox.Literal(str(rank), datatype=XSD.integer)),
               ox.Triple(node, GT.significant, ox.Literal("true" if item.significant else "false", datatype=XSD.boolean)),
               ox.Triple(node, GT.explanation, ox.Literal(item.explanation))]
+        tied = next((lookalike for lookalike in report.indistinguishable if lookalike.effect is item), None)
+        if tied is not None:
+            answer = report.answer
+            t.append(ox.Triple(node, GT.indistinguishableFrom,
+                               ox.NamedNode(f"{run.value}/candidate/{answer.effect}/{node_name[answer.node]}")))
+            t += [ox.Triple(node, GT.wouldSeparate, ox.Literal(text)) for text in tied.would_separate]
         for predicate, value in ((GT.scoreStatistic, item.score.statistic), (GT.pValue, item.score.p_value),
                                  (GT.deltaBic, item.delta_bic), (GT.testImprovement, item.test_improvement)):
             if np.isfinite(value):

@@ -218,6 +218,15 @@ def _numbers(candidate: StoredCandidate) -> str:
     return f"<details><summary>numbers</summary><dl>{rows}</dl></details>"
 
 
+def _lookalike_note(candidate) -> str:
+    """For a candidate the data cannot tell from the answer: that, and what would separate them."""
+    if not candidate.indistinguishable:
+        return ""
+    items = "".join(f"<li>{html.escape(text)}</li>" for text in candidate.would_separate)
+    return ('<p class="lookalike"><b>Indistinguishable from the answer on these data.</b> What would separate '
+            f"them:</p><ul>{items}</ul>")
+
+
 def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
     if diagnosis is None:
         return "<h2>Which effect is missing</h2><p class=\"note\">No diagnosis is based on this run.</p>"
@@ -232,7 +241,7 @@ def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
                        f'<small>{html.escape(e.label)}</small>',
           _breakable(e.node), f'<span class="{words[evidence_words(e)]}">{evidence_words(e)}</span>',
           f"{100 * e.test_improvement:.0f} %" if np.isfinite(e.test_improvement) else "–", _numbers(e),
-          html.escape(e.explanation)]
+          html.escape(e.explanation) + _lookalike_note(e)]
          for e in diagnosis.effects], "effects")
     return ("<h2>Which effect is missing (best first)</h2><p>Clear evidence: the diagnosis calls the effect "
             "significant (ΔBIC &lt; −10 and at least 20 % of the test-window error removed); some evidence: ΔBIC "

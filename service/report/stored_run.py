@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -54,6 +54,9 @@ SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value 
   OPTIONAL { GRAPH <https://w3id.org/graphtwin/resource/graph/signatures/library> {
     ?effect dcterms:identifier ?id ; rdfs:label ?label } }
 } ORDER BY ?rank"""
+_LOOKALIKES_QUERY = _PREFIXES + """SELECT ?effect ?node ?separate WHERE { GRAPH ?g {
+  ?candidate prov:wasGeneratedBy ?diagnosis ; gt:candidateEffect ?effect ; gt:onNode ?node ;
+             gt:indistinguishableFrom ?answer . OPTIONAL { ?candidate gt:wouldSeparate ?separate } } }"""
 _REGIMES_QUERY = _PREFIXES + """SELECT ?regime ?rule ?share WHERE { GRAPH ?g {
   ?regime a gt:OperatingRegime ; prov:wasGeneratedBy ?run ; gt:regimeRule ?rule ; gt:share ?share .
 } }"""
@@ -205,6 +208,9 @@ class StoredCandidate:
     p_value: float
     delta_bic: float
     test_improvement: float
+    effect_iri: str = ""
+    indistinguishable: bool = False  # from the answer, on these data
+    would_separate: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -249,12 +255,19 @@ def read_diagnosis(store: GraphStore, run_id: str) -> StoredDiagnosis | None:
     diagnosis = rows[0]["diagnosis"]
     bound = {"diagnosis": diagnosis}
     effects = [StoredCandidate(
-        effect=r["id"].value if "id" in r else local_name(r["effect"].value),
+        effect=r["id"].value if "id" in r else local_name(r["effect"].value), effect_iri=r["effect"].value,
         label=r["label"].value if "label" in r else "", node=r["node"].value, rank=int(r["rank"].value),
         significant=r["significant"].value == "true", explanation=r["explanation"].value,
         score=_float(r, "score"), p_value=_float(r, "p_value"), delta_bic=_float(r, "delta_bic"),
         test_improvement=_float(r, "improvement"),
     ) for r in store.query(_CANDIDATES_QUERY, substitutions=bound)]
+    lookalikes: dict[tuple[str, str], list[str]] = {}
+    for r in store.query(_LOOKALIKES_QUERY, substitutions=bound):
+        texts = lookalikes.setdefault((r["effect"].value, r["node"].value), [])
+        if "separate" in r:
+            texts.append(r["separate"].value)
+    effects = [replace(e, indistinguishable=True, would_separate=tuple(sorted(lookalikes[key])))
+               if (key := (e.effect_iri, e.node)) in lookalikes else e for e in effects]
     suspects: dict[str, tuple[Mapping, list[str]]] = {}  # location IRI → (its first row, its suspects)
     for r in store.query(_LOCATIONS_QUERY, substitutions=bound):
         _, components = suspects.setdefault(r["location"].value, (r, []))

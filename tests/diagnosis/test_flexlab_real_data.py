@@ -110,8 +110,9 @@ def test_the_top_effect_is_the_heating_valve_passing_water_while_shut(reports, f
     lower. A constant heat gain at a coil (its air flow from the fan downstream in this draw-through
     unit) ranks close behind: with the valve shut all day, a leak differs from any heat source only
     in how it follows the air flow and the coil inlet temperature. Fan motor heat, a property of the
-    fan and not a fault that appears from one day to the next, is not fitted as one. ΔBIC stays above the −10 the ranking
-    calls significant: 15-minute means leave a day only ~15 effective observations."""
+    fan and not a fault that appears from one day to the next, is not fitted as one. ΔBIC counts the
+    host's five freed parameters and each sensor's effective sample size from the leak's own residuals
+    (the base's, which hold the misfit it explains, left ~3 per sensor)."""
     effects = reports[fault]["report"].effects
     best = effects[0]
     assert (best.effect, best.node in HEATING) == ("ValveLeakage", True), \

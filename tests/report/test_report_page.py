@@ -449,3 +449,21 @@ def test_the_page_lists_the_runs_parameter_estimates(case, page):
     leak = next(row for row in table[1:] if row[1] == "valve_flow_coefficient" or row[1] == "loop_pressure_difference")
     estimate = next(e for e in run.estimates.values() if e.name == leak[1])
     assert leak[2] == f"{estimate.median:.4g}" and leak[5] in ("yes", "no")
+
+
+def test_a_candidate_indistinguishable_from_the_answer_says_what_would_separate_them(case):
+    """The diagnosis stores gt:indistinguishableFrom and gt:wouldSeparate on a look-alike; the page
+    shows them in that candidate's row (the stored triples added here, then taken away)."""
+    marked = (" { GRAPH ?g { ?c gt:indistinguishableFrom ?a ; "
+              "gt:wouldSeparate \"a temperature sensor for the inlet air temperature of heating_coil_air_side\" } } "
+              "WHERE { GRAPH ?g { ?c a gt:EffectCandidate ; gt:rank 2 . ?a a gt:EffectCandidate ; gt:rank 1 } }")
+    prefix = "PREFIX gt: <https://w3id.org/graphtwin/ontology#> "
+    case.store.backend.update(prefix + "INSERT" + marked)
+    try:
+        page = report_html(case.store, case.report.run_id, locate_data=data_file_locator(case.data))
+    finally:
+        case.store.backend.update(prefix + "DELETE" + marked)
+    effects = PageParser(page).tables["effects"][1:]
+    assert "Indistinguishable from the answer on these data" in effects[1][-1]
+    assert effects[1][-1].endswith("a temperature sensor for the inlet air temperature of heating_coil_air_side")
+    assert "Indistinguishable" not in effects[0][-1]
