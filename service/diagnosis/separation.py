@@ -1,7 +1,8 @@
 """One answer among look-alikes: which significant candidates the data cannot tell from the answer,
 and what would tell them apart.
 
-A candidate is indistinguishable from the answer when their held-out errors differ by no more than
+A candidate is indistinguishable from the answer when their fits and their held-out errors agree
+within noise: ΔBICs less than :data:`BIC_TIE` apart, and held-out errors differing by no more than
 twice the standard error of the difference (per-step differences, autocorrelation counted). What
 would separate them: a quantity the model computes and no sensor measures where the two fitted
 models differ by several sensor accuracies (a sensor the graph lacks, with the triples to add), or
@@ -23,6 +24,8 @@ from service.graph.namespaces import local_name
 
 __all__ = ["Lookalike", "indistinguishable", "held_out_tie"]
 
+#: ΔBICs closer than this (Kass & Raftery's "very strong" is a difference over 10) fit alike.
+BIC_TIE = 10.0
 #: A difference a sensor would see: this many times its accuracy (RMS over the evaluation half).
 SEPARATING_ACCURACIES = 3.0
 #: How far a boundary input is moved for "operation the data lack": ± this in K for a temperature,
@@ -67,14 +70,15 @@ def held_out_tie(a: EffectEvidence, b: EffectEvidence) -> bool:
 
 def indistinguishable(answer: EffectEvidence, ranked: list[EffectEvidence], md: ModelData, run_window: slice,
                       evaluation: slice, noise: Mapping[str, float]) -> list[Lookalike]:
-    """The significant candidates other than ``answer`` whose held-out error ties with its
-    (:func:`held_out_tie`), each with what would separate it from the answer.
+    """The significant candidates other than ``answer`` whose fit (ΔBIC within :data:`BIC_TIE`) and
+    held-out error (:func:`held_out_tie`) tie with its, each with what would separate it from the answer.
 
     :param md: the base model's data (its series, substeps and compared steps are the candidates' too).
     :param run_window: the simulated window; ``evaluation`` the held-out half inside it.
     :param noise: each target sensor's noise level σ (its unit).
     """
-    others = [e for e in ranked if e.significant and e is not answer and held_out_tie(answer, e)]
+    others = [e for e in ranked if e.significant and e is not answer
+              and abs(e.delta_bic - answer.delta_bic) < BIC_TIE and held_out_tie(answer, e)]
     return [Lookalike(other, tuple(_would_separate(answer, other, md, run_window, evaluation, noise)))
             for other in others]
 
