@@ -11,7 +11,7 @@ Jradi & Wetter, Sec. 4. GP inputs, moves, threads: ``docs/calibration.md``, *Bay
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import emcee
@@ -106,6 +106,7 @@ class BayesianCalibrator(BaseEstimator):
         None: :func:`default_moves`.
     :param point_calibrator: an unfitted :class:`PointCalibrator` for the start (default 2 starts).
     :param progress: show a rich progress bar.
+    :param on_check: hears after each convergence check how far sampling is (a job's progress).
 
     Results: ``samples_`` (ndarray[n_samples, n_parameters], burn-in discarded, thinned),
     ``chain_`` (the whole β = 1 chain, ndarray[n_steps, n_walkers, n_parameters + n_hyper], for traces),
@@ -133,6 +134,7 @@ class BayesianCalibrator(BaseEstimator):
         moves=None,
         point_calibrator: PointCalibrator | None = None,
         progress: bool = True,
+        on_check: Callable[[str], None] | None = None,
     ) -> None:
         self.n_walkers = n_walkers
         self.n_temperatures = n_temperatures
@@ -149,6 +151,7 @@ class BayesianCalibrator(BaseEstimator):
         self.moves = moves
         self.point_calibrator = point_calibrator
         self.progress = progress
+        self.on_check = on_check
 
     def _raw_gp_inputs(self, problem: CalibrationProblem, time_offset: int) -> tuple[np.ndarray | None, tuple | None]:
         """The raw GP input array for a window (None: the time index) and the input names."""
@@ -190,7 +193,8 @@ class BayesianCalibrator(BaseEstimator):
             residual_std = {key: float(np.nanstd(start.residuals_[key])) for key in problem.target_keys}
             initial = likelihood.initial_ensemble(start.theta_, residual_std, n_walkers, rng, start.covariance_)
             convergence = sampler.run(
-                initial, self.max_steps, self.check_interval, self.iat_multiple, self.iat_rtol, self.progress
+                initial, self.max_steps, self.check_interval, self.iat_multiple, self.iat_rtol, self.progress,
+                self.on_check,
             )
         p = problem.n_parameters
         backend = sampler.backend

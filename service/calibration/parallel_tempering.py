@@ -182,8 +182,10 @@ class ParallelTemperingSampler:
         iat_multiple: float = 20.0,
         iat_rtol: float = 0.05,
         progress: bool = False,
+        on_check: Callable[[str], None] | None = None,
     ) -> Convergence:
-        """Sample from ``initial`` until the 20 × IAT rule holds or ``max_steps`` is reached.
+        """Sample from ``initial`` until the 20 × IAT rule holds or ``max_steps`` is reached;
+        ``on_check`` hears after each IAT check how far the chain is (a job's progress).
 
         :param initial: ``ndarray[n_walkers, n_dim]`` (all temperatures start alike) or
             ``ndarray[n_temperatures, n_walkers, n_dim]``; every walker with finite posterior.
@@ -242,7 +244,11 @@ class ParallelTemperingSampler:
                 history.append(iat)
                 finite = bool(np.isfinite(iat))
                 converged = finite and step >= iat_multiple * iat and abs(iat - previous) < iat_rtol * iat
-                display.set_target(min(max_steps, max(step, int(np.ceil(iat_multiple * iat)))) if finite else max_steps)
+                target = min(max_steps, max(step, int(np.ceil(iat_multiple * iat)))) if finite else max_steps
+                display.set_target(target)
+                if on_check is not None:
+                    on_check(f"sampling: step {step} of {target} expected (at most {max_steps}), IAT {iat:.0f}"
+                             if finite else f"sampling: step {step} of at most {max_steps}, IAT not yet estimable")
         iat = history[-1]
         finite = bool(np.isfinite(iat))
         return Convergence(

@@ -290,7 +290,7 @@ def calibrate(
     substeps: int | None = None,
     bayes_settings: dict | None = None,
     progress: bool = False,
-    on_progress: Callable[[dict], None] | None = None,
+    on_progress: Callable[[str], None] | None = None,
     only_when: Sequence[str] = (),
     min_test_steps: int = 1,
     gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS,
@@ -307,6 +307,7 @@ def calibrate(
         inputs by node IRI, local name or CSV column (:meth:`ModelData.gp_input_nodes`).
     :param start_from: a model in the store whose latest calibrated values start this fit
         (:func:`calibrated_start`); None: the component defaults.
+    :param on_progress: hears how far a Bayesian run's sampling is after each convergence check.
 
     :raises InputError: a bad window, a target without measurements, NaN-only series, an unknown
         method, a ``start_from`` with nothing to start from; nothing is written to the store then.
@@ -352,7 +353,7 @@ def calibrate(
         options = {"n_temperatures": 4, "max_steps": 4000, "check_interval": 100, "progress": progress}
         options.update(bayes_settings or {})
         with _non_finite_named(md, train_slice, problem.default):
-            calibrator = BayesianCalibrator(random_state=seed, **options).fit(problem)
+            calibrator = BayesianCalibrator(random_state=seed, on_check=on_progress, **options).fit(problem)
         theta = calibrator.median_
         q16, q84, theta_map = calibrator.quantile16_, calibrator.quantile84_, calibrator.map_
         se = calibrator.samples_.std(axis=0)

@@ -359,6 +359,15 @@ def _explain(evidence: EffectEvidence, job: _CandidateJob, observed: dict[str, n
     )
 
 
+def _told(evaluated, jobs: list[_CandidateJob], say) -> list[EffectEvidence]:
+    """The candidates' evidence in order, saying how far the catalog is as each one is done."""
+    evidence = []
+    for done, item in enumerate(evaluated, start=1):
+        evidence.append(item)
+        say(f"effect {done} of {len(jobs)} refitted: {item.effect} at {local_name(item.node)}")
+    return evidence
+
+
 def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signature], base, *, seed: int,
                  refit_max_nfev: int, workers: int | None, say) -> tuple[list[EffectEvidence], list[str]]:
     """Every applicable (effect, node) candidate evaluated against ``base`` (a
@@ -398,9 +407,9 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
     workers = workers if workers is not None else min(len(jobs), usable_cpu_count())
     if workers > 1 and len(jobs) > 1:
         with ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent) as pool:
-            evidence = list(pool.map(_evaluate_candidate, jobs))
+            evidence = _told(pool.map(_evaluate_candidate, jobs), jobs, say)
     else:
-        evidence = [_evaluate_candidate(job) for job in jobs]
+        evidence = _told(map(_evaluate_candidate, jobs), jobs, say)
     for job, item in zip(jobs, evidence):
         item.model = job.model
     return rank_evidence(evidence), skipped

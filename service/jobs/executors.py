@@ -4,11 +4,14 @@
 from __future__ import annotations
 
 import logging
+import shutil
+import tempfile
 import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
+from pathlib import Path
 from urllib.parse import urlsplit
 
 from service.errors import InputError
@@ -35,6 +38,11 @@ class ProcessJobExecutor:
         self._slots = [self._new_pool() for _ in range(max_workers)]
         self._submitted: list[list[Future]] = [[] for _ in range(max_workers)]
         self._lock = threading.Lock()
+        self._progress_folder = Path(tempfile.mkdtemp(prefix="graphtwin-progress-"))
+
+    def progress_path(self, job_id: str) -> Path:
+        """Where a job's process writes its progress as it goes (the server reads it meanwhile)."""
+        return self._progress_folder / f"{job_id}.jsonl"
 
     @staticmethod
     def _new_pool() -> ProcessPoolExecutor:
@@ -74,6 +82,7 @@ class ProcessJobExecutor:
         with self._lock:
             for pool in self._slots:
                 _stop_pool(pool)
+        shutil.rmtree(self._progress_folder, ignore_errors=True)
 
 
 def _stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 10.0) -> None:
@@ -107,6 +116,10 @@ class DaskJobExecutor:
             except OSError as exc:
                 raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
         self.name = f"the Dask cluster at {self.client.scheduler.address}"
+
+    def progress_path(self, job_id: str) -> None:
+        """None: a Dask worker shares no files with the server, its progress comes with the result."""
+        return None
 
     def submit(self, function, run, job: ShippedJob):
         return self.client.submit(function, run, job, pure=False, key=f"graphtwin-job-{job.job_id}")

@@ -27,7 +27,7 @@ def calibrate_job(store: GraphStore, request: CalibrateRequest, context: WorkCon
     """Calibrate the model on its measurement upload; the run goes to a run graph."""
     data = context.measurements(request.measurements)
     context.report(f"calibrating ({request.method})")
-    outcome = calibrate_model(store, request, data)
+    outcome = calibrate_model(store, request, data, on_progress=context.report)
     context.report("calibrated; writing the run")
     return JobResult(outcome.record.to_dict(), result_links(store, request.model, outcome.record.run_id))
 

@@ -24,7 +24,7 @@ from service.errors import ConflictError, GraphtwinError, InputError, NotFoundEr
 from service.graph.store import GraphStore
 from service.jobs.deferred_writes import DeferredWrites
 from service.jobs.records import ACTIVE, JobRecord, JobRecords, JobStatus, json_safe, now
-from service.jobs.shipping import ShippedWorkError, run_shipped_job, ship_job
+from service.jobs.shipping import ShippedWorkError, read_progress, run_shipped_job, ship_job
 from service.jobs.work import JobCancelled, JobKind, JobResult, public_message
 from service.workflows.requests import JobRequest, ModelRequest
 
@@ -206,6 +206,15 @@ class JobRunner:
         while (job_id := self._queue.get()) is not None:
             self._run(job_id)
 
+    def _record_progress(self, job_id: str, messages: list[dict]) -> None:
+        """Progress entries (``{"time", "message"}``) made by shipped work, recorded and saved."""
+        if not messages:
+            return
+        with self._lock:
+            record = self._jobs[job_id]
+            record.progress.extend(messages)
+            self.records.save(record)
+
     def _progress(self, job_id: str, message: str) -> None:
         with self._lock:
             record = self._jobs[job_id]
@@ -225,19 +234,29 @@ class JobRunner:
 
     def _run_shipped(self, job_id: str, kind: str, request: JobRequest, writes: DeferredWrites) -> JobResult:
         """Run the job's work on ``self.executor``; wait for it, dropping it when a cancel is requested."""
+        progress_path = self.executor.progress_path(job_id)
         future = self.executor.submit(run_shipped_job, self.kinds[kind].run,
-                                      ship_job(self.store, job_id, request, self.locate_measurements))
+                                      ship_job(self.store, job_id, request, self.locate_measurements, progress_path))
         self._progress(job_id, f"sent to {self.executor.name}")
-        # poll done() rather than result(timeout=...): distributed's result() can lose a result that
-        # arrives as its timeout expires (an UnboundLocalError inside distributed.utils.sync)
-        while not future.done():
-            if self.get(job_id).cancel_requested:
-                self.executor.cancel(future)
-                raise JobCancelled()
-            time.sleep(0.2)
-        outcome, nquads, dropped, messages = future.result()
-        with self._lock:
-            self._jobs[job_id].progress.extend(messages)
+        seen, offset = 0, 0
+        try:
+            # poll done() rather than result(timeout=...): distributed's result() can lose a result that
+            # arrives as its timeout expires (an UnboundLocalError inside distributed.utils.sync)
+            while not future.done():
+                if self.get(job_id).cancel_requested:
+                    self.executor.cancel(future)
+                    raise JobCancelled()
+                if progress_path is not None:  # the work's progress as it goes, not only at its end
+                    messages, offset = read_progress(progress_path, offset)
+                    if messages:
+                        self._record_progress(job_id, messages)
+                        seen += len(messages)
+                time.sleep(0.2)
+            outcome, nquads, dropped, messages = future.result()
+        finally:
+            if progress_path is not None:
+                progress_path.unlink(missing_ok=True)
+        self._record_progress(job_id, messages[seen:])
         writes.keep_shipped(nquads, dropped)
         return outcome
 

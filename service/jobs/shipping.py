@@ -5,6 +5,7 @@ measurement upload (:class:`ShippedJob`), the work runs on a scratch in-memory s
 
 from __future__ import annotations
 
+import json
 import pickle
 import tempfile
 from collections.abc import Callable
@@ -20,7 +21,7 @@ from service.jobs.records import now
 from service.jobs.work import JobCancelled, JobResult, WorkContext
 from service.workflows.requests import JobRequest
 
-__all__ = ["ShippedJob", "ShippedContext", "ShippedWorkError", "run_shipped_job", "ship_job"]
+__all__ = ["ShippedJob", "ShippedContext", "ShippedWorkError", "run_shipped_job", "ship_job", "read_progress"]
 
 
 class ShippedWorkError(Exception):
@@ -31,17 +32,21 @@ class ShippedWorkError(Exception):
 @dataclass(frozen=True)
 class ShippedJob:
     """Everything a job needs away from the server (picklable): its ``request``, the graphs it reads
-    (``dataset``, N-Quads) and the bytes of its measurement uploads by upload id."""
+    (``dataset``, N-Quads), the bytes of its measurement uploads by upload id, and where its progress
+    messages go as they are made (``progress_path``: a file the server reads while the job runs, one
+    JSON line a message; None where the worker shares no files with the server: a Dask cluster)."""
 
     job_id: str
     request: JobRequest
     dataset: bytes
     measurements: dict[str, bytes] = field(default_factory=dict)
+    progress_path: str | None = None
 
 
 class ShippedContext:
     """The work context of shipped work: progress messages are kept (they travel back with the
-    result), measurements are the shipped bytes written to ``folder``."""
+    result) and written to the job's progress file as they come, measurements are the shipped bytes
+    written to ``folder``."""
 
     cancel_requested = False
 
@@ -50,7 +55,23 @@ class ShippedContext:
         self.messages: list[dict] = []
 
     def report(self, message: str) -> None:
-        self.messages.append({"time": now(), "message": message})
+        entry = {"time": now(), "message": message}
+        self.messages.append(entry)
+        if self._job.progress_path is not None:
+            with open(self._job.progress_path, "a", encoding="utf-8") as progress:
+                progress.write(json.dumps(entry) + "\n")
+
+
+def read_progress(path: Path, offset: int) -> tuple[list[dict], int]:
+    """The whole progress lines written to ``path`` after byte ``offset``, and the offset after them."""
+    try:
+        with open(path, "rb") as progress:
+            progress.seek(offset)
+            text = progress.read()
+    except FileNotFoundError:
+        return [], offset
+    complete = text[: text.rfind(b"\n") + 1]
+    return [json.loads(line) for line in complete.splitlines()], offset + len(complete)
 
     def measurements(self, upload_id: str) -> Path:
         if upload_id not in self._job.measurements:
@@ -95,7 +116,7 @@ def _travels(exc: BaseException) -> bool:
 
 
 def ship_job(store: GraphStore, job_id: str, request: JobRequest,
-             locate_measurements: Callable[[str], Path] | None) -> ShippedJob:
+             locate_measurements: Callable[[str], Path] | None, progress_path: Path | None = None) -> ShippedJob:
     """What :func:`run_shipped_job` needs for a job on ``store``: the graphs its request reads
     (:meth:`~service.workflows.requests.JobRequest.graphs_read`) and the bytes of its uploads.
 
@@ -108,4 +129,5 @@ def ship_job(store: GraphStore, job_id: str, request: JobRequest,
         if locate_measurements is None:
             raise NotFoundError(f"no measurement upload {upload!r}: this runner keeps no uploads")
         files[upload] = Path(locate_measurements(upload)).read_bytes()
-    return ShippedJob(job_id, request, ox.serialize(quads, format=ox.RdfFormat.N_QUADS), files)
+    return ShippedJob(job_id, request, ox.serialize(quads, format=ox.RdfFormat.N_QUADS), files,
+                      str(progress_path) if progress_path is not None else None)

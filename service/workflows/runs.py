@@ -33,12 +33,13 @@ def assemble_model(store: GraphStore, model: str, *, max_complexity: int | None 
     return assembled
 
 
-def calibrate_model(store: GraphStore, request: CalibrateRequest, data: Path, *, progress: bool = False) -> CalibrationOutcome:
+def calibrate_model(store: GraphStore, request: CalibrateRequest, data: Path, *, progress: bool = False,
+                    on_progress: Callable[[str], None] | None = None) -> CalibrationOutcome:
     """Calibrate ``request.model`` against the CSV ``data`` (:func:`~service.calibration.run.calibrate`);
-    ``progress``: a progress bar on the terminal."""
+    ``progress``: a progress bar on the terminal; ``on_progress`` hears how far sampling is."""
     return calibrate(store, request.model, data, train=parse_window(request.train),
                      test=parse_window(request.test) if request.test else None, method=request.method,
-                     seed=request.seed, progress=progress, only_when=request.only_when,
+                     seed=request.seed, progress=progress, on_progress=on_progress, only_when=request.only_when,
                      gp_inputs=request.gp_inputs, start_from=request.start_from)
 
 

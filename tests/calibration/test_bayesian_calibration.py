@@ -164,3 +164,15 @@ def test_exact_data_start_the_sampler_from_the_plain_ball():
     point = fit.point_calibrator_
     assert np.all(point.standard_errors_ == 0.0) and np.array_equal(point.correlation_, np.eye(2))
     assert np.allclose(fit.median_, [2.0, 1.0], atol=0.01)
+
+
+def test_sampling_reports_how_far_it_is_after_each_convergence_check():
+    """A job's progress during a Bayesian run (HTTP shows it while the job runs): one message per
+    IAT check, the step counts rising by the check interval, the last one the chain's length."""
+    train, *_ = zone_windows(1, steps_per_day=72, seed=3, estimate=ESTIMATE, targets=(KEY,))
+    heard: list[str] = []
+    fit = BayesianCalibrator(n_temperatures=2, max_steps=300, check_interval=100, random_state=0, progress=False,
+                             on_check=heard.append).fit(train)
+    assert len(heard) == len(fit.convergence_.iat_history) == 3
+    assert [message.split()[2] for message in heard] == ["100", "200", "300"]
+    assert all(message.startswith("sampling: step ") and "at most 300" in message for message in heard)

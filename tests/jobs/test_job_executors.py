@@ -109,6 +109,34 @@ def _sleep_job(store, request: Sleep, context):
     return JobResult({"slept": request.seconds})
 
 
+def _chatty_job(store, request: Sleep, context):
+    context.report("reading the data")
+    time.sleep(request.seconds)
+    context.report("fitting")
+    return JobResult({"slept": request.seconds})
+
+
+def test_a_pool_job_reports_its_progress_while_it_runs_each_message_once(tmp_path):
+    """Shipped work's progress reached the job record only with its result; now it is read from the
+    worker's progress file as it comes (HTTP's GET /jobs/{id} shows the phase a long job is in)."""
+    runner = JobRunner(GraphStore.embedded(None), JobRecords(tmp_path / "jobs"), {"chatty": JobKind(Sleep, _chatty_job)},
+                       executor=ProcessJobExecutor(1))
+    try:
+        job = runner.submit("chatty", Sleep(seconds=6)).id
+        deadline = time.monotonic() + 60
+        while "reading the data" not in [p["message"] for p in runner.get(job).progress]:
+            assert runner.get(job).status in ("queued", "running"), runner.get(job)
+            assert time.monotonic() < deadline, runner.get(job).progress
+            time.sleep(0.05)
+        assert runner.get(job).status == "running"
+        assert JobRecords(tmp_path / "jobs").load(job).progress[-1]["message"] == "reading the data"  # saved too
+        messages = [p["message"] for p in _wait(runner, job).progress]
+        assert messages.count("reading the data") == 1 and messages.count("fitting") == 1
+        assert messages.index("reading the data") < messages.index("fitting")
+    finally:
+        runner.shutdown(wait=True)
+
+
 def _workers(executor: ProcessJobExecutor) -> list:
     return [w for pool in executor._slots for w in (pool._processes or {}).values()]
 
@@ -213,6 +241,9 @@ class _InlineExecutor:
 
     def cancel(self, future):
         raise AssertionError("nothing was cancelled")
+
+    def progress_path(self, job_id):
+        return None
 
     def shutdown(self):
         pass
