@@ -61,6 +61,14 @@ class ShippedContext:
             with open(self._job.progress_path, "a", encoding="utf-8") as progress:
                 progress.write(json.dumps(entry) + "\n")
 
+    def measurements(self, upload_id: str) -> Path:
+        if upload_id not in self._job.measurements:
+            raise NotFoundError(f"no measurement upload {upload_id!r}")
+        path = self._folder / f"{upload_id}.csv"
+        if not path.is_file():
+            path.write_bytes(self._job.measurements[upload_id])
+        return path
+
 
 def read_progress(path: Path, offset: int) -> tuple[list[dict], int]:
     """The whole progress lines written to ``path`` after byte ``offset``, and the offset after them."""
@@ -72,14 +80,6 @@ def read_progress(path: Path, offset: int) -> tuple[list[dict], int]:
         return [], offset
     complete = text[: text.rfind(b"\n") + 1]
     return [json.loads(line) for line in complete.splitlines()], offset + len(complete)
-
-    def measurements(self, upload_id: str) -> Path:
-        if upload_id not in self._job.measurements:
-            raise NotFoundError(f"no measurement upload {upload_id!r}")
-        path = self._folder / f"{upload_id}.csv"
-        if not path.is_file():
-            path.write_bytes(self._job.measurements[upload_id])
-        return path
 
 
 def run_shipped_job(run: Callable[[GraphStore, JobRequest, WorkContext], JobResult],
