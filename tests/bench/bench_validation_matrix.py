@@ -1,0 +1,234 @@
+"""The validation matrix of issue 32: graphtwin's ``diagnose`` on data from the independent
+reference plant (``tests/reference_plant``), whose physics shares no code with ``service/``.
+
+Cells: each catalog effect the case study admits × two sizes (clear, subtle) × N seeds; fault-free ×
+M seeds; faults outside the catalog (and catalog effects the case-study graph does not admit) × K
+seeds. Seven days of 10-minute data from Thursday 2026-01-15: trained on Thursday–Sunday, tested on
+Monday–Wednesday; a fault that can appear starts on Monday 00:00, an equipment property is there
+from the start. Per run: the right effect at the right node ranked first and significant; anything
+significant (a false alarm on fault-free data; for a fault outside the catalog, a catalog effect
+claimed with confidence); the share of the most-failing sensor's held-out squared error the top
+candidate removes. Runs on a process pool of 2 (each diagnosis on one core).
+
+    python -m tests.bench.bench_validation_matrix --quick [--json rows.json] [--only valve]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import statistics
+import sys
+import tempfile
+import time
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script: `tests.` importable
+
+from service.components.library import SignatureLibrary  # noqa: E402
+from service.diagnosis.candidates import effect_candidates  # noqa: E402
+from service.diagnosis.loop import diagnose  # noqa: E402
+from service.graph.store import GraphStore  # noqa: E402
+from service.resources import examples_dir  # noqa: E402
+from service.runtime import exit_with_parent  # noqa: E402
+from tests.reference_plant import FAULTS, Fault, simulate_plant, write_run_csv  # noqa: E402
+from tests.reference_plant.sensors import SENSORS  # noqa: E402
+
+CASE_STUDY = examples_dir() / "ventilation_case_study" / "model.ttl"
+EX = "https://example.org/ventilation-case-study#"
+START, DAYS = "2026-01-15T00:00", 7.0
+TRAIN, TEST = ("2026-01-15", "2026-01-18T23:59"), ("2026-01-19", None)
+FAULT_START = "2026-01-19T00:00"
+
+#: The case study's measuring device (local name) reading each series (its gt:timeSeriesId).
+DEVICE_OF_SERIES = {"fan_inlet_air_temperature": "fan_inlet_air_temperature_sensor",
+                    "supply_air_flow": "supply_air_flow_meter", "supply_fan_power": "fan_power_meter",
+                    "coil_outlet_air_temperature": "coil_outlet_air_temperature_sensor",
+                    "supply_water_temperature": "supply_water_temperature_sensor",
+                    "valve_position": "valve_position_sensor",
+                    "coil_inlet_water_temperature": "coil_inlet_water_temperature_sensor",
+                    "coil_outlet_water_temperature": "coil_outlet_water_temperature_sensor"}
+
+#: The plant's plain-language catalog names → graphtwin's effect signatures (the plant knows none).
+EFFECT_IDS = {"valve leakage": "ValveLeakage", "valve stuck": "ValveStuck", "temperature sensor offset": "SensorOffset",
+              "temperature sensor lag": "SensorLag", "fan motor heat": "FanMotorHeat",
+              "constant heat gain": "ConstantHeatGain", "duct heat exchange": "DuctHeatExchange",
+              "coil thermal mass": "CoilThermalMass"}
+
+
+@dataclass(frozen=True)
+class Run:
+    """One diagnosis: ``group`` catalog / fault-free / outside; ``fault`` None for fault-free."""
+
+    group: str
+    fault: str | None
+    size_label: str
+    size: float
+    seed: int
+
+    @property
+    def cell(self) -> str:
+        return "fault-free" if self.fault is None else f"{self.fault} ({self.size_label})"
+
+
+def admitted_pairs() -> set[tuple[str, str]]:
+    """(effect id, node IRI) of every candidate the case study admits."""
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    candidates, _ = effect_candidates(store, "case", SignatureLibrary.load())
+    return {(c.signature.id, c.node) for c in candidates}
+
+
+def plan(seeds: int, free_seeds: int, outside_seeds: int) -> list[Run]:
+    admitted = admitted_pairs()
+    runs = [Run("fault-free", None, "-", 0.0, seed) for seed in range(free_seeds)]
+    for name, kind in FAULTS.items():
+        expected = (EFFECT_IDS.get(kind.catalog_effect or ""), EX + kind.node)
+        if expected in admitted:
+            runs += [Run("catalog", name, label, getattr(kind, label), seed)
+                     for label in ("clear", "subtle") for seed in range(seeds)]
+        else:
+            runs += [Run("outside", name, "clear", kind.clear, seed) for seed in range(outside_seeds)]
+    return runs
+
+
+def affected_sensor(run: Run, readings: dict[str, np.ndarray], timestamps: np.ndarray) -> str | None:
+    """The device whose test-window readings the fault moves most against its noise: the plant run
+    again without the fault (same seed), RMS(faulty − fault-free)/σ per series."""
+    if run.fault is None:
+        return None
+    twin = simulate_plant(days=DAYS, start=START, seed=1000 + run.seed).readings
+    test = timestamps >= np.datetime64(TEST[0])
+
+    def moved(series: str) -> float:
+        spec = SENSORS[series]
+        sigma = max(spec.sigma, spec.relative_sigma * float(np.mean(np.abs(twin[series][test]))), 1e-9)
+        return float(np.sqrt(np.mean((readings[series][test] - twin[series][test]) ** 2))) / sigma
+
+    return EX + DEVICE_OF_SERIES[max(DEVICE_OF_SERIES, key=moved)]
+
+
+def _share_removed(evidence, device: str) -> float | None:
+    """1 − (RMSE after / RMSE before)² of a candidate at ``device`` on the evaluation half."""
+    before = evidence.rmse_before.get(device) if evidence is not None else None
+    return 1.0 - (evidence.rmse_after[device] / before) ** 2 if before else None
+
+
+def diagnose_run(run: Run) -> dict:
+    """Write the plant's CSV, diagnose the case study on it, score the verdict against the truth."""
+    started = time.perf_counter()
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    appears = run.fault is not None and FAULTS[run.fault].appears
+    fault = None if run.fault is None else Fault(
+        name=run.fault, size=run.size,
+        start_s=float((np.datetime64(FAULT_START) - np.datetime64(START)) / np.timedelta64(1, "s")) if appears else 0.0)
+    plant = simulate_plant(days=DAYS, start=START, seed=1000 + run.seed, fault=fault)
+    truth = plant.truth
+    with tempfile.TemporaryDirectory() as folder:
+        data = Path(folder) / "plant.csv"
+        write_run_csv(plant, data)
+        report = diagnose(store, "case", data, train=TRAIN, test=TEST, seed=run.seed, workers=1)
+    expected = (EFFECT_IDS.get(truth.catalog_effect or ""), EX + truth.node) if truth.node else None
+    top = report.effects[0] if report.effects else None
+    true_rank = next((i + 1 for i, e in enumerate(report.effects) if (e.effect, e.node) == expected), None)
+    true = report.effects[true_rank - 1] if true_rank else None
+    significant = report.significant
+    failing = sorted(report.failing_sensors, key=lambda n: -report.sensors[n].rmse_over_noise)
+    worst = failing[0] if failing else max(report.sensors, key=lambda n: report.sensors[n].rmse_over_noise)
+    affected = affected_sensor(run, plant.readings, plant.timestamps)
+    if affected not in report.sensors:  # a boundary input: judged at the most-failing target instead
+        affected = worst
+    return {
+        "group": run.group, "cell": run.cell, "fault": run.fault, "size": run.size, "seed": run.seed,
+        "truth": truth.to_dict(),
+        "top": None if top is None else f"{top.effect}@{top.node.removeprefix(EX)}",
+        "top_significant": bool(top is not None and top.significant),
+        "right_first": bool(top is not None and top.significant and (top.effect, top.node) == expected),
+        "true_rank": true_rank, "any_significant": bool(significant),
+        "failing": [n.removeprefix(EX) for n in failing], "worst_sensor": worst.removeprefix(EX),
+        "rmse_over_noise": {n.removeprefix(EX): v.rmse_over_noise for n, v in report.sensors.items()},
+        "affected_sensor": affected.removeprefix(EX), "share_removed": _share_removed(top, affected),
+        "true_share_removed": _share_removed(true, affected),
+        "wall_s": time.perf_counter() - started,
+    }
+
+
+def _rate(rows: list[dict], key: str) -> str:
+    return f"{sum(r[key] for r in rows)}/{len(rows)}"
+
+
+def _median(values: list) -> str:
+    known = [v for v in values if v is not None]
+    return f"{statistics.median(known):.0%}" if known else "–"
+
+
+def table(rows: list[dict]) -> str:
+    """Per cell: runs; the right effect at the right node first and significant; anything
+    significant; the median share of the affected sensor's held-out error the top candidate and the
+    true candidate remove; the true candidate's rank; the most common top candidate."""
+    lines = ["| cell | runs | right first | any significant | removed by top | removed by true | true rank | "
+             "top candidate (most often) |",
+             "|---|---|---|---|---|---|---|---|"]
+    cells: dict[str, list[dict]] = {}
+    for row in rows:
+        cells.setdefault(row["cell"], []).append(row)
+    for cell, group in cells.items():
+        catalog = group[0]["group"] == "catalog"
+        ranks = [r["true_rank"] for r in group if r["true_rank"] is not None]
+        top, count = Counter(r["top"] + (" (sig.)" if r["top_significant"] else "") for r in group).most_common(1)[0]
+        lines.append(f"| {cell} | {len(group)} | {_rate(group, 'right_first') if catalog else '–'} | "
+                     f"{_rate(group, 'any_significant')} | {_median([r['share_removed'] for r in group])} | "
+                     f"{_median([r['true_share_removed'] for r in group]) if catalog else '–'} | "
+                     f"{statistics.median(ranks) if ranks else '–'} | {top} ×{count} |")
+    return "\n".join(lines)
+
+
+def _round(value: float | None) -> float | None:
+    return None if value is None else round(value, 2)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="one seed per cell")
+    parser.add_argument("--seeds", type=int, default=10, help="seeds per catalog effect and size")
+    parser.add_argument("--free-seeds", type=int, default=20, help="seeds of fault-free data")
+    parser.add_argument("--outside-seeds", type=int, default=5, help="seeds per fault outside the catalog")
+    parser.add_argument("--only", default="", help="only the cells whose name contains this")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--json", type=Path, default=None, help="write every run's row here")
+    args = parser.parse_args()
+    if args.quick:
+        args.seeds = args.free_seeds = args.outside_seeds = 1
+    started = time.perf_counter()
+    runs = [r for r in plan(args.seeds, args.free_seeds, args.outside_seeds) if args.only in r.cell]
+    print(f"{len(runs)} diagnoses on {args.workers} processes")
+    rows = []
+    with ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"),
+                             initializer=exit_with_parent) as pool:
+        for row in pool.map(diagnose_run, runs):
+            rows.append(row)
+            significant = " (significant)" if row["top_significant"] else ""
+            print(f"  {row['cell']:<36} seed {row['seed']}: top {row['top']}{significant},"
+                  f" right first {row['right_first']}, true rank {row['true_rank']}, failing {row['failing']},"
+                  f" affected {row['affected_sensor']}: removed by top {_round(row['share_removed'])},"
+                  f" by true {_round(row['true_share_removed'])}"
+                  f" ({row['wall_s']:.0f} s)", flush=True)
+    wall = time.perf_counter() - started
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+    print()
+    print(table(rows))
+    print(f"\nmatrix wall time: {wall:.0f} s for {len(rows)} diagnoses ({args.workers} processes)")
+
+
+if __name__ == "__main__":
+    main()
