@@ -71,12 +71,24 @@ class ModelData:
         return {c: self.data.series[node][index] for c, node in self.node_of.items()}
 
     def run(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None, *,
-            record: Sequence[tuple[str, str]] | None = None) -> SimulationResult:
+            record: Sequence[tuple[str, str]] | None = None,
+            factors: Mapping[str, np.ndarray] | None = None) -> SimulationResult:
         """Simulate ``window`` for θ ``ndarray[n_ensemble, n_estimated]`` after :attr:`warmup_s` of
         warm-up: the states at the window's start are those the measured operation before it leaves
-        (a controller's integral, a coil's water), not a cold start."""
-        return self.simulator.run(self.boundary(window), np.atleast_2d(theta), fixed=fixed, record=record,
-                                  warmup_steps=self.warmup_steps)
+        (a controller's integral, a coil's water), not a cold start. The model's drifting parameters
+        (:class:`~service.model.assembled_model.ParameterDrift`) and ``factors`` (parameter key →
+        ``ndarray[n_ensemble, n_steps]`` over the warm-up and the window, see :meth:`time_s`) change
+        over time."""
+        theta = np.atleast_2d(theta)
+        if self.model.drifts:
+            factors = self.model.drift_factors(theta, self.time_s(window)) | dict(factors or {})
+        return self.simulator.run(self.boundary(window), theta, fixed=fixed, record=record,
+                                  warmup_steps=self.warmup_steps, factors=factors)
+
+    def time_s(self, window: slice) -> np.ndarray:
+        """Seconds since the data's first step of each step :meth:`run` simulates for ``window``: its
+        warm-up (negative before the data's start) and the window."""
+        return np.arange(window.start - self.warmup_steps, window.stop) * self.data.step_s
 
     def observed(self, window: slice) -> dict[str, np.ndarray]:
         """Target node → observed series in ``window``: NaN where not measured; NaN where a
@@ -96,9 +108,12 @@ class ModelData:
         return {self.node_of[c]: np.where(keep, self.data.series[self.node_of[c]][window], np.nan)
                 for c in self.model.targets}
 
-    def simulate_targets(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
-        """Target node → ``ndarray[n_ensemble, n_steps]`` for θ ``ndarray[n_ensemble, n_estimated]``."""
-        result = self.run(window, theta, fixed, record=[(c, "measured_value") for c in self.model.targets])
+    def simulate_targets(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None, *,
+                         factors: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        """Target node → ``ndarray[n_ensemble, n_steps]`` for θ ``ndarray[n_ensemble, n_estimated]``
+        (``factors``: :meth:`run`)."""
+        result = self.run(window, theta, fixed, record=[(c, "measured_value") for c in self.model.targets],
+                          factors=factors)
         return {self.node_of[c]: result.target(c) for c in self.model.targets}
 
     def simulate_all(self, window: slice, theta: np.ndarray) -> SimulationResult:

@@ -53,6 +53,7 @@ class PointCalibrator(BaseEstimator):
     :param jacobian_with_residuals: simulate each trial point's Jacobian members in the same call as
         the point (one call per accepted step: right for a vectorised simulator, not for an FMU per
         member); None follows the problem's ``vectorised_simulate``.
+    :param continuations: times a best start that stopped at ``max_nfev`` runs on from where it stopped.
     :param flat_ratio: singular value ratio below which a direction counts as flat.
     :param flat_loading: |component| of a flat direction's vector that implicates a parameter.
     :param correlation_threshold: |ρ| above which two parameters are reported as confounded.
@@ -65,7 +66,8 @@ class PointCalibrator(BaseEstimator):
     first), ``identifiability_`` (``{name: ParameterIdentifiability}``), ``cost_``, ``residuals_``
     (``{target: ndarray[n_steps]}``, y − ŷ in the target's unit, NaN where not measured),
     ``prediction_`` (``{target: ndarray[n_steps]}``), ``start_costs_``, ``n_simulate_calls_``,
-    ``n_simulated_members_``.
+    ``n_simulated_members_``, ``converged_`` (the best start stopped at a tolerance, not at
+    ``max_nfev``: after ``continuations`` further runs of ``max_nfev`` from where it stopped).
     """
 
     def __init__(
@@ -81,6 +83,7 @@ class PointCalibrator(BaseEstimator):
         relative_error_threshold: float = 0.5,
         jump_threshold: float = 3.0,
         jacobian_with_residuals: bool | None = None,
+        continuations: int = 0,
     ) -> None:
         self.n_starts = n_starts
         self.n_candidates = n_candidates
@@ -93,6 +96,7 @@ class PointCalibrator(BaseEstimator):
         self.relative_error_threshold = relative_error_threshold
         self.jump_threshold = jump_threshold
         self.jacobian_with_residuals = jacobian_with_residuals
+        self.continuations = continuations
 
     def fit(self, problem: CalibrationProblem, candidates: np.ndarray | None = None) -> PointCalibrator:
         """Estimate θ and its uncertainty; returns ``self``.
@@ -113,6 +117,11 @@ class PointCalibrator(BaseEstimator):
             fits = [self._local_fit(problem, start) for start in starts]
             self.start_costs_ = np.array([fit.cost for fit in fits])
             best = fits[int(np.argmin(self.start_costs_))]
+            for _ in range(self.continuations):  # least_squares' status 0: stopped at max_nfev
+                if best.status > 0:
+                    break
+                best = self._local_fit(problem, best.x)
+            self.converged_ = bool(best.status > 0)
             self.theta_ = problem.from_unit(best.x)
             self.cost_ = float(best.cost)
             outputs, _, jacobian = self._evaluate(problem, best.x, with_jacobian=True)

@@ -32,6 +32,7 @@ def demo_command(
 ) -> None:
     """The whole loop on the case study with a hidden effect: before, where it fails, what is missing, after."""
     from service.data.synthetic import generate_synthetic_data
+    from service.diagnosis.drift import DriftEvidence
     from service.diagnosis.error_history import error_history
     from service.report.plots import plot_error_history, plot_measured_vs_model
     from service.workflows.runs import calibrate_model, diagnose_model
@@ -57,6 +58,9 @@ def demo_command(
         console.print("No effect is significant: nothing to add.")
         return
     best = report.significant[0]
+    if isinstance(best, DriftEvidence):
+        console.print("The answer is a parameter that drifts, not an effect of the catalog: nothing to add.")
+        return
     console.rule(f"[bold]3. Add {best.effect} at {local_name(best.node)} and recalibrate from the base fit")
     new_model = output / "model_with_effect.ttl"
     add_effect_to_file(model_path, new_model, best.effect, best.node, library)

@@ -41,13 +41,16 @@ class Port:
     """An input or output signal of a component model.
 
     ``feedback=True`` marks an input that closes a control loop (a controller's measured value):
-    when the connections form a cycle, the simulator serves this input one step late.
+    when the connections form a cycle, the simulator serves this input one step late. ``reports``
+    names, on an output, the input it reports as received (a valve's position feedback reports its
+    position input): an effect that leaves readings unchanged rewires such an output to the input's feed.
     """
 
     name: str
     unit: str
     description: str = ""
     feedback: bool = False
+    reports: str | None = None
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,13 @@ class ComponentModel:
     #: One :meth:`step` advances a whole ensemble with numpy at about the cost of one member (False
     #: when each member is stepped on its own, an FMU instance per member).
     vectorised: ClassVar[bool] = True
+    #: The sign of the heat the component can give the air passing it: +1 only adds heat (a coil fed
+    #: with hot water), −1 only removes it (a chilled-water coil), 0 either or none. The diagnosis
+    #: demotes an effect that puts heat where the component has no source (``docs/diagnosis.md``).
+    air_heat_sign: ClassVar[int] = 0
+    #: An effect's parameter that is a heat rate into the air [W] (its sign is checked against the
+    #: host's :attr:`air_heat_sign`); None for effects that add no heat of their own.
+    heat_rate_parameter: ClassVar[str | None] = None
     #: How long the states take to forget their start [s], at the slowest the priors allow: the
     #: warm-up a simulated window needs (:func:`service.data.model_series.model_warmup_s`). None: a
     #: day for a model with states (:data:`DEFAULT_SETTLING_S`), nothing for a memoryless one.

@@ -3,10 +3,12 @@
 Hydraulics: V̇ = sqrt(Δp_loop / (1/(K_v·u)² + 1/K_v,loop²)) [m³/h, bar], ṁ_w = ρ_w·V̇/3600 [kg/s].
 Heat: counter-flow ε-NTU, Q_static = ε·C_min·(T_w,in − T_a,in) [W], with
 1/UA = 1/(hA_w·(ṁ_w/0.5)^0.8) + 1/(hA_a·(ṁ_a/2)^0.8) [K/W] (:mod:`service.components.heat_exchanger`).
-Dynamics: exact first-order lags for the supply pipe (stretched at low flow), the coil metal and the
-air- and water-side outlet temperatures, each advanced before it is reported. Parameters (9): K_v
-(mapped from ``s4bldg:flowCoefficient``), Δp_loop, K_v,loop, hA_w, hA_a and four time constants.
-Equations, bounds and why these parameter groups: ``docs/components.md``.
+Water in the supply pipe and on the water side moves with the flow and loses heat where it stands:
+dT/dt = (ṁ_w/ṁ_ref)·(T_entering − T)/τ + (T_amb − T)/τ_loss, τ the transport time at the reference
+flow ṁ_ref = 0.5 kg/s (τ_pipe, τ_w; hours near shut-off), advanced exactly. The coil metal and the
+air-side outlet are first-order lags. Parameters (11): K_v (mapped from ``s4bldg:flowCoefficient``),
+Δp_loop, K_v,loop, hA_w, hA_a, four time constants, T_amb and τ_loss. Equations, bounds and why these
+parameter groups: ``docs/components.md``.
 """
 
 from __future__ import annotations
@@ -43,6 +45,8 @@ def loop_water_flow_m3_per_h(position: np.ndarray, *, kv_valve: np.ndarray, kv_l
 class HotWaterLoop(ComponentModel):
     """Heating coil + motorised valve + check valve + pump (see the module docstring)."""
 
+    air_heat_sign = 1
+
     inputs = (
         Port("valve_position", "1", "motorised valve position commanded by the controller, u"),
         Port("supply_water_temperature", "degC", "water temperature from the heat source"),
@@ -55,7 +59,7 @@ class HotWaterLoop(ComponentModel):
         Port("outlet_water_temperature", "degC", "water temperature leaving the coil"),
         Port("water_mass_flow", "kg/s", "water mass flow, ṁ_w"),
         Port("heat_rate", "W", "heat given to the air, Q"),
-        Port("valve_position", "1", "valve position reached"),
+        Port("valve_position", "1", "valve position reached (the stem's position feedback)", reports="valve_position"),
     )
     parameters = (
         Parameter("valve_flow_coefficient", "m3/h", 2.5, 0.3, 40.0, "motorised valve flow coefficient, K_v"),
@@ -66,11 +70,16 @@ class HotWaterLoop(ComponentModel):
         Parameter("supply_pipe_time_constant", "s", 90.0, 10.0, 900.0, "supply pipe to coil inlet, τ_pipe"),
         Parameter("metal_time_constant", "s", 180.0, 60.0, 900.0, "coil metal, τ_metal"),
         Parameter("air_side_time_constant", "s", 30.0, 5.0, 300.0, "air side, τ_a"),
-        Parameter("water_side_time_constant", "s", 60.0, 5.0, 600.0, "water side, τ_w"),
+        Parameter("water_side_time_constant", "s", 60.0, 5.0, 600.0, "water side at 0.5 kg/s, τ_w"),
+        Parameter("pipe_surroundings_temperature", "degC", 18.0, 0.0, 35.0,
+                  "what water standing in the pipes cools or warms to, T_amb"),
+        Parameter("standing_water_time_constant", "s", 14400.0, 1800.0, 43200.0,
+                  "heat loss of standing water to its surroundings, τ_loss"),
     )
     states = ("inlet_water_temperature", "heat_rate", "outlet_air_temperature", "outlet_water_temperature")
-    #: Five times the four lags in series at their slowest (their time constants' upper bounds).
-    settling_s = 5.0 * sum(p.upper for p in parameters if p.unit == "s")
+    #: A day: every state forgets its start at least as fast as standing water (τ_loss ≤ 12 h leaves
+    #: e⁻² of a wrong start), and the states start in steady state with the first inputs.
+    settling_s = 86400.0
 
     def _water_flow(self, params, position):
         flow_m3_per_h = loop_water_flow_m3_per_h(
@@ -92,27 +101,33 @@ class HotWaterLoop(ComponentModel):
                                 water_inlet_temperature=water_in, air_inlet_temperature=air_in) * (water_flow > 0.0)
         return heat, c_water, c_air
 
-    def _pipe_factor(self, params, water_flow, dt_s):
-        """1 − exp(−Δt/(τ_pipe·stretch)); τ_pipe ≥ 10 s by its bounds, so no zero guard is needed."""
-        stretch = REFERENCE_WATER_MASS_FLOW / np.maximum(water_flow, 0.05)
-        return -np.expm1(-dt_s / (params["supply_pipe_time_constant"] * stretch))
+    def _moved_water(self, params, temperature, entering, water_flow, transport_time_s, dt_s):
+        """Water temperature [°C] after ``dt_s`` of dT/dt = (ṁ_w/ṁ_ref)·(T_entering − T)/τ + (T_amb − T)/τ_loss
+        (module docstring), exact for inputs held over the step; ``temperature`` None: its steady state."""
+        transport = (water_flow / REFERENCE_WATER_MASS_FLOW) / transport_time_s
+        loss = 1.0 / params["standing_water_time_constant"]
+        rate = transport + loss
+        steady = (transport * entering + loss * params["pipe_surroundings_temperature"]) / rate
+        return steady if temperature is None else steady + (temperature - steady) * np.exp(-rate * dt_s)
 
     def initial_state(self, params, inputs, dt_s):
         shape = np.broadcast(inputs["supply_water_temperature"], params["air_side_conductance"]).shape
         supply = np.broadcast_to(inputs["supply_water_temperature"], shape).astype(float)
         air_in = np.broadcast_to(inputs["inlet_air_temperature"], shape).astype(float)
         water_flow = self._water_flow(params, np.clip(inputs["valve_position"], 0.0, 1.0))
-        heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0), water_flow, supply)
-        low, high = np.minimum(air_in, supply), np.maximum(air_in, supply)
+        water_in = self._moved_water(params, None, supply, water_flow, params["supply_pipe_time_constant"], dt_s)
+        heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0), water_flow, water_in)
+        low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
+        water_target = np.clip(water_in - heat / c_water, low, high)
         return {
             # lag factors of the constant time constants, computed once per run
             "_metal_factor": first_order_lag_factor(dt_s, params["metal_time_constant"]) + 0.0 * supply,
             "_air_factor": first_order_lag_factor(dt_s, params["air_side_time_constant"]) + 0.0 * supply,
-            "_water_factor": first_order_lag_factor(dt_s, params["water_side_time_constant"]) + 0.0 * supply,
-            "inlet_water_temperature": supply.copy(),
+            "inlet_water_temperature": water_in + 0.0 * supply,
             "heat_rate": heat + 0.0 * supply,
             "outlet_air_temperature": np.clip(air_in + heat / c_air, low, high),
-            "outlet_water_temperature": np.where(water_flow > 0.0, np.clip(supply - heat / c_water, low, high), air_in),
+            "outlet_water_temperature": self._moved_water(params, None, water_target, water_flow,
+                                                          params["water_side_time_constant"], dt_s) + 0.0 * supply,
         }
 
     def step(self, params, inputs, state, dt_s):
@@ -121,7 +136,8 @@ class HotWaterLoop(ComponentModel):
         position = np.minimum(np.maximum(inputs["valve_position"], 0.0), 1.0)
         water_flow = self._water_flow(params, position)
         water_in = state["inlet_water_temperature"]
-        water_in += self._pipe_factor(params, water_flow, dt_s) * (inputs["supply_water_temperature"] - water_in)
+        water_in[...] = self._moved_water(params, water_in, inputs["supply_water_temperature"], water_flow,
+                                          params["supply_pipe_time_constant"], dt_s)
         heat_static, c_water, c_air = self._static_heat(params, air_in, air_flow, water_flow, water_in)
         heat = state["heat_rate"]
         heat += state["_metal_factor"] * (heat_static - heat)
@@ -129,11 +145,12 @@ class HotWaterLoop(ComponentModel):
         # T_a,out = T_a,in + Q/(ṁ_a·c_p), the same C_a as the heat rate's (energy balance); clipped to
         # [T_a,in, T_w,in]: stagnant air (fan off) in a warm coil approaches the water temperature
         air_target = np.minimum(np.maximum(air_in + heat / c_air, low), high)
-        water_target = np.where(water_flow > 0.0, np.minimum(np.maximum(water_in - heat / c_water, low), high), air_in)
+        water_target = np.minimum(np.maximum(water_in - heat / c_water, low), high)
         air_out = state["outlet_air_temperature"]
         air_out += state["_air_factor"] * (air_target - air_out)
         water_out = state["outlet_water_temperature"]
-        water_out += state["_water_factor"] * (water_target - water_out)
+        water_out[...] = self._moved_water(params, water_out, water_target, water_flow,
+                                           params["water_side_time_constant"], dt_s)
         return {
             "outlet_air_temperature": air_out.copy(),
             "inlet_water_temperature": water_in.copy(),

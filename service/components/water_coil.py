@@ -72,6 +72,8 @@ class HeatingWaterCoil(WaterCoil):
     """A :class:`WaterCoil` fed with hot water: T_w 35–90 °C (low-temperature to conventional boiler
     and district-heating supply), default 60 °C."""
 
+    air_heat_sign = 1
+
     parameters = (
         Parameter("supply_water_temperature", "degC", 60.0, 35.0, 90.0,
                   "hot water temperature entering the coil, T_w"),
@@ -81,6 +83,8 @@ class HeatingWaterCoil(WaterCoil):
 class CoolingWaterCoil(WaterCoil):
     """A :class:`WaterCoil` fed with chilled water: T_w 4–18 °C (ice-storage to high-temperature
     chilled water), default 7 °C."""
+
+    air_heat_sign = -1
 
     parameters = (
         Parameter("supply_water_temperature", "degC", 7.0, 4.0, 18.0,

@@ -6,7 +6,8 @@ name or ``gt:timeSeriesId`` and converted from the device's QUDT unit to the mod
 problem (cells, stamps, row lengths, missing or doubled columns, percent declared as a fraction) is
 reported at once in one :class:`MeasurementError` naming column and line; unclaimed columns and
 frozen points are warnings. The step is the median spacing (an irregular file is resampled); gaps
-up to ``max_gap_steps`` are interpolated, longer ones stay NaN. The full contract: ``docs/data.md``.
+up to ``max_gap_steps`` are interpolated (held at the last value for schedules, a zero-order hold;
+resampled to the nearer row), longer ones stay NaN. The full contract: ``docs/data.md``.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ class SeriesSpec:
     """What the model needs from a column: the device ``node`` IRI, the names a column may carry
     (``series_id``), the QUDT ``unit`` the values are in, the ``port_unit`` the model wants, and
     whether the model cannot run without it (``required``); ``holds_values``: it may hold one value
-    for days (a schedule, a command), so no frozen-point warning."""
+    for days (a schedule, a command), so no frozen-point warning; ``steps``: it steps between samples
+    (a schedule), so gaps and resampling hold a value rather than interpolate."""
 
     node: str
     series_id: str | None
@@ -44,6 +46,7 @@ class SeriesSpec:
     port_unit: str
     required: bool = True
     holds_values: bool = False
+    steps: bool = False
 
     def names(self) -> set[str]:
         local = local_name(self.node)
@@ -180,9 +183,10 @@ def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
     return parsed, False
 
 
-def _fill_short_gaps(values: np.ndarray, max_gap: int) -> tuple[np.ndarray, int]:
-    """Interpolate NaN runs of at most ``max_gap`` steps between two measured values; returns the
-    filled array and the number of longer runs left NaN."""
+def _fill_short_gaps(values: np.ndarray, max_gap: int, *, hold: bool = False) -> tuple[np.ndarray, int]:
+    """Interpolate NaN runs of at most ``max_gap`` steps between two measured values (``hold``: keep
+    the last value, a zero-order hold for schedules and commands); returns the filled array and the
+    number of longer runs left NaN."""
     missing = np.isnan(values)
     if not missing.any() or missing.all():
         return values, int(missing.all())
@@ -194,7 +198,7 @@ def _fill_short_gaps(values: np.ndarray, max_gap: int) -> tuple[np.ndarray, int]
     known = ~missing
     for start, end in zip(starts, ends):
         if end - start <= max_gap and start > 0 and end < values.size:
-            out[start:end] = np.interp(index[start:end], index[known], values[known])
+            out[start:end] = values[start - 1] if hold else np.interp(index[start:end], index[known], values[known])
         else:
             long_runs += 1
     return out, long_runs
@@ -401,7 +405,7 @@ def read_measurements(
         # a gap as a run of missing rows); a grid point on a row keeps the row's value
         limit_s = (max_gap_steps + 1) * step_s
 
-        def on_grid(series: np.ndarray) -> np.ndarray:
+        def on_grid(series: np.ndarray, hold: bool = False) -> np.ndarray:
             finite = np.isfinite(series)
             t_known, y_known = t_old[finite], series[finite]
             resampled = np.full(grid.size, np.nan)
@@ -411,15 +415,20 @@ def read_measurements(
                 on_row = (after > 0) & (t_known[before] == t_new)
                 between = (after > 0) & (after < t_known.size)
                 close = between & (t_known[np.clip(after, 0, t_known.size - 1)] - t_known[before] <= limit_s)
-                resampled[close] = np.interp(t_new[close], t_known, y_known)
+                if hold:  # the nearer row's value: a schedule steps, and a jittered stamp is no step
+                    later = np.clip(after, 0, t_known.size - 1)
+                    nearer = np.where(t_known[later] - t_new < t_new - t_known[before], later, before)
+                    resampled[close] = y_known[nearer[close]]
+                else:
+                    resampled[close] = np.interp(t_new[close], t_known, y_known)
                 resampled[on_row] = y_known[before[on_row]]
             return resampled
 
-        converted = {node: on_grid(series) for node, series in converted.items()}
+        converted = {node: on_grid(series, specs[node].steps) for node, series in converted.items()}
         others = {name: on_grid(series) for name, series in others.items()}
         stamps = grid
     for node in list(converted):
-        converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps)
+        converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps, hold=specs[node].steps)
         if long_runs:
             warnings.append(
                 f"column {header[claimed[node]]!r}: {long_runs} gap(s) longer than {max_gap_steps} steps left "

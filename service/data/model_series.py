@@ -53,7 +53,8 @@ def series_specs(model: AssembledModel) -> dict[str, SeriesSpec]:
     for component in model.boundary_inputs + model.targets:
         link = model.measurement(component)
         specs[link.node] = SeriesSpec(link.node, link.series_id, link.unit, device_unit(model, component),
-                                      holds_values=model.components[component].signature.holds_values)
+                                      holds_values=model.components[component].signature.holds_values,
+                                      steps=model.components[component].signature.steps)
     return specs
 
 

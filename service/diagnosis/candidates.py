@@ -1,4 +1,5 @@
-"""Which effect of the catalog is missing: every applicable (effect, node) candidate refitted and judged.
+"""Which effect of the catalog is missing: every applicable (effect, node) candidate, and a drift of a
+failing component's parameters (:mod:`service.diagnosis.drift`), refitted and judged.
 
 Each candidate is fitted on the training window plus the first half of the test window and judged on
 the second half (:func:`split_windows`), against the base model refitted on the same windows or as
@@ -10,8 +11,9 @@ Candidates are evaluated in worker processes. The method: ``docs/diagnosis.md``,
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -20,6 +22,15 @@ from service.calibration.model_data import ModelData
 from service.calibration.point import PointCalibrator
 from service.calibration.problem import CalibrationProblem
 from service.data.measurements import MeasuredData
+from service.diagnosis.drift import (
+    DriftEvidence,
+    drift_candidates,
+    drift_fields,
+    drift_identity,
+    drift_sentence,
+    step_onset,
+)
+from service.diagnosis.plausibility import bound_note, demotion_reasons
 from service.diagnosis.ranking import (
     EffectEvidence,
     delta_bic,
@@ -90,10 +101,12 @@ class _CandidateJob:
     each target's base residuals; ``target_scales``: the residual weights; ``base_evaluation_prediction``: the
     better base prediction of the evaluation half; ``onset_windows``: (training windows, first half
     of the test window) for the fit of a fault appearing in the test window; ``compared``: the
-    operating filter's steps (``ModelData.compared``).
+    operating filter's steps (``ModelData.compared``). A drift candidate
+    (:mod:`service.diagnosis.drift`) has no ``signature``: its model carries the drift, and a step's
+    onset is picked among the data steps ``drift_onsets``.
     """
 
-    signature: Signature
+    signature: Signature | None
     node: str
     model: AssembledModel
     data: MeasuredData
@@ -112,6 +125,13 @@ class _CandidateJob:
     train_unidentified: frozenset[str] = frozenset()
     onset_windows: tuple[list[slice], slice] | None = None
     compared: np.ndarray | None = None
+    drift_onsets: tuple[int, ...] = ()
+
+    def identity(self) -> tuple[str, str, str]:
+        """(effect id, IRI, label) of the candidate."""
+        if self.signature is None:
+            return drift_identity(self.model.drifts[0])
+        return self.signature.id, self.signature.iri, self.signature.label
 
 
 def split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]:
@@ -157,13 +177,15 @@ def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_t
 class _Fit(NamedTuple):
     """One hypothesis's fit: θ (all estimated parameters) and standard errors, the mean squared
     weighted residual and the effective sample fraction n_eff/n of its residuals per target, and
-    the number of parameters it frees beyond the base's."""
+    the number of parameters it frees beyond the base's; whether the least-squares fit converged
+    (continued once where it stopped at its evaluation limit)."""
 
     theta: np.ndarray
     standard_errors: np.ndarray
     mean_squares: dict[str, float]
     sample_fractions: dict[str, float]
     freed: int
+    converged: bool = True
 
 
 def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effect_columns: list[int],
@@ -207,13 +229,13 @@ def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effec
     # competes too, and the host's parameters get a wider screen
     active = _probe_start(probe, at_null, own, active_only=True)[None, :] if host else None
     calibrator = PointCalibrator(n_starts=2 if host else 1, n_candidates=32 if host else 8, random_state=job.seed,
-                                 max_nfev=job.refit_max_nfev).fit(problem, candidates=active)
+                                 max_nfev=job.refit_max_nfev, continuations=1).fit(problem, candidates=active)
     theta = null.copy()
     theta[free] = calibrator.theta_
     standard_errors = np.zeros_like(theta)
     standard_errors[free] = calibrator.standard_errors_
     return _Fit(theta, standard_errors, _mean_squares(calibrator.residuals_, job.target_scales),
-                _sample_fractions(calibrator.residuals_), len(free))
+                _sample_fractions(calibrator.residuals_), len(free), calibrator.converged_)
 
 
 def _mean_squares(residuals: dict[str, np.ndarray], scales: dict[str, float]) -> dict[str, float]:
@@ -245,22 +267,12 @@ def _host_columns(job: _CandidateJob) -> list[int]:
     return columns if columns and all(refs[j].key in job.train_unidentified for j in columns) else []
 
 
-def _bound_note(value: float, spec) -> str:
-    """`` (at its lower/upper bound B)`` when ``value`` sits within 10⁻⁶ of the range of a bound of
-    ``spec`` (a :class:`~service.components.component.Parameter`): the data push it further than the prior allows."""
-    tolerance = 1e-6 * (spec.upper - spec.lower)
-    for side, bound in (("lower", spec.lower), ("upper", spec.upper)):
-        if abs(value - bound) <= tolerance:
-            return f" (at its {side} bound {bound:g})"
-    return ""
-
-
 def _estimate_text(name: str, value: float, standard_error: float, spec) -> str:
     """``name = value ± se`` (with :func:`_bound_note`), or, where the standard error spans the
     prior range or is not finite, that the data do not identify it."""
     if not np.isfinite(standard_error) or standard_error > spec.upper - spec.lower:
         return f"{name} = {value:.3g}, not identified (the data leave it anywhere in [{spec.lower:g}, {spec.upper:g}])"
-    return f"{name} = {value:.3g} ± {standard_error:.2g}" + _bound_note(value, spec)
+    return f"{name} = {value:.3g} ± {standard_error:.2g}" + bound_note(value, spec)
 
 
 def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
@@ -271,6 +283,11 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     effect_columns = [j for j, r in enumerate(refs) if r.key not in job.base_theta]
     theta0 = np.array([job.base_theta.get(r.key, np.nan) for r in refs])
     theta0[effect_columns] = _null(refs, effect_columns)
+    theta_train = np.array([job.train_theta.get(r.key, theta0[j]) for j, r in enumerate(refs)])
+    if job.drift_onsets:  # a step drift: its onset picked by the fit, on the grid
+        job = replace(job, model=step_onset(md, job.fit_windows, [theta0, theta_train], job.drift_onsets,
+                                            job.target_scales))
+        md = ModelData(job.model, job.data, job.substeps, job.compared)
     problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
     keys = problem.target_keys
     score = score_test(problem, theta0, effect_columns, sample_fractions=[job.sample_fractions[k] for k in keys])
@@ -280,15 +297,16 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         return delta_bic([before[k] * c for k, c in zip(keys, counts)], [after[k] * c for k, c in zip(keys, counts)],
                          counts * np.array([fractions[k] for k in keys]), freed)
 
-    theta_train = np.array([job.train_theta.get(r.key, theta0[j]) for j, r in enumerate(refs)])
     problem = md.problem(job.fit_windows, default=_probe_start(problem, theta0, effect_columns, theta_train),
                          target_scales=job.target_scales)
-    calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev)
+    calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev,
+                                 continuations=1)
     calibrator.fit(problem)
     fits = {"present throughout": _Fit(calibrator.theta_, calibrator.standard_errors_,
                                        _mean_squares(calibrator.residuals_, job.target_scales),
-                                       _sample_fractions(calibrator.residuals_), len(effect_columns))}
-    if job.onset_windows is not None and effect_columns and job.signature.can_appear:
+                                       _sample_fractions(calibrator.residuals_),
+                                       len(effect_columns) + (1 if job.drift_onsets else 0), calibrator.converged_)}
+    if job.onset_windows is not None and effect_columns and job.signature is not None and job.signature.can_appear:
         fits["appearing in the test window"] = _fit_onset(md, job, theta_train, effect_columns)
         host = _host_columns(job)
         if host:  # an unexercised host may hide what the effect does: fit it with the effect too
@@ -301,7 +319,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         return bic_against(job.base_mean_squares, fit.mean_squares, fit.sample_fractions, fit.freed)
 
     onset = min(fits, key=lambda name: bic_of(fits[name]))
-    theta, standard_errors, mean_squares, fractions, freed = fits[onset]
+    theta, standard_errors, mean_squares, fractions, freed, converged = fits[onset]
     # what the refit gains with the base parameters alone (the effect set back to its null) is the
     # base model's, not the effect's: "before" is the better of the base refit and that
     theta_null = theta.copy()
@@ -314,12 +332,15 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     null = _predict_evaluation(md, job.run_window, job.evaluation, theta_null)
     before = min((job.base_evaluation_prediction, null),
                  key=lambda prediction: weighted_test_error(observed, prediction, job.target_scales))
-    evidence = EffectEvidence(
-        effect=job.signature.id, effect_iri=job.signature.iri, node=job.node, label=job.signature.label,
+    effect, effect_iri, label = job.identity()
+    drifts = job.model.drifts
+    described = drift_fields(job.model, job.data.timestamps, job.data.step_s)
+    evidence = (DriftEvidence if drifts else EffectEvidence)(
+        effect=effect, effect_iri=effect_iri, node=job.node, label=label,
         parameter_names=tuple(refs[j].name for j in effect_columns), score=score,
         delta_bic=bic_against(base_mean_squares, mean_squares, fractions, freed), freed_parameters=freed,
         estimates={refs[j].name: float(theta[j]) for j in effect_columns},
-        standard_errors={refs[j].name: float(standard_errors[j]) for j in effect_columns},
+        standard_errors={refs[j].name: float(standard_errors[j]) for j in effect_columns}, **described,
     )
     after = _predict_evaluation(md, job.run_window, job.evaluation, theta)
     before_error = weighted_test_error(observed, before, job.target_scales)
@@ -331,21 +352,34 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         mask = np.isfinite(values)
         evidence.rmse_before[node] = float(np.sqrt(np.mean((values[mask] - before[node][mask]) ** 2)))
         evidence.rmse_after[node] = float(np.sqrt(np.mean((values[mask] - after[node][mask]) ** 2)))
+    evidence.demoted = "; ".join(filter(None, [demotion_reasons(job.model, job.node, theta, effect_columns), "" if converged
+                                              else f"its refit stopped at its limit of {job.refit_max_nfev} evaluations twice"]))
+    demotion = f"; ranked below the plausible effects: {evidence.demoted}" if evidence.demoted else ""
+    if drifts:
+        lead = drift_sentence(job.model, theta, standard_errors, job.data.timestamps, job.data.step_s,
+                              job.evaluation.stop - 1)
+        picked = "; its onset picked by the fit (a 6-hour grid, then the data steps around the best)" if job.drift_onsets else ""
+        _explain(evidence, observed, null, after, "the drift", f"fitted with the base parameters{picked}{demotion}",
+                 lead, job.target_scales)
+        evidence.model = job.model  # with the onset the fit picked
+        return evidence
     estimates = "; ".join(_estimate_text(refs[j].name, theta[j], standard_errors[j], refs[j].spec) for j in effect_columns)
-    _explain(evidence, job, observed, null, after, f"{estimates}; fitted as an effect {onset}")
+    _explain(evidence, observed, null, after, f"{effect} at {local_name(job.node)}",
+             f"{estimates}; fitted as an effect {onset}{demotion}", "", job.target_scales)
     return evidence
 
 
-def _explain(evidence: EffectEvidence, job: _CandidateJob, observed: dict[str, np.ndarray],
-             null: dict[str, np.ndarray], after: dict[str, np.ndarray], fit_text: str) -> None:
-    """Set the evidence's residual correlation and sentence: the sensor where the effect itself (its
-    prediction ``after`` against the same parameters with the effect at its null) removes the most
-    scaled error, how its residual correlates with what the effect adds, and ``fit_text``."""
+def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: dict[str, np.ndarray],
+             after: dict[str, np.ndarray], what: str, fit_text: str, lead: str, scales: Mapping[str, float]) -> None:
+    """Set the evidence's residual correlation and sentence: ``lead`` (what a drift does), the sensor
+    where the effect itself (its prediction ``after`` against the same parameters with the effect at
+    its null) removes the most scaled error, how its residual correlates with what ``what`` adds, and
+    ``fit_text``."""
     def mean_square(prediction: dict[str, np.ndarray], node: str) -> float:
         error = observed[node] - prediction[node]
         return float(np.mean(error[np.isfinite(error)] ** 2)) if np.isfinite(error).any() else 0.0
 
-    best = max(observed, key=lambda k: (mean_square(null, k) - mean_square(after, k)) / job.target_scales[k] ** 2)
+    best = max(observed, key=lambda k: (mean_square(null, k) - mean_square(after, k)) / scales[k] ** 2)
     change = after[best] - null[best]
     residual = observed[best] - null[best]
     mask = np.isfinite(residual) & np.isfinite(change)
@@ -353,7 +387,8 @@ def _explain(evidence: EffectEvidence, job: _CandidateJob, observed: dict[str, n
     evidence.residual_correlation = (best, rho)
     removed = 1.0 - mean_square(after, best) / max(mean_square(null, best), 1e-300)
     evidence.explanation = (
-        f"residual on {local_name(best)} correlates {rho:.2f} with what {job.signature.id} at {local_name(job.node)} adds; "
+        (f"{lead}; " if lead else "")
+        + f"residual on {local_name(best)} correlates {rho:.2f} with what {what} adds; "
         f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "
         f"sensors); {fit_text}"
     )
@@ -369,8 +404,11 @@ def _told(evaluated, jobs: list[_CandidateJob], say) -> list[EffectEvidence]:
 
 
 def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signature], base, *, seed: int,
-                 refit_max_nfev: int, workers: int | None, say) -> tuple[list[EffectEvidence], list[str]]:
-    """Every applicable (effect, node) candidate evaluated against ``base`` (a
+                 refit_max_nfev: int, workers: int | None, say, drifting: Sequence[str] = (),
+                 failing_noise: Mapping[str, float] | None = None) -> tuple[list[EffectEvidence], list[str]]:
+    """Every applicable (effect, node) candidate, and a drift of the parameters of the components
+    ``drifting`` (IRIs) that the failing sensors ``failing_noise`` (node → σ) would show
+    (:mod:`service.diagnosis.drift`), evaluated against ``base`` (a
     :class:`~service.calibration.run.CalibrationOutcome` with a test window) and ranked, in
     ``workers`` processes (default: one per candidate, at most the usable CPUs); returns (ranked
     evidence, the reasons the others do not apply)."""
@@ -382,7 +420,7 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
     fit_windows, run_window, evaluation = split_windows(train_slice, test_slice)
     scales = dict(md.problem(train_slice).target_scales)
     say("refitting the base model on the comparison's fit windows")
-    refit = PointCalibrator(n_starts=1, n_candidates=8, random_state=seed, max_nfev=refit_max_nfev).fit(
+    refit = PointCalibrator(n_starts=1, n_candidates=8, random_state=seed, max_nfev=refit_max_nfev, continuations=1).fit(
         md.problem(fit_windows, default=base.theta, target_scales=scales))
     fractions = _sample_fractions(refit.residuals_)
     base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, refit.theta_)}
@@ -393,16 +431,19 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
                           key=lambda prediction: weighted_test_error(observed, prediction, scales))
     train_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, base.theta)}
     unidentified = frozenset(e.key for e in base.record.estimates if not e.identified)
+    drifts = drift_candidates(md, base.theta, drifting, test=test_slice, fit_windows=fit_windows,
+                              noise=failing_noise or {}) if drifting else []
     jobs = [
         _CandidateJob(
-            signature=candidate.signature, node=candidate.node, model=candidate.model, data=data, substeps=substeps,
+            signature=signature, node=node, model=candidate_model, drift_onsets=onsets, data=data, substeps=substeps,
             fit_windows=fit_windows, run_window=run_window, evaluation=evaluation, base_theta=base_theta,
             base_mean_squares=_mean_squares(refit.residuals_, scales), sample_fractions=fractions, target_scales=scales,
             base_evaluation_prediction=base_evaluation, seed=seed, refit_max_nfev=refit_max_nfev,
             train_theta=train_theta, train_unidentified=unidentified,
             onset_windows=([train_slice], slice(test_slice.start, evaluation.start)), compared=md.compared,
         )
-        for candidate in candidates
+        for signature, node, candidate_model, onsets in [(c.signature, c.node, c.model, ()) for c in candidates]
+        + [(None, d.node, d.model, d.onsets) for d in drifts]
     ]
     workers = workers if workers is not None else min(len(jobs), usable_cpu_count())
     if workers > 1 and len(jobs) > 1:
@@ -411,5 +452,5 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
     else:
         evidence = _told(map(_evaluate_candidate, jobs), jobs, say)
     for job, item in zip(jobs, evidence):
-        item.model = job.model
+        item.model = item.model or job.model
     return rank_evidence(evidence), skipped

@@ -22,11 +22,12 @@ from service.calibration.run import calibrate
 from service.components.library import SignatureLibrary
 from service.data.windows import Window
 from service.diagnosis.candidates import rank_catalog, split_windows
+from service.diagnosis.drift import drifting_components
 from service.diagnosis.episodes import Episode, find_episodes
-from service.diagnosis.localization import FlowTopology, localize_failures
+from service.diagnosis.localization import FailureLocation, FlowTopology, localize_failures
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
 from service.diagnosis.report import DiagnosisReport, SensorVerdict, diagnosis_triples
-from service.diagnosis.residual_dependence import Dependence, residual_dependence
+from service.diagnosis.residual_dependence import Dependence, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
@@ -42,19 +43,29 @@ MIN_TEST_STEPS = 12
 
 
 def noise_level(values: np.ndarray, unit: str, observed: np.ndarray) -> float:
-    """Measurement noise σ of a sensor from the second differences of its residual y − ŷ
-    (``values``), floored at the instrument accuracy of its unit — for a unit without an absolute one
-    (W, m³/s) 1 % of the mean magnitude of the ``observed`` reading
+    """Measurement noise σ (RMS over the window) of a sensor from the second differences of its
+    residual y − ŷ (``values``), floored at the instrument accuracy of its unit — for a unit without an
+    absolute one (W, m³/s) 1 % of the mean magnitude of the ``observed`` reading
     (:data:`~service.calibration.problem.RELATIVE_ACCURACY_FLOOR`).
 
     Δ²e of white noise has standard deviation √6·σ; the first quartile of |Δ²e| is 0.3186·√6·σ for
     Gaussian noise, and stays a noise measure while model error bends the residual on up to half of
-    the steps (a median would not).
+    the steps (a median would not). A meter without an absolute accuracy (power, flow) reads with
+    noise in proportion to its reading, σₖ = c·|yₖ|: Δ²eₖ is divided by sₖ = √((y²ₖ₋₁ + 4y²ₖ + y²ₖ₊₁)/6)
+    before the quartile gives c, and σ = c·√(mean y²) (one quartile of Δ²e would give the noise of the
+    low readings).
     """
-    finite = np.asarray(values, dtype=float)
-    second = np.diff(finite, n=2)
+    residual = np.asarray(values, dtype=float)
+    second = np.diff(residual, n=2)
+    if unit not in INSTRUMENT_ACCURACY_FLOOR:
+        squares = np.asarray(observed, dtype=float) ** 2
+        local = np.sqrt((squares[:-2] + 4.0 * squares[1:-1] + squares[2:]) / 6.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            second = np.where(local > 0.0, second / local, np.nan)
     second = second[np.isfinite(second)]
     sigma = float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
+    if unit not in INSTRUMENT_ACCURACY_FLOOR:
+        sigma *= float(np.sqrt(np.nanmean(np.asarray(observed, dtype=float) ** 2)))
     floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.nanmean(np.abs(observed))))
     return max(sigma, floor)
 
@@ -104,8 +115,22 @@ def diagnose(
             nmbe_percent=metrics.nmbe_percent, r2=metrics.r2, unit=md.units[node], noise=sigma,
             fails=bool(metrics.rmse > failure_ratio * sigma),
         )
+    topology = FlowTopology.from_store(store, model_name)
+    carries = _carried_down(residuals, md.units, {node: s.noise for node, s in sensors.items()}, failure_ratio)
+
+    def locate(located: Mapping[str, bool]) -> list[FailureLocation]:
+        """The failures on the flow path of the target sensors ``located`` marks (node → True)."""
+        matches = {md.node_of[c]: True for c in model.boundary_inputs} | {n: not bad for n, bad in located.items()}
+        return localize_failures(topology, matches, [md.node_of[c] for c in model.boundary_inputs + model.targets],
+                                 carries=carries)
+
+    failing = [n for n, s in sensors.items() if s.fails]
+    # a drift of the parameters of the components suspected for the most-failing sensor competes too
+    drift = {"drifting": drifting_components(model, locate({n: s.fails for n, s in sensors.items()}),
+                                             max(failing, key=lambda n: sensors[n].rmse_over_noise)),
+             "failing_noise": {n: sensors[n].noise for n in failing}} if failing and rank_effects else {}
     ranked, skipped = (rank_catalog(store, model_name, library, base, seed=seed, refit_max_nfev=refit_max_nfev,
-                                    workers=workers, say=say)
+                                    workers=workers, say=say, **drift)
                        if rank_effects else ([], []))
     answer = next((e for e in ranked if e.significant), None)
     lookalikes = []
@@ -117,10 +142,7 @@ def diagnose(
         lookalikes = indistinguishable(answer, ranked, md, run_window, evaluation,
                                        {node: verdict.noise for node, verdict in sensors.items()})
     say("locating the failures")
-    matches = {md.node_of[c]: True for c in model.boundary_inputs} | {n: not s.located for n, s in sensors.items()}
-    localization = localize_failures(
-        FlowTopology.from_store(store, model_name), matches, [md.node_of[c] for c in model.boundary_inputs + model.targets],
-        carries=_carried_down(residuals, md.units, {node: s.noise for node, s in sensors.items()}, failure_ratio))
+    localization = locate({n: s.located for n, s in sensors.items()})
     regimes = _regimes_with_worst(base.regimes.rows(), sensors)
     episodes: dict[str, list[Episode]] = {}
     for node in observed:
@@ -129,9 +151,10 @@ def diagnose(
         if found:
             episodes[node] = found
 
-    failing = [n for n, s in sensors.items() if s.fails]
     dependence = (_residual_dependence(base, failing, residuals)
                   if failing and not any(e.significant for e in ranked) else {})
+    trends = {node: trend for node in dependence
+              if (trend := time_trend(residuals[node], data.timestamps[test_slice])) is not None}
 
     report = DiagnosisReport(
         model_name=model_name, run_id=base.record.run_id, sensors=sensors, localization=localization,
@@ -139,7 +162,7 @@ def diagnose(
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, step_s=data.step_s,
         base_test_prediction=predicted, effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice],
         test_observed=observed, failure_ratio=failure_ratio, data_warnings=list(base.record.diagnostics.warnings),
-        indistinguishable=lookalikes,
+        indistinguishable=lookalikes, residual_trend=trends,
     )
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
     return report

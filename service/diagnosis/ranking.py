@@ -5,8 +5,9 @@ RSS the bounded Gauss–Newton step on the effect's directions would remove beyo
 target over its own σ̂ₖ² and scaled by its n_eff,ₖ/nₖ = (1 − ρ₁)/(1 + ρ₁); ~χ̄²), the **refit**
 compared by ΔBIC = Σₖ n_eff,ₖ·ln(RSS₁,ₖ/RSS₀,ₖ) + k·ln(Σ n_eff), and the share of the test-window
 weighted squared error it removes **out of sample**. Significant: ΔBIC < ``bic_threshold`` and at least
-``min_test_improvement`` removed; ranked by the share removed (two decimals), then fewer parameters,
-then ΔBIC. The method in full: ``docs/diagnosis.md``, "What is missing".
+``min_test_improvement`` removed; ranked significant first, then the plausible before those demoted
+(an effect fitted only at a bound that is not its null), then by the share removed (two decimals),
+fewer parameters, ΔBIC. The method in full: ``docs/diagnosis.md``, "What is missing".
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ class EffectEvidence:
     residual_correlation: tuple[str, float] | None = None
     significant: bool = False
     explanation: str = ""
+    demoted: str = ""  # why the ranking puts it below the plausible effects (empty: it does not)
     # for telling look-alikes apart (service.diagnosis.separation), not part of the report: θ of the
     # fit kept (all estimated parameters), each evaluation step's share of the error after it, the model
     theta: np.ndarray | None = field(default=None, repr=False)
@@ -81,7 +83,7 @@ class EffectEvidence:
             "freed_parameters": self.freed_parameters, "significant": self.significant,
             "estimates": self.estimates, "standard_errors": self.standard_errors,
             "test_improvement": self.test_improvement, "rmse_before": self.rmse_before,
-            "rmse_after": self.rmse_after, "explanation": self.explanation,
+            "rmse_after": self.rmse_after, "explanation": self.explanation, "demoted": self.demoted,
         }
 
 
@@ -211,7 +213,8 @@ def rank_evidence(
     def key(item: EffectEvidence):
         improvement = item.test_improvement if np.isfinite(item.test_improvement) else -np.inf
         bic = item.delta_bic if np.isfinite(item.delta_bic) else np.inf
-        return (not item.significant, -round(improvement, 2), len(item.parameter_names), bic, item.effect, item.node)
+        return (not item.significant, bool(item.demoted), -round(improvement, 2), len(item.parameter_names), bic,
+                item.effect, item.node)
 
     return sorted(evidence, key=key)
 

@@ -15,12 +15,14 @@ import numpy as np
 import pyoxigraph as ox
 
 from service.calibration.triples import run_iri
+from service.diagnosis.drift import DriftEvidence
 from service.diagnosis.episodes import Episode
 from service.diagnosis.localization import FailureLocation
 from service.diagnosis.ranking import EffectEvidence
-from service.diagnosis.residual_dependence import Dependence
+from service.diagnosis.residual_dependence import Dependence, TimeTrend
 from service.diagnosis.separation import Lookalike
-from service.graph.namespaces import GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
+from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
+from service.graph.units import unit_label
 
 __all__ = ["SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
 
@@ -65,7 +67,8 @@ class DiagnosisReport:
     ``regimes``: the calibration's rows (``{"regime", "rule", "share", "rmse": {sensor: value}}``)
     with ``"worst"`` marking the one with the largest mean RMSE / noise; ``residual_dependence``: per
     failing sensor, the (up to three) signals its residual follows, described with ``step_s`` (the
-    data's sampling interval, s); ``effects_tested``: False for ``graphtwin compare``.
+    data's sampling interval, s), and ``residual_trend`` its trend in time; ``effects_tested``: False
+    for ``graphtwin compare``.
     """
 
     model_name: str
@@ -86,6 +89,7 @@ class DiagnosisReport:
     failure_ratio: float = 2.0
     data_warnings: list[str] = field(default_factory=list)  # reading the data and assembling: frozen points, gaps
     indistinguishable: list[Lookalike] = field(default_factory=list)  # significant, tied with the answer
+    residual_trend: dict[str, TimeTrend] = field(default_factory=dict)
 
     @property
     def significant(self) -> list[EffectEvidence]:
@@ -109,12 +113,12 @@ class DiagnosisReport:
                 return "The model matches every sensor within its noise."
             return (f"The model fails at {', '.join(local_name(n) for n in failing)}: see localization, regimes and "
                     "episodes for where, residual_dependence for what the residual follows, and graphtwin diagnose "
-                    "for which effect is missing.")
+                    f"for which effect is missing. {self.residual_structure()}")
         if not self.significant:
             if not failing:
                 return "The model matches every sensor within its noise; nothing significant is missing."
             return (f"The model fails at {', '.join(local_name(n) for n in failing)}, but no effect in the catalog "
-                    "explains it significantly: see residual_dependence for what the residual follows.")
+                    f"and no drift of a parameter explains it significantly. {self.residual_structure()}")
         best = self.answer
         explanation = best.explanation[:1].upper() + best.explanation[1:]
         sentence = f"Missing: {best.label} at {local_name(best.node)}. {explanation}."
@@ -123,6 +127,29 @@ class DiagnosisReport:
                          + "; ".join(f"{e.effect.label} at {local_name(e.effect.node)}" for e in self.indistinguishable)
                          + " (see indistinguishable for what would separate them).")
         return sentence
+
+    def residual_structure(self) -> str:
+        """The most-failing sensor's residual in words: its trend in time, the operating regime where
+        its error is largest, and the signal it follows most (what of these the report holds)."""
+        failing = self.failing_sensors
+        if not failing:
+            return ""
+        node = max(failing, key=lambda n: self.sensors[n].rmse_over_noise)
+        verdict = self.sensors[node]
+        unit = unit_label(verdict.unit)
+        parts = []
+        if node in self.residual_trend:
+            parts.append(self.residual_trend[node].describe(unit))
+        regimes = [r for r in self.regimes if r["share"] > 0 and np.isfinite(r["rmse"].get(node, np.nan))]
+        if len(regimes) > 1:
+            worst = max(regimes, key=lambda r: r["rmse"][node])
+            parts.append(f"its error is largest where {worst['rule']} (RMSE {worst['rmse'][node]:.3g} {unit} over "
+                         f"{100 * worst['share']:.0f} % of the test window)")
+        if self.residual_dependence.get(node):
+            parts.append(self.residual_dependence[node][0].describe(self.step_s).replace("the residual", "it", 1))
+        described = "; ".join(parts) or "its residual has no structure the report can name"
+        return (f"At {local_name(node)}, the worst (RMSE {verdict.rmse:.3g} {unit}, {verdict.rmse_over_noise:.1f}× its "
+                f"noise): {described}.")
 
     def to_dict(self) -> dict:
         return {
@@ -140,6 +167,8 @@ class DiagnosisReport:
             "residual_dependence": {
                 node: {"signals": [d.to_dict() | {"text": d.describe(self.step_s)} for d in signals]}
                 for node, signals in self.residual_dependence.items()},
+            "residual_trend": {node: trend.to_dict() | {"text": trend.describe(unit_label(self.sensors[node].unit))}
+                               for node, trend in self.residual_trend.items()},
             "data_warnings": self.data_warnings,
         }
 
@@ -162,6 +191,10 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
               ox.Triple(node, GT.rank, ox.Literal(str(rank), datatype=XSD.integer)),
               ox.Triple(node, GT.significant, ox.Literal("true" if item.significant else "false", datatype=XSD.boolean)),
               ox.Triple(node, GT.explanation, ox.Literal(item.explanation))]
+        if isinstance(item, DriftEvidence):  # not in the signature library: named here
+            drift = ox.NamedNode(item.effect_iri)
+            t += [ox.Triple(drift, RDF.type, GT.ParameterDrift), ox.Triple(drift, DCTERMS.identifier, ox.Literal(item.effect)),
+                  ox.Triple(drift, RDFS.label, ox.Literal(item.label))]
         tied = next((lookalike for lookalike in report.indistinguishable if lookalike.effect is item), None)
         if tied is not None:
             answer = report.answer

@@ -5,7 +5,8 @@ Every candidate signal x is ranked by its strongest Pearson |ρ| of the residual
 the top ``n_joint`` at their best lags, ``partial_correlation`` (with the signals ranked above
 regressed out of both, intercept included) and ``cumulative_r2`` (R² of the residual on the top k
 together). Constant or too short signals (fewer than ``min_steps``) come last with ``skipped_reason``.
-More: ``docs/diagnosis.md``, "When nothing is found".
+:func:`time_trend`: the residual's straight-line trend in time. More: ``docs/diagnosis.md``, "When
+nothing is found".
 """
 
 from __future__ import annotations
@@ -15,11 +16,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Dependence", "residual_dependence", "COLLINEAR_SHARE"]
+__all__ = ["Dependence", "residual_dependence", "COLLINEAR_SHARE", "TimeTrend", "time_trend"]
 
 #: A signal whose variance left after regressing on the signals above is below this share of its
 #: own is a linear combination of them: its partial correlation is reported as 0.
 COLLINEAR_SHARE = 1e-10
+#: A straight line in time that explains less than this share of a residual's variance is no trend.
+TREND_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,41 @@ class Dependence:
         return {"signal": self.signal, "lag_steps": self.lag_steps, "correlation": self.correlation,
                 "n_steps": self.n_steps, "partial_correlation": self.partial_correlation,
                 "cumulative_r2": self.cumulative_r2, "rank": self.rank, "skipped_reason": self.skipped_reason}
+
+
+@dataclass(frozen=True)
+class TimeTrend:
+    """The least-squares line of a residual against time: ``per_day`` (the residual's unit a day),
+    the share ``r2`` of the residual's variance it explains, over ``n_steps`` finite steps."""
+
+    per_day: float
+    r2: float
+    n_steps: int
+
+    def describe(self, unit: str) -> str:
+        """"it drifts +0.31 K a day (the trend explains 64 % of its variance)", or, where the line
+        explains less than :data:`TREND_SHARE` of it, that it has no trend."""
+        if self.r2 < TREND_SHARE:
+            return f"it has no trend in time (a straight line explains {100 * self.r2:.0f} % of its variance)"
+        return (f"it drifts {self.per_day:+.2g} {unit} a day (the trend explains {100 * self.r2:.0f} % of its "
+                "variance)")
+
+    def to_dict(self) -> dict:
+        return {"per_day": self.per_day, "r2": self.r2, "n_steps": self.n_steps}
+
+
+def time_trend(residual: np.ndarray, timestamps: np.ndarray) -> TimeTrend | None:
+    """The straight-line trend of ``residual`` ``ndarray[n_t]`` (NaN: not measured) against its
+    ``timestamps`` (datetime64); None with fewer than 3 finite steps or a constant residual."""
+    residual = np.asarray(residual, dtype=float)
+    days = (np.asarray(timestamps) - np.asarray(timestamps)[0]) / np.timedelta64(1, "D")
+    use = np.isfinite(residual)
+    if use.sum() < 3 or np.ptp(residual[use]) == 0 or np.ptp(days[use]) == 0:
+        return None
+    slope, intercept = np.polyfit(days[use], residual[use], 1)
+    left = residual[use] - (slope * days[use] + intercept)
+    r2 = 1.0 - float(np.sum(left ** 2) / np.sum((residual[use] - residual[use].mean()) ** 2))
+    return TimeTrend(float(slope), r2, int(use.sum()))
 
 
 def _lagged(x: np.ndarray, lag: int) -> np.ndarray:

@@ -108,12 +108,15 @@ class EffectSplice:
     the port receives) or on an ``output`` port (it transforms what the port emits) of the component
     that represents node ``node``. ``host_models`` (``module:Class`` names), when given, restricts the
     effect to hosts of those models (e.g. coil thermal mass only where the chosen coil model is static).
+    ``readings_unchanged`` (an input splice): the fault changes what the port does, not what the host
+    reports of it, so the host's outputs that report the input (``Port.reports``) read its feed.
     """
 
     node: str
     port: str
     side: str  # "input" or "output"
     host_models: tuple[str, ...] = ()
+    readings_unchanged: bool = False
 
 
 @dataclass(frozen=True)
@@ -138,6 +141,7 @@ class Signature:
     extra: dict[str, Any] = field(default_factory=dict)
     can_appear: bool = True  # effects: may appear from one day to the next (a fault), else a property
     holds_values: bool = False  # measuring devices whose series may hold one value for days (schedules, commands)
+    steps: bool = False  # boundary series that step between samples (schedules): held, not interpolated
 
     @property
     def iri(self) -> str:
@@ -153,11 +157,11 @@ def signature_iri(signature_id: str) -> str:
 
 _TOP_KEYS = {
     "id", "label", "comment", "kind", "model", "fmu", "complexity", "modeled_nodes", "nodes",
-    "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values",
+    "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values", "steps",
 }
 _NODE_KEYS = ("classes", "iri", "literal", "any")
 _TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_reverse", "stop_at"}
-_SPLICE_KEYS = {"node", "input", "output", "host_models"}
+_SPLICE_KEYS = {"node", "input", "output", "host_models", "readings_unchanged"}
 
 
 def signature_error(path: Path | None, where: str, message: str) -> SignatureError:
@@ -349,9 +353,13 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
             raise signature_error(path, "splice", "an effect's splice names node and one of 'input' or 'output'")
         side = sides[0]
         host_models = _array(path, "splice.host_models", spec.get("host_models", []), "an array of 'module:Class' names")
+        readings_unchanged = spec.get("readings_unchanged", False)
+        if not isinstance(readings_unchanged, bool) or (readings_unchanged and side != "input"):
+            raise signature_error(path, "splice.readings_unchanged", "true or false, and true only on an input splice")
         splice = EffectSplice(
             node=known(spec.get("node"), "splice.node"), port=_text(path, f"splice.{side}", spec[side]), side=side,
             host_models=tuple(_model_name(path, f"splice.host_models[{i}]", m) for i, m in enumerate(host_models)),
+            readings_unchanged=readings_unchanged,
         )
     elif kind == "effect":
         raise signature_error(path, "splice", "an effect must say where it enters the model ([splice])")
@@ -376,13 +384,16 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     holds_values = data.get("holds_values", False)
     if not isinstance(holds_values, bool) or ("holds_values" in data and kind != "component"):
         raise signature_error(path, "holds_values", "components only, true or false")
+    steps = data.get("steps", False)
+    if not isinstance(steps, bool) or ("steps" in data and kind != "component"):
+        raise signature_error(path, "steps", "components only, true or false")
     extra = _table(path, "extra", data.get("extra", {}), "a table")
     return Signature(
         id=sig_id, label=label, kind=kind, nodes=nodes,
         triples=tuple(triples), modeled_nodes=modeled, inputs=tuple(inputs), outputs=tuple(outputs),
         parameters=tuple(parameters), model=model, fmu=fmu_path, complexity=complexity,
         comment=comment, splice=splice, source_file=path,
-        extra=dict(extra), can_appear=can_appear, holds_values=holds_values,
+        extra=dict(extra), can_appear=can_appear, holds_values=holds_values, steps=steps,
     )
 
 

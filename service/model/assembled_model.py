@@ -14,14 +14,19 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from service.components.component import ComponentModel, Parameter
 from service.components.library import load_model_class
 from service.matching.signature import Signature
 
 __all__ = [
-    "MeasurementLink", "ComponentInstance", "Connection", "ParameterRef", "AssembledModel",
-    "mapped_values_outside_bounds",
+    "MeasurementLink", "ComponentInstance", "Connection", "ParameterRef", "ParameterDrift", "AssembledModel",
+    "mapped_values_outside_bounds", "DAY_S",
 ]
+
+#: Seconds in a day: a linear drift's rate is per day.
+DAY_S = 86400.0
 
 
 @dataclass(frozen=True)
@@ -83,6 +88,25 @@ class ParameterRef:
         return f"{self.component}#{self.spec.name}"
 
 
+@dataclass(frozen=True)
+class ParameterDrift:
+    """A parameter that changes over time from ``onset_s`` (s since the data's first step), relative
+    to its constant value p₀: ``"linear"`` p(t) = p₀·(1 + r·(t − t₀)/day), ``"step"`` p(t) = p₀·(1 + j),
+    for t ≥ t₀; p₀ before. Its size, r [1/d] or j [1], is the estimated parameter ``size_key``."""
+
+    parameter_key: str
+    shape: str
+    onset_s: float
+    size_key: str
+
+    def factor(self, size: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+        """p(t)/p₀, ``ndarray[n_ensemble, n_steps]``, for sizes ``ndarray[n_ensemble]`` at the times
+        ``ndarray[n_steps]`` (s since the data's first step)."""
+        elapsed = np.asarray(time_s, dtype=float) - self.onset_s
+        change = np.maximum(elapsed, 0.0) / DAY_S if self.shape == "linear" else (elapsed >= 0.0).astype(float)
+        return 1.0 + np.asarray(size, dtype=float)[:, None] * change[None, :]
+
+
 @dataclass(kw_only=True)
 class AssembledModel:
     """The simulation model of one building model: its components by IRI, their connections, the
@@ -96,6 +120,13 @@ class AssembledModel:
     estimated_parameters: tuple[ParameterRef, ...]  # the columns of θ, in this order
     building_graph: str = ""
     notes: tuple[str, ...] = field(default_factory=tuple)
+    drifts: tuple[ParameterDrift, ...] = ()  # parameters that change over time, one drift per parameter
+
+    def drift_factors(self, theta: np.ndarray, time_s: np.ndarray) -> dict[str, np.ndarray]:
+        """Drifting parameter key → its factor p(t)/p₀ ``ndarray[n_ensemble, n_steps]`` for θ
+        ``ndarray[n_ensemble, n_estimated]`` at the times ``ndarray[n_steps]`` (s since the data's first step)."""
+        column = {ref.key: j for j, ref in enumerate(self.estimated_parameters)}
+        return {d.parameter_key: d.factor(np.asarray(theta)[:, column[d.size_key]], time_s) for d in self.drifts}
 
     def component_for_node(self, node_iri: str) -> ComponentInstance | None:
         for component in self.components.values():

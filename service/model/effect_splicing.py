@@ -4,7 +4,9 @@ Effects (``kind = "effect"`` signatures) are instantiated only where the buildin
 (``node gt:hasEffect [ gt:effectSignature <signature IRI> ]``, :func:`recorded_effects`) or where the
 caller asks (:class:`EffectRequest`). The effect enters the component that represents its
 ``splice.node`` on one port: on an output it takes the port's consumers (``port → value_in``,
-``value_out → consumers``), on an input its feed (``feed → value_in``, ``value_out → port``).
+``value_out → consumers``), on an input its feed (``feed → value_in``, ``value_out → port``); an
+input splice that leaves readings unchanged also gives the host's outputs reporting that input
+(a position feedback) the feed.
 Details: ``docs/assembly.md``.
 """
 
@@ -112,8 +114,15 @@ def splice_effect(
         feeding = [c for c in connections if (c.target, c.target_port) == (host.iri, port)]
         if not feeding:
             raise AssemblyError(f"effect {signature.id} splices input {port} of {host.iri}, which nothing feeds")
+        feed = feeding[0]
+        reports = ({p.name for p in host.model_class.outputs if p.reports == port}
+                   if signature.splice.readings_unchanged else set())
         for c in connections:
-            spliced.append(dataclasses.replace(c, target=effect.iri, target_port="value_in") if c in feeding else c)
+            if c in feeding:
+                c = dataclasses.replace(c, target=effect.iri, target_port="value_in")
+            elif c.source == host.iri and c.source_port in reports:
+                c = dataclasses.replace(c, source=feed.source, source_port=feed.source_port)
+            spliced.append(c)
         spliced.append(Connection(effect.iri, "value_out", host.iri, port))
     extra, missing = wire({**{effect.iri: effect}, **{k: v for k, v in instances.items() if k != effect.iri}})
     spliced.extend(c for c in extra if c.target == effect.iri and c.target_port != "value_in")

@@ -6,7 +6,8 @@ loop is broken by a one-step delay on the connection into a ``feedback`` port (e
 connection, with a note); ``substeps`` runs the components at ``step_s / substeps`` with the boundary
 series interpolated linearly. Memoryless components outside loops are evaluated over all steps at
 once. Boundary inputs replay their measured series (NaN gaps held at the last value); ``warmup_steps``
-lets dynamic components settle before the reported steps. Times in s. Details: ``docs/assembly.md``.
+lets dynamic components settle before the reported steps; ``factors`` make a parameter change over
+time (a factor per member and data step). Times in s. Details: ``docs/assembly.md``.
 """
 
 from __future__ import annotations
@@ -206,6 +207,8 @@ class Simulator:
             if missing:
                 self.unconnected[iri] = missing
         self.ahead, self.behind = self._memoryless_ends()
+        #: Series held between data steps (schedules: a zero-order hold); others are interpolated.
+        self.held = {iri for iri in model.boundary_inputs if model.components[iri].signature.steps}
 
     def _memoryless_ends(self) -> tuple[list[str], list[str]]:
         """(ahead, behind): the memoryless components evaluated over all internal steps before the
@@ -238,6 +241,23 @@ class Simulator:
                 params[ref.component][ref.name] = np.ascontiguousarray(theta[:, self.column[ref.key]])
         return params
 
+    def _scheduled(self, params: dict[str, dict[str, np.ndarray]], factors: Mapping[str, np.ndarray],
+                   n_steps: int, n_internal: int) -> dict[str, dict[str, np.ndarray]]:
+        """Component → parameter name → its value at every internal step, ``ndarray[n_internal,
+        n_ensemble]``: the constant value in ``params`` times its factor per data step, held over the
+        sub-steps."""
+        refs = {ref.key: ref for ref in (*self.model.mapped_parameters, *self.model.estimated_parameters)}
+        scheduled: dict[str, dict[str, np.ndarray]] = defaultdict(dict)
+        for key, factor in factors.items():
+            if key not in refs:
+                raise ValueError(f"a factor for {key}, which is no parameter of the model")
+            ref, factor = refs[key], np.asarray(factor, dtype=float)
+            value = params[ref.component][ref.name]
+            if factor.shape != (value.size, n_steps):
+                raise ValueError(f"the factor for {key} has shape {factor.shape}, expected {(value.size, n_steps)}")
+            scheduled[ref.component][ref.name] = np.repeat(factor.T, self.substeps, axis=0)[:n_internal] * value
+        return scheduled
+
     def run(
         self,
         boundary: Mapping[str, np.ndarray],
@@ -246,6 +266,7 @@ class Simulator:
         fixed: Mapping[str, float] | None = None,
         record: Iterable[tuple[str, str]] | None = None,
         warmup_steps: int = 0,
+        factors: Mapping[str, np.ndarray] | None = None,
     ) -> SimulationResult:
         """Simulate every ensemble member over the boundary series.
 
@@ -259,8 +280,14 @@ class Simulator:
         :param warmup_steps: the first ``warmup_steps`` data steps of ``boundary`` are a warm-up
             (:func:`warmup_index`): simulated, left out of the result (``n_steps − warmup_steps``
             steps).
+        :param factors: parameter key → ``ndarray[n_ensemble, n_steps]``, a factor on that
+            parameter's value (θ's, fixed or mapped) at each data step of ``boundary``, held over its
+            sub-steps: a parameter that changes over time. Components read it at every step; what a
+            component computes from its parameters once, in ``initial_state``, stays as it was at
+            the first step.
         :raises ValueError: a boundary input without a series, series of different lengths, θ of
-            the wrong shape, a warm-up as long as the series.
+            the wrong shape, a warm-up as long as the series, a factor of the wrong shape or for no
+            parameter of the model.
         """
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
         if theta.shape[1] != self.n_parameters:
@@ -280,6 +307,7 @@ class Simulator:
         substeps = self.substeps
         dt = self.step_s / substeps
         n_internal = (n_steps - 1) * substeps + 1
+        scheduled = self._scheduled(params, factors, n_steps, n_internal) if factors else {}
 
         series: dict[str, np.ndarray] = {}
         for iri, values in boundary.items():
@@ -291,7 +319,9 @@ class Simulator:
                 continue
             if bad.any():
                 filled = held_over_gaps(filled)
-            if substeps > 1:
+            if substeps > 1 and iri in self.held:
+                filled = np.repeat(filled, substeps)[:n_internal]
+            elif substeps > 1:
                 filled = np.interp(np.arange(n_internal) / substeps, np.arange(n_steps), filled)
             series[iri] = np.broadcast_to(filled[:, None], (filled.size, n_ens))
 
@@ -305,11 +335,16 @@ class Simulator:
                  for iri in self.order}
 
         def evaluate_at_once(iri: str, sources: Mapping, measured: np.ndarray | None, shape: tuple[int, int]):
+            p = params[iri]
+            if iri in scheduled:  # a parameter that changes: its value at every internal step, or at the kept data steps
+                at_data_steps = shape[0] != n_internal
+                p = p | {name: values[::substeps][warmup_steps:] if at_data_steps else values
+                         for name, values in scheduled[iri].items()}
             inputs = {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])}
             inputs.update({name: sources[source] for name, source, _ in links[iri]})
             if measured is not None:
                 inputs["measured_value"] = measured
-            outputs = self.instances[iri].step(params[iri], inputs, {}, dt)
+            outputs = self.instances[iri].step(p, inputs, {}, dt)
             return {(iri, port): np.broadcast_to(value, shape) for port, value in outputs.items()}
 
         # memoryless components fed by the boundary alone: every internal step in one call
@@ -332,7 +367,8 @@ class Simulator:
                          [(name, source) for name, source, late in links[iri] if not late],
                          [(name, source) for name, source, late in links[iri] if late],
                          series.get(iri) if iri in self.model.boundary_inputs else None, record_ports,
-                         {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])}))
+                         {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])},
+                         scheduled.get(iri)))
 
         current: dict[tuple[str, str], np.ndarray] = {}
         previous: dict[tuple[str, str], np.ndarray] = {}
@@ -346,7 +382,9 @@ class Simulator:
             k, offset = divmod(i, substeps)
             for key in feeding_steps:
                 current[key] = early[key][i]
-            for iri, instance, p, live, late, measured, keep, constant in plan:
+            for iri, instance, p, live, late, measured, keep, constant, varying in plan:
+                if varying:
+                    p = p | {name: values[i] for name, values in varying.items()}
                 inputs = dict(constant)
                 for name, source in live:
                     inputs[name] = current[source]

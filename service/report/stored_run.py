@@ -53,6 +53,7 @@ SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value 
     OPTIONAL { ?candidate gt:deltaBic ?delta_bic } OPTIONAL { ?candidate gt:testImprovement ?improvement } }
   OPTIONAL { GRAPH <https://w3id.org/graphtwin/resource/graph/signatures/library> {
     ?effect dcterms:identifier ?id ; rdfs:label ?label } }
+  OPTIONAL { GRAPH ?g { ?effect a gt:ParameterDrift ; dcterms:identifier ?id ; rdfs:label ?label } }
 } ORDER BY ?rank"""
 _LOOKALIKES_QUERY = _PREFIXES + """SELECT ?effect ?node ?separate WHERE { GRAPH ?g {
   ?candidate prov:wasGeneratedBy ?diagnosis ; gt:candidateEffect ?effect ; gt:onNode ?node ;

@@ -1,6 +1,6 @@
 """Benchmark of calibration on the case study: 1 day of 10-minute data (144 steps), synthetic truth.
 
-The problem is what ``graphtwin calibrate`` builds for the ventilation case study (14 estimated
+The problem is what ``graphtwin calibrate`` builds for the ventilation case study (16 estimated
 parameters, 5 targets, the simulator with its loop sub-steps) on a training day of synthetic data
 (``service.data.synthetic``, seed 3). Figures printed, each with its baseline measured in the same
 run and the ratio:

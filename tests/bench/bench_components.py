@@ -1,6 +1,6 @@
 """Component throughput: member-steps per second of every library model at ensemble 256, against the
 same model stepped with one member (the per-member loop's cost per member, measured in this run).
-The simulator's goal is ≥ 10 M component-steps/s at ensemble 256.
+The simulator's own figure, member-evaluations performed per second: ``tests/bench/bench_simulator.py``.
 
     python tests/bench/bench_components.py
 """

@@ -79,6 +79,14 @@ class Run:
         return "fault-free" if self.fault is None else f"{self.fault} ({self.size_label})"
 
 
+def cell_run(fault: str | None, size: str = "clear", seed: int = 0) -> Run:
+    """The run of one cell: fault-free (``fault`` None), or ``fault`` of the reference plant at its
+    ``size`` label, in the catalog group."""
+    if fault is None:
+        return Run("fault-free", None, "-", 0.0, seed)
+    return Run("catalog", fault, size, getattr(FAULTS[fault], size), seed)
+
+
 def admitted_pairs() -> set[tuple[str, str]]:
     """(effect id, node IRI) of every candidate the case study admits."""
     store = GraphStore.embedded(None)

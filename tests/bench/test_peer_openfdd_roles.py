@@ -5,7 +5,7 @@ extra: the suite does not install the peer.)"""
 import csv
 
 import pytest
-from bench_peer_openfdd import COLUMN_ROLES, RULE_COMPONENTS
+from bench_peer_openfdd import COLUMN_ROLES
 from shared_data import SZVAV
 
 

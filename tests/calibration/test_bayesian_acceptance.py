@@ -62,11 +62,14 @@ def fan_heat(tmp_path_factory):
     return CaseStudyTruth(tmp_path_factory.mktemp("fan_heat"), hidden_effect="FanMotorHeat")
 
 
-def test_point_calibration_recovers_the_identifiable_parameters_within_5_percent(exact, exact_point):
+def test_point_calibration_recovers_the_identifiable_parameters_within_5_percent_all_but_one(exact, exact_point):
     chosen = identifiable(exact_point, exact.problem)
     assert len(chosen) >= 4, [exact.short(exact.names[j]) for j in chosen]
     error = np.abs(exact_point.theta_ - exact.true_theta) / np.abs(exact.true_theta)
-    assert {exact.short(exact.names[j]): round(error[j], 4) for j in chosen if error[j] > 0.05} == {}
+    # "identifiable" is a 95 % interval within ±5 %: of eight, one outside is expected a third of the
+    # time (the standing water's τ_loss 5.6 % off at 2.1 standard errors, 2026-11-28), two rarely
+    outside = {exact.short(exact.names[j]): round(error[j], 4) for j in chosen if error[j] > 0.05}
+    assert len(outside) <= 1 and all(e <= 0.10 for e in outside.values()), outside
     # the verdicts are honest: every parameter called identified is within 3 standard errors of the truth
     for j, name in enumerate(exact.names):
         if exact_point.identifiability_[name].identified:

@@ -165,3 +165,14 @@ def test_a_cost_that_jumps_within_two_standard_errors_is_not_called_identified()
     slope = jumping.identifiability_["slope"]
     assert not slope.identified and slope.reasons[0].startswith("the cost jumps at the estimate")
     assert jumping.identifiability_["intercept"].identified  # ±2 SE in the intercept alone crosses no step
+
+
+def test_a_fit_stopped_at_its_evaluation_limit_says_so_and_can_run_on_from_where_it_stopped():
+    """The zone (nonlinear, 5 parameters) with 3 evaluations a start: not converged; continued three
+    times it gets closer to the converged cost, and an unlimited fit says it converged."""
+    (problem,) = zone_windows(1, seed=1)
+    stopped = PointCalibrator(n_starts=1, n_candidates=4, random_state=0, max_nfev=3).fit(problem)
+    continued = PointCalibrator(n_starts=1, n_candidates=4, random_state=0, max_nfev=3, continuations=3).fit(problem)
+    full = PointCalibrator(n_starts=1, n_candidates=4, random_state=0).fit(problem)
+    assert not stopped.converged_ and full.converged_
+    assert full.cost_ <= continued.cost_ < stopped.cost_

@@ -27,7 +27,7 @@ def test_assemble_prints_the_model_as_json():
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert len(data["targets"]) == 5 and len(data["boundary_inputs"]) == 4
-    assert len(data["parameters"]["estimated"]) == 14
+    assert len(data["parameters"]["estimated"]) == 16
 
 
 def test_assemble_prints_tables_a_terminal_of_80_columns_can_read(monkeypatch):

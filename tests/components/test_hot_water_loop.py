@@ -36,9 +36,13 @@ def test_closed_valve_gives_no_flow_and_no_heat(run_model, params_for):
     assert out["outlet_air_temperature"][0] == pytest.approx(5.0, abs=1e-12)
 
 
+#: Standing water that loses no heat: the coil's own balances, without the pipes' loss.
+NO_LOSS = {"standing_water_time_constant": 1e15}
+
+
 @pytest.mark.parametrize("air_flow", [1.5, 0.05])  # 0.05 kg/s: a fan at low speed, below the old 0.1 kg/s floor
 def test_steady_state_energy_balance_within_half_a_percent(run_model, params_for, air_flow):
-    out = run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(0.6, air_flow=air_flow), steps=200)[-1]
+    out = run_model(HotWaterLoop, params_for(HotWaterLoop, **NO_LOSS), _inputs(0.6, air_flow=air_flow), steps=200)[-1]
     air = air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K * (out["outlet_air_temperature"][0] - 5.0)
     water = out["water_mass_flow"][0] * WATER_SPECIFIC_HEAT_J_PER_KG_K * (
         out["inlet_water_temperature"][0] - out["outlet_water_temperature"][0])
@@ -57,7 +61,7 @@ def test_heat_rate_follows_a_valve_step_with_the_metal_time_constant(params_for)
     """Started in steady state at u = 0.3, the valve steps to 0.6: the water inlet is already at the
     supply temperature and the flows are constant, so Q_k = Q∞ + (Q₀ − Q∞)·(1 − a)^{k+1},
     a = 1 − e^{−Δt/τ_metal} (the lag is reported after its update)."""
-    params = params_for(HotWaterLoop)
+    params = params_for(HotWaterLoop, **NO_LOSS)
     model = HotWaterLoop()
     q0 = model.initial_state(params, _inputs(0.3), DT)["heat_rate"][0]
     q_end = model.initial_state(params, _inputs(0.6), DT)["heat_rate"][0]
@@ -71,13 +75,30 @@ def test_heat_rate_follows_a_valve_step_with_the_metal_time_constant(params_for)
 
 def test_coil_inlet_water_follows_the_supply_through_the_pipe_lag(params_for):
     """A supply step 65 → 75 °C: T_w,in,k = 75 − 10·(1 − b)^{k+1}, b = 1 − e^{−Δt/(τ_pipe·ṁ_ref/ṁ_w)}."""
-    params = params_for(HotWaterLoop)
+    params = params_for(HotWaterLoop, **NO_LOSS)
     state = HotWaterLoop().initial_state(params, _inputs(1.0), DT)
     outs = _steps(params, state, _inputs(1.0, supply=75.0), 8)
     flow = outs[0]["water_mass_flow"]
     b = 1.0 - math.exp(-DT / (90.0 * 0.5 / flow))
     np.testing.assert_allclose([o["inlet_water_temperature"] for o in outs],
                                [75.0 - 10.0 * (1.0 - b) ** (k + 1) for k in range(8)], rtol=1e-12)
+
+
+def test_standing_water_cools_to_its_surroundings_with_tau_loss_and_moves_again_with_the_flow(params_for):
+    """Valve shut after a steady state at u = 1: no flow, so the inlet and the outlet water approach
+    T_amb = 18 °C exactly as T_amb + (T₀ − T_amb)·e^{−t/τ_loss}, τ_loss = 4 h (hours, where the
+    transport time τ·ṁ_ref/ṁ_w would be infinite); opened again, hot water is back within minutes."""
+    params = params_for(HotWaterLoop)
+    model = HotWaterLoop()
+    state = model.initial_state(params, _inputs(1.0), DT)
+    start = {k: state[k][0] for k in ("inlet_water_temperature", "outlet_water_temperature")}
+    shut = _steps(params, state, _inputs(0.0), 240)  # four hours
+    decay = math.exp(-240 * DT / 14400.0)
+    for port, t0 in start.items():
+        assert shut[-1][port] == pytest.approx(18.0 + (t0 - 18.0) * decay, rel=1e-9)
+    assert start["inlet_water_temperature"] > 60.0 and shut[-1]["inlet_water_temperature"] < 40.0
+    opened = _steps(params, state, _inputs(1.0), 10)
+    assert opened[-1]["inlet_water_temperature"] > 60.0
 
 
 def test_the_reported_valve_position_is_the_clipped_command(run_model, params_for):

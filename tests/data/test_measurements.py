@@ -72,6 +72,21 @@ def test_long_gaps_stay_gaps_and_irregular_steps_are_resampled(tmp_path):
     assert data.step_s == 10.0 * 60 and data.n_steps == 4 and any("resampled" in w for w in data.warnings)
 
 
+def test_schedules_are_held_in_gaps_and_resampling_where_sensors_are_interpolated(tmp_path):
+    """A setpoint steps: a gap holds its last value (zero-order hold) and a resampled grid point takes
+    the nearer row's, where a temperature sensor's are interpolated."""
+    specs = {**SPECS, "https://example.org/x#valve": replace(SPECS["https://example.org/x#valve"], holds_values=True, steps=True)}
+    gap = "time,SAT,valve\n2025-01-01 00:00,50,0\n2025-01-01 00:01,,\n2025-01-01 00:02,,\n2025-01-01 00:03,53,60\n"
+    data = read_measurements(_write(tmp_path, gap), specs)
+    assert data.series["https://example.org/x#valve"] == pytest.approx([0.0, 0.0, 0.0, 0.6])
+    assert data.series["https://example.org/x#sat"] == pytest.approx((np.array([50, 51, 52, 53]) - 32) / 1.8)
+    # a stamp a minute off the 10-minute grid: the command takes the nearer row's value, the sensor ramps
+    irregular = "time,SAT,valve\n2025-01-01 00:00,50,0\n2025-01-01 00:10,50,0\n2025-01-01 00:21,53,60\n2025-01-01 00:30,54,60\n"
+    data = read_measurements(_write(tmp_path, irregular), specs)
+    assert data.series["https://example.org/x#valve"] == pytest.approx([0.0, 0.0, 0.6, 0.6])
+    assert data.series["https://example.org/x#sat"][2] == pytest.approx((50.0 + 3.0 * 10.0 / 11.0 - 32) / 1.8)
+
+
 def test_windows_outside_the_data_are_refused(tmp_path):
     data = read_measurements(_write(tmp_path, "time,SAT,valve\n2025-01-01 00:00,50,0\n2025-01-01 00:10,50,0\n2025-01-01 00:20,50,0\n"), SPECS)
     assert data.window("2025-01-01 00:10", None) == slice(1, 3)

@@ -117,12 +117,49 @@ def test_ranking_prefers_significant_then_larger_improvement_then_fewer_paramete
 
 def test_an_estimate_at_a_bound_of_its_prior_is_flagged_in_the_explanation():
     from service.components.component import Parameter
-    from service.diagnosis.candidates import _bound_note
+    from service.diagnosis.plausibility import bound_note as _bound_note
 
     offset = Parameter("offset", "K", 0.0, -5.0, 5.0, "sensor offset", null=0.0)
-    assert _bound_note(4.99999999961, offset) == " (at its upper bound 5)"
-    assert _bound_note(-5.0, offset) == " (at its lower bound -5)"
+    assert _bound_note(4.99999999961, offset) == " (at its upper bound 5 K)"
+    assert _bound_note(-5.0, offset) == " (at its lower bound -5 K)"
     assert _bound_note(4.9, offset) == ""
+    # relative to the prior's range: a 5 kW heat gain fitted at 4,990 W sits at its bound
+    gain = Parameter("heat_gain", "W", 0.0, -5000.0, 5000.0, "heat gain", null=0.0)
+    assert _bound_note(4990.0, gain) == " (at its upper bound 5000 W)" and _bound_note(4900.0, gain) == ""
+
+
+def test_an_effect_fitted_only_at_a_bound_other_than_its_null_or_without_a_heat_source_is_ranked_below():
+    """On the FLEXLAB unit: a heat gain at the heating coil at its 5 kW limit, or any heat gain into
+    the air at the chilled-water coil (no heat source there), is demoted with the reason; a gain at
+    the heating coil inside its range, or a loss at the cooling coil, is not. The ranking puts a
+    demoted effect that removes more held-out error below a plausible one."""
+    from service.diagnosis.plausibility import demotion_reasons
+    from service.graph.store import GraphStore
+    from service.model.assembly import assemble
+    from service.model.effect_splicing import EffectRequest
+    from service.resources import examples_dir
+
+    flexlab = "https://example.org/flexlab-x3a#"
+    store = GraphStore.embedded(None)
+    store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+
+    def reasons(node: str, heat_w: float) -> str:
+        model = assemble(store, "flexlab", extra_effects=[EffectRequest("ConstantHeatGain", flexlab + node)])
+        column = next(j for j, r in enumerate(model.estimated_parameters) if r.name == "heat_gain")
+        theta = np.array([r.spec.default for r in model.estimated_parameters])
+        theta[column] = heat_w
+        return demotion_reasons(model, flexlab + node, theta, [column])
+
+    assert reasons("heating_coil", 4999.0) == "heat_gain fits only at its upper bound 5000 W"
+    assert reasons("heating_coil", 3450.0) == "" and reasons("cooling_coil", -2000.0) == ""
+    assert reasons("cooling_coil", 3450.0) == ("heat_gain = 3450 W into the air at cooling_coil, which can only take "
+                                               "heat from the air (Chilled-water cooling coil driven by a valve command): no heat source there")
+    bounded = _evidence("ConstantHeatGain", 0.8, -900.0, 1)
+    bounded.demoted = "heat_gain fits only at its upper bound 5000 W"
+    offset = _evidence("SensorOffset", 0.6, -300.0, 1)
+    ranked = rank_evidence([bounded, offset])
+    assert [e.effect for e in ranked] == ["SensorOffset", "ConstantHeatGain"] and all(e.significant for e in ranked)
+    assert ranked[1].to_dict()["demoted"].startswith("heat_gain fits only")
 
 
 def test_an_estimate_the_data_leave_anywhere_in_its_prior_is_called_not_identified():

@@ -85,3 +85,40 @@ def test_a_residual_the_first_signal_explains_whole_gets_no_partial_correlation_
     ranked = residual_dependence(2.0 * first, {"first": first, "second": second}, max_lag_steps=0)
     assert ranked[0].signal == "first" and ranked[0].cumulative_r2 == pytest.approx(1.0)
     assert ranked[1].partial_correlation is None and "nan" not in ranked[1].describe()
+
+
+def test_a_residual_s_trend_in_time_is_its_slope_per_day_with_the_share_it_explains():
+    from service.diagnosis.residual_dependence import time_trend
+
+    rng = np.random.default_rng(1)
+    stamps = np.datetime64("2026-01-14T00:00") + np.arange(432) * np.timedelta64(10, "m")  # 3 days
+    days = np.arange(432) / 144.0
+    trend = time_trend(0.4 * days + rng.normal(0.0, 0.1, 432), stamps)
+    assert abs(trend.per_day - 0.4) < 0.02 and trend.r2 > 0.9  # var of the line 0.4²·0.75 against 0.01 of noise
+    assert trend.describe("°C").startswith("it drifts +0.4 °C a day")
+    flat = time_trend(rng.normal(0.0, 0.1, 432), stamps)
+    assert flat.r2 < 0.05 and flat.describe("°C").startswith("it has no trend in time")
+    assert time_trend(np.full(432, 1.0), stamps) is None
+
+
+def test_when_nothing_explains_a_failure_the_summary_describes_its_residual():
+    from service.diagnosis.report import DiagnosisReport, SensorVerdict
+    from service.diagnosis.residual_dependence import Dependence, TimeTrend
+
+    node = "urn:x#coil_outlet_water_temperature_sensor"
+    verdict = SensorVerdict(rmse=0.8, mae=0.6, cv_rmse_percent=3.0, nmbe_percent=1.0, r2=0.9, unit="degC",
+                            noise=0.1, fails=True)
+    regimes = [{"regime": 0, "rule": "fan speed ≤ 0.5", "share": 0.4, "rmse": {node: 0.3}},
+               {"regime": 1, "rule": "fan speed > 0.5", "share": 0.6, "rmse": {node: 1.1}}]
+    report = DiagnosisReport(
+        model_name="m", run_id="r", sensors={node: verdict}, localization=[], regimes=regimes,
+        regime_rule_accuracy=1.0, episodes={}, effects=[], not_applicable=[], step_s=600.0,
+        residual_dependence={node: [Dependence("measured outdoor_temperature", 3, 0.81, 400, 0.81, 0.66, 1)]},
+        residual_trend={node: TimeTrend(0.31, 0.64, 400)})
+    summary = report.summary
+    assert "no effect in the catalog and no drift of a parameter explains it" in summary
+    assert "At coil_outlet_water_temperature_sensor, the worst (RMSE 0.8 °C, 8.0× its noise)" in summary
+    assert "it drifts +0.31 °C a day (the trend explains 64 % of its variance)" in summary
+    assert "its error is largest where fan speed > 0.5 (RMSE 1.1 °C over 60 % of the test window)" in summary
+    assert "it follows measured outdoor_temperature 30 min earlier (ρ = +0.81" in summary
+    assert report.to_dict()["residual_trend"][node]["per_day"] == 0.31

@@ -242,7 +242,7 @@ def test_per_regime_metrics_of_both_strategies_are_computed_on_the_regime_steps(
     json.dumps(comparison.to_dict())
 
 
-@pytest.mark.slow  # a day of the case study, 14 parameters, stages to convergence: ~20 s on a free 2-core machine
+@pytest.mark.slow  # a day of the case study, 16 parameters, stages to convergence: ~20 s on a free 2-core machine
 def test_successive_calibration_recovers_the_identifiable_parameters_of_the_truth(case):
     md, truth, _, _, labels = case
     train = slice(0, 144)

@@ -27,7 +27,7 @@ def test_case_study_assembles_like_the_paper(case_store):
         "coil_outlet_water_temperature_sensor", "fan_power_meter", "valve_position_sensor"]
     mapped = {ref.name: ref.value for ref in model.mapped_parameters}
     assert mapped == {"nominal_air_flow": 1.5, "nominal_power": pytest.approx(1800.0), "valve_flow_coefficient": 2.5}
-    assert len(model.estimated_parameters) == 14
+    assert len(model.estimated_parameters) == 16
     loop = model.component_for_node(EX + "heating_valve")
     assert loop.signature.id == "HotWaterLoop" and EX + "check_valve" in loop.modeled_nodes
     wires = {(model.components[c.source].signature.id, c.source_port, model.components[c.target].node.rsplit("#")[-1], c.target_port)
@@ -304,3 +304,19 @@ def test_a_room_whose_class_the_model_makes_equivalent_to_a_building_space_stops
                      for c in model.connections} for name, model in models.items()}
     assert wiring["office"] == wiring["saref"]
     assert not any("declared by no loaded ontology" in n for n in models["office"].notes), models["office"].notes
+
+
+@pytest.mark.parametrize(("effect", "position_reads_command"), [("ValveLeakage", True), ("ValveStuck", False)])
+def test_a_seat_leak_changes_the_flow_while_the_position_feedback_reads_the_command(case_store, effect,
+                                                                                     position_reads_command):
+    """A leak passes water through the seat with the stem where it was commanded: the valve position
+    sensor reads the controller's command, the coil the leaking opening. A stuck stem's feedback reads
+    where it is stuck."""
+    model = assemble(case_store, "case", extra_effects=[EffectRequest(effect, EX + "heating_valve")])
+    sensor = model.component_for_node(EX + "valve_position_sensor").iri
+    feeds = {(model.components[c.source].signature.id, c.source_port)
+             for c in model.connections if c.target == sensor}
+    assert feeds == ({("PIController", "control_signal")} if position_reads_command else {("HotWaterLoop", "valve_position")})
+    loop = model.component_for_node(EX + "heating_valve").iri
+    assert {model.components[c.source].signature.id for c in model.connections
+            if c.target == loop and c.target_port == "valve_position"} == {effect}

@@ -1,5 +1,6 @@
 """The ensemble simulator: order, the one-step delay that breaks a loop, boundary series, sub-steps."""
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -118,6 +119,28 @@ def test_substeps_report_at_data_steps():
     fine = Simulator(model, 60.0, substeps=3).run({"urn:source": np.ones(4)}, np.array([[0.0]]))
     assert fine.outputs[("urn:sum", "y")].shape == (1, 4)
     assert fine.outputs[("urn:sum", "y")] == pytest.approx(coarse.outputs[("urn:sum", "y")])
+
+
+def test_between_data_steps_a_schedule_is_held_and_a_sensor_interpolated():
+    """A boundary device that holds values (a setpoint schedule) steps at its sample; a sensor's
+    series ramps between samples. Seen through a first-order lag, the hold starts responding only at
+    the step's sample, the interpolation a whole data step earlier."""
+    from service.components.effects.first_order_lag import FirstOrderLag
+
+    def lagged(holds: bool) -> np.ndarray:
+        source = _instance("urn:source", __import__("service.components.measuring_device", fromlist=["x"]).MeasuringDevice, True)
+        source = dataclasses.replace(source, signature=dataclasses.replace(source.signature, steps=holds))
+        model = AssembledModel(components={"urn:source": source, "urn:lag": _instance("urn:lag", FirstOrderLag)},
+                               connections=(Connection("urn:source", "measured_value", "urn:lag", "value_in"),),
+                               boundary_inputs=("urn:source",), targets=(), mapped_parameters=(),
+                               estimated_parameters=tuple(ParameterRef("urn:lag", p) for p in FirstOrderLag.parameters))
+        run = Simulator(model, 600.0, substeps=10).run({"urn:source": np.array([0.0, 0.0, 1.0, 1.0])}, np.array([[300.0]]))
+        return run.outputs[("urn:lag", "value_out")][0]
+
+    held, ramped = lagged(True), lagged(False)
+    # the hold: nothing before the sample at 1,200 s, then one 60-s sub-step of the lag at the sample
+    assert held[:2] == pytest.approx([0.0, 0.0]) and held[2] == pytest.approx(-np.expm1(-60.0 / 300.0))
+    assert ramped[1] == pytest.approx(0.0) and ramped[2] > held[2] + 0.3
 
 
 def _sensor_loop_model():

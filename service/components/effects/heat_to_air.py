@@ -25,6 +25,7 @@ class ConstantHeatGain(SplicedEffect):
         Port("air_mass_flow", "kg/s", "air mass flow through the component"),
     )
     outputs = (Port("value_out", "degC", "air temperature with the heat gain"),)
+    heat_rate_parameter = "heat_gain"
     parameters = (
         Parameter("heat_gain", "W", 0.0, -5000.0, 5000.0, "constant heat rate into the air stream, Q", null=0.0),
     )

@@ -11,9 +11,10 @@ class ValveLeakage(SplicedEffect):
     """u_eff = u + λ · (1 − u)   [1]
 
     u the commanded position (0 shut … 1 open), λ the leakage as a fraction of the fully open flow
-    coefficient: a linear valve with a parallel leak path of Kv_leak = λ·Kv. Null: λ = 0. It acts on
-    the command, so behind an actuator dead band u₀ a leak λ ≤ u₀ cannot be told from a tight valve
-    (``docs/components.md``).
+    coefficient: a linear valve with a parallel leak path of Kv_leak = λ·Kv. Null: λ = 0. The flow
+    opening changes, not the stem: the host's position feedback reads the command (the signature's
+    ``readings_unchanged``). Behind an actuator dead band u₀ a leak λ ≤ u₀ cannot be told from a
+    tight valve (``docs/components.md``).
     """
 
     inputs = (Port("value_in", "1", "commanded valve position"),)

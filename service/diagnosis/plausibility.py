@@ -1,0 +1,64 @@
+"""Whether a fitted effect is physically plausible where it sits: a size at the prior's limit, or heat
+where the graph's component has no source, demotes it in the ranking, and the ranking says why.
+
+An effect parameter at a bound that is not its null means the data ask for more than the prior
+allows (the effect's size is the limit, not an estimate). A heat rate into the air
+(:attr:`~service.components.component.ComponentModel.heat_rate_parameter`) at a component that can
+only take heat from the air (``air_heat_sign = −1``: a chilled-water coil) has no source there.
+The method: ``docs/diagnosis.md``, "Plausibility".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.graph.namespaces import local_name
+from service.graph.units import unit_label
+from service.model.assembled_model import AssembledModel
+
+__all__ = ["BOUND_SHARE", "at_bound", "bound_note", "demotion_reasons"]
+
+#: A fitted value this share of its prior range from a bound sits at the bound.
+BOUND_SHARE = 0.005
+
+
+def at_bound(value: float, spec) -> str | None:
+    """``"lower"`` or ``"upper"`` when ``value`` lies within :data:`BOUND_SHARE` of the prior range
+    of that bound of ``spec`` (a :class:`~service.components.component.Parameter`), else None."""
+    tolerance = BOUND_SHARE * (spec.upper - spec.lower)
+    return next((side for side, bound in (("lower", spec.lower), ("upper", spec.upper))
+                 if abs(value - bound) <= tolerance), None)
+
+
+def bound_note(value: float, spec) -> str:
+    """`` (at its lower/upper bound B)`` where :func:`at_bound`: the data push it further than the prior allows."""
+    side = at_bound(value, spec)
+    return f" (at its {side} bound {_quantity(getattr(spec, side), spec.unit)})" if side else ""
+
+
+def _quantity(value: float, unit: str) -> str:
+    """``5000 W``; a dimensionless value without a unit."""
+    return f"{value:g} {unit_label(unit)}".rstrip()
+
+
+def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect_columns: list[int]) -> str:
+    """Why the ranking puts the effect at ``node`` (its parameters at ``effect_columns`` of ``model``'s
+    estimated parameters, fitted to ``theta``) below the plausible ones; empty when nothing does."""
+    refs = model.estimated_parameters
+    reasons = []
+    for j in effect_columns:
+        spec = refs[j].spec
+        side = at_bound(theta[j], spec)
+        if side and not (spec.null is not None and abs(getattr(spec, side) - spec.null) <= BOUND_SHARE * (spec.upper - spec.lower)):
+            reasons.append(f"{refs[j].name} fits only at its {side} bound {_quantity(getattr(spec, side), spec.unit)}")
+    effects = {refs[j].component for j in effect_columns}
+    host = next((c for iri, c in model.components.items() if node in c.modeled_nodes and iri not in effects), None)
+    for j in effect_columns:
+        heat_parameter = model.components[refs[j].component].model_class.heat_rate_parameter
+        spec = refs[j].spec
+        if (host is not None and refs[j].name == heat_parameter and host.model_class.air_heat_sign < 0
+                and theta[j] > BOUND_SHARE * (spec.upper - spec.lower)):
+            reasons.append(f"{refs[j].name} = {_quantity(round(float(theta[j]), 0), spec.unit)} into the air at "
+                           f"{local_name(node)}, which can only take heat from the air ({host.signature.label}): "
+                           "no heat source there")
+    return "; ".join(reasons)
