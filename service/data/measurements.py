@@ -185,7 +185,7 @@ def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
 
 def _fill_short_gaps(values: np.ndarray, max_gap: int, *, hold: bool = False) -> tuple[np.ndarray, int]:
     """Interpolate NaN runs of at most ``max_gap`` steps between two measured values (``hold``: keep
-    the last value, a zero-order hold for schedules and commands); returns the filled array and the
+    the last value, a zero-order hold for schedules); returns the filled array and the
     number of longer runs left NaN."""
     missing = np.isnan(values)
     if not missing.any() or missing.all():
@@ -413,10 +413,10 @@ def read_measurements(
                 after = np.searchsorted(t_known, t_new, side="right")  # first known value after the point
                 before = np.clip(after - 1, 0, None)
                 on_row = (after > 0) & (t_known[before] == t_new)
+                later = np.clip(after, 0, t_known.size - 1)
                 between = (after > 0) & (after < t_known.size)
-                close = between & (t_known[np.clip(after, 0, t_known.size - 1)] - t_known[before] <= limit_s)
+                close = between & (t_known[later] - t_known[before] <= limit_s)
                 if hold:  # the nearer row's value: a schedule steps, and a jittered stamp is no step
-                    later = np.clip(after, 0, t_known.size - 1)
                     nearer = np.where(t_known[later] - t_new < t_new - t_known[before], later, before)
                     resampled[close] = y_known[nearer[close]]
                 else:

@@ -55,17 +55,16 @@ def noise_level(values: np.ndarray, unit: str, observed: np.ndarray) -> float:
     before the quartile gives c, and σ = c·√(mean y²) (one quartile of Δ²e would give the noise of the
     low readings).
     """
-    residual = np.asarray(values, dtype=float)
-    second = np.diff(residual, n=2)
+    second = np.diff(np.asarray(values, dtype=float), n=2)
+    scale = 1.0  # σ per unit of the quartile: 1, or √(mean y²) for noise in proportion to the reading
     if unit not in INSTRUMENT_ACCURACY_FLOOR:
         squares = np.asarray(observed, dtype=float) ** 2
         local = np.sqrt((squares[:-2] + 4.0 * squares[1:-1] + squares[2:]) / 6.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             second = np.where(local > 0.0, second / local, np.nan)
+        scale = float(np.sqrt(np.nanmean(squares)))
     second = second[np.isfinite(second)]
-    sigma = float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
-    if unit not in INSTRUMENT_ACCURACY_FLOOR:
-        sigma *= float(np.sqrt(np.nanmean(np.asarray(observed, dtype=float) ** 2)))
+    sigma = scale * float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
     floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.nanmean(np.abs(observed))))
     return max(sigma, floor)
 

@@ -49,7 +49,7 @@ def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect
     for j in effect_columns:
         spec = refs[j].spec
         side = at_bound(theta[j], spec)
-        if side and not (spec.null is not None and abs(getattr(spec, side) - spec.null) <= BOUND_SHARE * (spec.upper - spec.lower)):
+        if side and (spec.null is None or at_bound(spec.null, spec) != side):
             reasons.append(f"{refs[j].name} fits only at its {side} bound {_quantity(getattr(spec, side), spec.unit)}")
     effects = {refs[j].component for j in effect_columns}
     host = next((c for iri, c in model.components.items() if node in c.modeled_nodes and iri not in effects), None)
