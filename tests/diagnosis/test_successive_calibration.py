@@ -145,6 +145,17 @@ def _readable(key: str) -> str:
     return key.rsplit("/", 1)[-1].replace("#", ".")
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "since the water moves with a transport time of water content / flow (2026-11-28), the supply pipe's and the "
+    "air side's lags move 3-5 % of the low-flow misfit; the claim is to be re-derived (issue 32 closing note)"))
+def test_dynamics_below_the_sampling_barely_move_the_misfit(case):
+    md, _, train, _, labels = case
+    sensitivity = calibration_morris_by_regime(md.problem(train), labels[train], seed=0)
+    names = [_readable(n) for n in sensitivity.names]
+    lags = [i for i, n in enumerate(names) if n.endswith("_time_constant")]
+    assert sensitivity.normalised_mu_star()[:, lags].max() < 0.02
+
+
 def test_morris_puts_the_fan_curve_first_at_high_flow_and_the_coil_first_at_low_flow(case):
     md, _, train, regimes, labels = case
     problem = md.problem(train)
@@ -163,9 +174,6 @@ def test_morris_puts_the_fan_curve_first_at_high_flow_and_the_coil_first_at_low_
     coil = [names.index(n) for n in COIL_CONDUCTANCES]
     assert names[int(np.nanargmax(sensitivity.mu_star[low_flow]))] in COIL_CONDUCTANCES
     assert share[low_flow, coil].sum() > share[high_flow, coil].sum()
-    # Dynamics below the 10-minute sampling barely move the misfit anywhere.
-    lags = [i for i, n in enumerate(names) if n.endswith("_time_constant")]
-    assert share[:, lags].max() < 0.02
     # Per target: nothing but the fan curve moves the fan power; the fan curve moves no coil sensor.
     fan_power = calibration_morris_by_regime(problem, labels[train], targets=[EX + "fan_power_meter"], seed=0)
     assert fan_power.mu_star[:, [i for i in range(len(names)) if i not in fan]].max() == 0.0
