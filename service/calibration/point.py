@@ -11,6 +11,8 @@ coverage: ``docs/calibration.md``, *Point calibration and identifiability*.
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +22,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
+from service.calibration.lockstep import run_in_lockstep
 from service.calibration.problem import CalibrationProblem
 from service.errors import CalibrationError
 
@@ -54,6 +57,8 @@ class PointCalibrator(BaseEstimator):
         the point (one call per accepted step: right for a vectorised simulator, not for an FMU per
         member); None follows the problem's ``vectorised_simulate``.
     :param continuations: times a best start that stopped at ``max_nfev`` runs on from where it stopped.
+    :param check_jumps: run the jump check (one more simulate call); off where only θ, its standard
+        errors and the residuals are read.
     :param flat_ratio: singular value ratio below which a direction counts as flat.
     :param flat_loading: |component| of a flat direction's vector that implicates a parameter.
     :param correlation_threshold: |ρ| above which two parameters are reported as confounded.
@@ -84,6 +89,7 @@ class PointCalibrator(BaseEstimator):
         jump_threshold: float = 3.0,
         jacobian_with_residuals: bool | None = None,
         continuations: int = 0,
+        check_jumps: bool = True,
     ) -> None:
         self.n_starts = n_starts
         self.n_candidates = n_candidates
@@ -97,6 +103,7 @@ class PointCalibrator(BaseEstimator):
         self.jump_threshold = jump_threshold
         self.jacobian_with_residuals = jacobian_with_residuals
         self.continuations = continuations
+        self.check_jumps = check_jumps
 
     def fit(self, problem: CalibrationProblem, candidates: np.ndarray | None = None) -> PointCalibrator:
         """Estimate θ and its uncertainty; returns ``self``.
@@ -112,20 +119,28 @@ class PointCalibrator(BaseEstimator):
         self.n_simulate_calls_ = 0
         self.n_simulated_members_ = 0
         self._evaluations: dict[bytes, tuple] = {}
+        self._evaluations_lock = threading.Lock()
+
+        def simulate(theta: np.ndarray) -> dict[str, np.ndarray]:
+            return self._run(problem, theta)
+
         with threadpool_limits(limits=1):
             starts = self._screen_starts(problem, candidates)
-            fits = [self._local_fit(problem, start) for start in starts]
+            if len(starts) > 1 and problem.vectorised_simulate:  # the starts' calls share simulate calls
+                fits = run_in_lockstep(simulate, starts, lambda start, run: self._local_fit(problem, start, run))
+            else:
+                fits = [self._local_fit(problem, start, simulate) for start in starts]
             self.start_costs_ = np.array([fit.cost for fit in fits])
             best = fits[int(np.argmin(self.start_costs_))]
             for _ in range(self.continuations):  # least_squares' status 0: stopped at max_nfev
                 if best.status > 0:
                     break
-                best = self._local_fit(problem, best.x)
+                best = self._local_fit(problem, best.x, simulate)
             self.converged_ = bool(best.status > 0)
             self.theta_ = problem.from_unit(best.x)
             self.cost_ = float(best.cost)
-            outputs, _, jacobian = self._evaluate(problem, best.x, with_jacobian=True)
-        del self._evaluations
+            outputs, _, jacobian = self._evaluate(problem, best.x, simulate, with_jacobian=True)
+        del self._evaluations, self._evaluations_lock
         masks = problem.masks
         self.prediction_ = {key: outputs[key] for key in problem.target_keys}
         self.residuals_ = {
@@ -133,7 +148,8 @@ class PointCalibrator(BaseEstimator):
             for key in problem.target_keys
         }
         self._set_uncertainty(problem, jacobian, best.fun)
-        self._check_linearisation(problem, best.x, best.fun, jacobian)
+        if self.check_jumps:
+            self._check_linearisation(problem, best.x, best.fun, jacobian)
         return self
 
     def _run(self, problem: CalibrationProblem, theta: np.ndarray) -> dict[str, np.ndarray]:
@@ -162,25 +178,28 @@ class PointCalibrator(BaseEstimator):
                 + ", ".join(f"target {key} (first at step {step})" for key, step in first.items()))
         return candidates[finite[np.argsort(costs[finite], kind="stable")[: self.n_starts]]]
 
-    def _local_fit(self, problem: CalibrationProblem, start: np.ndarray):
+    def _local_fit(self, problem: CalibrationProblem, start: np.ndarray, simulate: Callable):
         fused = problem.vectorised_simulate if self.jacobian_with_residuals is None else self.jacobian_with_residuals
 
         def residuals(unit_theta: np.ndarray) -> np.ndarray:
-            return self._evaluate(problem, unit_theta, with_jacobian=fused)[1]
+            return self._evaluate(problem, unit_theta, simulate, with_jacobian=fused)[1]
 
         def jacobian(unit_theta: np.ndarray) -> np.ndarray:
-            return self._evaluate(problem, unit_theta, with_jacobian=True)[2]
+            return self._evaluate(problem, unit_theta, simulate, with_jacobian=True)[2]
 
         return least_squares(
             residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev
         )
 
-    def _evaluate(self, problem: CalibrationProblem, unit_theta: np.ndarray, *, with_jacobian: bool):
+    def _evaluate(self, problem: CalibrationProblem, unit_theta: np.ndarray, simulate: Callable, *,
+                  with_jacobian: bool):
         """(outputs {target: ndarray[n_steps]}, weighted residuals, Jacobian or None) at
-        ``unit_theta`` in one simulate call, remembered for the rest of the fit. The Jacobian is by
-        forward differences in the unit cube (backward at the upper bound)."""
+        ``unit_theta`` in one ``simulate`` call (physical θ rows → outputs), remembered for the rest
+        of the fit. The Jacobian is by forward differences in the unit cube (backward at the upper
+        bound)."""
         key = np.asarray(unit_theta, dtype=float).tobytes()
-        known = self._evaluations.get(key)
+        with self._evaluations_lock:
+            known = self._evaluations.get(key)
         if known is not None and (known[2] is not None or not with_jacobian):
             return known
         members = unit_theta[None, :]
@@ -189,13 +208,14 @@ class PointCalibrator(BaseEstimator):
             step = np.where(unit_theta + self.diff_step <= 1.0, self.diff_step, -self.diff_step)
             members = np.repeat(members, n_par + 1, axis=0)
             members[1:][np.diag_indices(n_par)] += step
-        outputs = self._run(problem, problem.from_unit(members))
+        outputs = simulate(problem.from_unit(members))
         residuals = problem.weighted_residuals(outputs)
         jacobian = ((residuals[1:] - residuals[0]) / step[:, None]).T if with_jacobian else None
         known = ({target: values[0] for target, values in outputs.items()}, residuals[0], jacobian)
-        if len(self._evaluations) >= 64:  # the starts' last points are what fit() asks for again
-            self._evaluations.pop(next(iter(self._evaluations)))
-        self._evaluations[key] = known
+        with self._evaluations_lock:
+            if len(self._evaluations) >= 64:  # the starts' last points are what fit() asks for again
+                self._evaluations.pop(next(iter(self._evaluations)))
+            self._evaluations[key] = known
         return known
 
     def _set_uncertainty(self, problem: CalibrationProblem, jacobian: np.ndarray, residuals: np.ndarray) -> None:

@@ -148,9 +148,13 @@ def split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]
     return fit, (slice(train.start, test.stop) if test.start > train.stop else test), evaluation
 
 
-def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice, theta: np.ndarray) -> dict[str, np.ndarray]:
+def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice,
+                        *thetas: np.ndarray) -> list[dict[str, np.ndarray]]:
+    """Each θ's prediction of the evaluation window (target → ndarray[n_steps]), run from
+    ``run_window``'s start, all in one simulate call."""
     offset = evaluation.start - run_window.start
-    return {k: v[0][offset:] for k, v in md.simulate_targets(run_window, theta[None, :]).items()}
+    outputs = md.simulate_targets(run_window, np.vstack(thetas))
+    return [{k: v[member][offset:] for k, v in outputs.items()} for member in range(len(thetas))]
 
 
 def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None,
@@ -172,6 +176,13 @@ def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_t
     if active_only:
         cost[np.any(ensemble[:, effect_columns] == theta0[effect_columns], axis=1)] = np.inf
     return ensemble[int(np.argmin(cost))]
+
+
+def _refit_calibrator(seed: int, max_nfev: int, *, n_starts: int = 1, n_candidates: int = 8) -> PointCalibrator:
+    """The least squares of the comparison's refits: continued once where it stops at ``max_nfev``,
+    without the jump check (a refit is read for θ, its standard errors and residuals)."""
+    return PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev,
+                           continuations=1, check_jumps=False)
 
 
 class _Fit(NamedTuple):
@@ -228,8 +239,8 @@ def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effec
     # with its host as trained the effect could only overshoot: the best start with it switched on
     # competes too, and the host's parameters get a wider screen
     active = _probe_start(probe, at_null, own, active_only=True)[None, :] if host else None
-    calibrator = PointCalibrator(n_starts=2 if host else 1, n_candidates=32 if host else 8, random_state=job.seed,
-                                 max_nfev=job.refit_max_nfev, continuations=1).fit(problem, candidates=active)
+    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev, n_starts=2 if host else 1,
+                                   n_candidates=32 if host else 8).fit(problem, candidates=active)
     theta = null.copy()
     theta[free] = calibrator.theta_
     standard_errors = np.zeros_like(theta)
@@ -299,9 +310,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
 
     problem = md.problem(job.fit_windows, default=_probe_start(problem, theta0, effect_columns, theta_train),
                          target_scales=job.target_scales)
-    calibrator = PointCalibrator(n_starts=1, n_candidates=8, random_state=job.seed, max_nfev=job.refit_max_nfev,
-                                 continuations=1)
-    calibrator.fit(problem)
+    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev).fit(problem)
     fits = {"present throughout": _Fit(calibrator.theta_, calibrator.standard_errors_,
                                        _mean_squares(calibrator.residuals_, job.target_scales),
                                        _sample_fractions(calibrator.residuals_),
@@ -329,7 +338,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     base_mean_squares = min((job.base_mean_squares, null_mean_squares),
                             key=lambda before: bic_against(job.base_mean_squares, before, job.sample_fractions, 0))
     observed = md.observed(job.evaluation)
-    null = _predict_evaluation(md, job.run_window, job.evaluation, theta_null)
+    null, after = _predict_evaluation(md, job.run_window, job.evaluation, theta_null, theta)
     before = min((job.base_evaluation_prediction, null),
                  key=lambda prediction: weighted_test_error(observed, prediction, job.target_scales))
     effect, effect_iri, label = job.identity()
@@ -342,7 +351,6 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         estimates={refs[j].name: float(theta[j]) for j in effect_columns},
         standard_errors={refs[j].name: float(standard_errors[j]) for j in effect_columns}, **described,
     )
-    after = _predict_evaluation(md, job.run_window, job.evaluation, theta)
     before_error = weighted_test_error(observed, before, job.target_scales)
     evidence.evaluation_step_errors = step_errors(observed, after, job.target_scales)
     after_error = float(evidence.evaluation_step_errors.sum())
@@ -420,14 +428,13 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
     fit_windows, run_window, evaluation = split_windows(train_slice, test_slice)
     scales = dict(md.problem(train_slice).target_scales)
     say("refitting the base model on the comparison's fit windows")
-    refit = PointCalibrator(n_starts=1, n_candidates=8, random_state=seed, max_nfev=refit_max_nfev, continuations=1).fit(
-        md.problem(fit_windows, default=base.theta, target_scales=scales))
+    refit = _refit_calibrator(seed, refit_max_nfev).fit(md.problem(fit_windows, default=base.theta, target_scales=scales))
     fractions = _sample_fractions(refit.residuals_)
     base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, refit.theta_)}
     # judged against the better base prediction of the evaluation half: refitted on the fit windows,
     # or as trained (a fault in the test window's first half can bend the refit)
     observed = md.observed(evaluation)
-    base_evaluation = min((_predict_evaluation(md, run_window, evaluation, theta) for theta in (refit.theta_, base.theta)),
+    base_evaluation = min(_predict_evaluation(md, run_window, evaluation, refit.theta_, base.theta),
                           key=lambda prediction: weighted_test_error(observed, prediction, scales))
     train_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, base.theta)}
     unidentified = frozenset(e.key for e in base.record.estimates if not e.identified)

@@ -108,18 +108,44 @@ def test_standard_errors_carry_each_targets_own_noise():
 def test_jacobian_and_start_screening_are_one_simulate_call_each():
     calls: list[int] = []
     problem, *_ = linear_problem(calls, default=np.array([0.0, 0.0]))
-    separate = PointCalibrator(n_starts=2, n_candidates=16, random_state=0, jacobian_with_residuals=False).fit(problem)
+    separate = PointCalibrator(n_starts=1, n_candidates=16, random_state=0, jacobian_with_residuals=False).fit(problem)
     assert calls[0] == 17  # 16 Latin-hypercube candidates + the default, one call
     assert set(calls[1:-1]) == {1, 3}  # residuals (1 member) and Jacobians (p + 1 = 3 members)
     assert calls[-1] == 4  # the jump check: ±2 SE in each identified parameter, one call
     assert separate.n_simulate_calls_ == len(calls) and separate.n_simulated_members_ == sum(calls)
     n_separate = len(calls)
     calls.clear()
-    fused = PointCalibrator(n_starts=2, n_candidates=16, random_state=0).fit(problem)
+    fused = PointCalibrator(n_starts=1, n_candidates=16, random_state=0).fit(problem)
     assert calls[0] == 17 and set(calls[1:-1]) == {3}  # every trial point simulated with its Jacobian
     assert len(calls) < n_separate  # an accepted step is one call, and the final point is not simulated again
     np.testing.assert_array_equal(fused.theta_, separate.theta_)
     np.testing.assert_array_equal(fused.covariance_, separate.covariance_)
+
+
+def test_starts_fitted_in_lockstep_share_simulate_calls_and_find_what_they_find_alone():
+    """Three starts of a nonlinear fit, each start's calls gathered into one simulate call while
+    all run (3 × (p + 1) members), end where each ends alone (a problem that is not vectorised
+    fits its starts one after another), in fewer calls."""
+    t = np.linspace(0.0, 5.0, 60)
+    observed = 2.0 * np.exp(-0.7 * t) + 0.5 + 0.01 * np.random.default_rng(3).normal(size=t.size)
+
+    def problem(calls, vectorised):
+        def simulate(theta):
+            calls.append(theta.shape[0])
+            return {"y": theta[:, :1] * np.exp(-theta[:, 1:2] * t) + theta[:, 2:3]}
+        return CalibrationProblem(
+            parameter_names=("amplitude", "rate", "floor"), lower=np.array([0.0, 0.01, -2.0]),
+            upper=np.array([5.0, 5.0, 2.0]), simulate=simulate, observed={"y": observed},
+            target_scales={"y": 0.01}, vectorised_simulate=vectorised)
+
+    lockstep_calls, alone_calls = [], []
+    settings = dict(n_starts=3, n_candidates=12, random_state=2, jacobian_with_residuals=True)
+    together = PointCalibrator(**settings).fit(problem(lockstep_calls, True))
+    alone = PointCalibrator(**settings).fit(problem(alone_calls, False))
+    np.testing.assert_allclose(together.start_costs_, alone.start_costs_, rtol=1e-9)
+    np.testing.assert_allclose(together.theta_, alone.theta_, rtol=1e-9)
+    assert max(lockstep_calls[1:-1]) == 3 * 4 and max(alone_calls[1:-1]) == 4
+    assert len(lockstep_calls) < 0.6 * len(alone_calls)
 
 
 def test_a_seeded_fit_is_reproducible():

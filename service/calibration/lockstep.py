@@ -1,0 +1,84 @@
+"""Concurrent fits whose simulate calls share one ensemble run.
+
+A run of the vectorised simulator costs the same for 1 member as for ~60 (the per-step overhead of
+its time loop dominates, ``docs/benchmarks.md``), so local fits from several starts, each in its own
+thread, gain by waiting for each other: :class:`LockstepRuns` holds each call until every fit still
+running has asked, then simulates all their members in one call and hands each its rows. A batch is
+ordered by fit, so results do not depend on which thread asked first.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+import numpy as np
+
+__all__ = ["LockstepRuns", "run_in_lockstep"]
+
+Result = TypeVar("Result")
+Outputs = dict[str, np.ndarray]
+
+
+class LockstepRuns:
+    """``run(theta)`` of ``n_fits`` concurrent fits gathered into calls of ``simulate`` (θ rows →
+    target → ``ndarray[n_rows, n_steps]``); a fit calls :meth:`leave` when it ends."""
+
+    def __init__(self, simulate: Callable[[np.ndarray], Outputs], n_fits: int):
+        self._simulate = simulate
+        self._active = n_fits
+        self._waiting: dict[int, dict] = {}
+        self._condition = threading.Condition()
+
+    def caller(self, fit: int) -> Callable[[np.ndarray], Outputs]:
+        """The ``run`` of fit number ``fit``: blocks until its batch is simulated."""
+        def run(theta: np.ndarray) -> Outputs:
+            slot = {"theta": np.atleast_2d(theta)}
+            with self._condition:
+                self._waiting[fit] = slot
+                self._flush_when_all_wait()
+                while "outputs" not in slot and "error" not in slot:
+                    self._condition.wait()
+            if "error" in slot:
+                raise slot["error"]
+            return slot["outputs"]
+        return run
+
+    def leave(self) -> None:
+        """One fit ended: the others no longer wait for it."""
+        with self._condition:
+            self._active -= 1
+            self._flush_when_all_wait()
+
+    def _flush_when_all_wait(self) -> None:
+        if not self._waiting or len(self._waiting) < self._active:
+            return
+        batch = [self._waiting.pop(fit) for fit in sorted(self._waiting)]
+        sizes = np.cumsum([0] + [slot["theta"].shape[0] for slot in batch])
+        try:
+            outputs = self._simulate(np.vstack([slot["theta"] for slot in batch]))
+        except BaseException as exc:  # every fit of the batch sees the failure
+            for slot in batch:
+                slot["error"] = exc
+        else:
+            for slot, start, stop in zip(batch, sizes[:-1], sizes[1:]):
+                slot["outputs"] = {key: values[start:stop] for key, values in outputs.items()}
+        self._condition.notify_all()
+
+
+def run_in_lockstep(simulate: Callable[[np.ndarray], Outputs], starts: Sequence,
+                    fit: Callable[[object, Callable[[np.ndarray], Outputs]], Result]) -> list[Result]:
+    """``fit(start, run)`` for every start, concurrently, their ``run`` calls sharing simulate calls;
+    the results in the order of ``starts`` (the first failure raised)."""
+    lockstep = LockstepRuns(simulate, len(starts))
+
+    def one(index: int) -> Result:
+        try:
+            return fit(starts[index], lockstep.caller(index))
+        finally:
+            lockstep.leave()
+
+    with ThreadPoolExecutor(max_workers=len(starts)) as pool:
+        return list(pool.map(one, range(len(starts))))
