@@ -174,5 +174,5 @@ def first_order_lag_factor(dt_s: float, time_constant_s: np.ndarray) -> np.ndarr
     τ = 0 gives 1 (no lag).
     """
     tau = np.asarray(time_constant_s, dtype=float)
-    with np.errstate(divide="ignore"):
-        return np.where(tau > 0.0, -np.expm1(-dt_s / np.where(tau > 0.0, tau, 1.0)), 1.0)
+    lagging = tau > 0.0
+    return np.where(lagging, -np.expm1(-dt_s / np.where(lagging, tau, 1.0)), 1.0)

@@ -23,8 +23,12 @@ FILM_EXPONENT = 0.8
 #: Reference air flow at which the coils' air-side film conductance hA_a is quoted, kg/s (the
 #: nominal flow of a 1.7 m³/s air handling unit; a convention, so priors read alike across coils).
 REFERENCE_AIR_MASS_FLOW = 2.0
+# 0-d arrays: numpy's ufuncs take them faster than Python floats
+_FILM_EXPONENT, _ONE = np.array(FILM_EXPONENT), np.array(1.0)
 #: Floor of flow ratios and capacity rates: a stagnant side conducts (almost) nothing.
-_TINY = 1e-9
+_TINY = np.array(1e-9)
+#: Cap of the capacity ratio C_r (:func:`counterflow_effectiveness`).
+_RATIO_CAP = np.array(1.0 - 1e-7)
 
 
 def counterflow_effectiveness(ntu: np.ndarray, capacity_ratio: np.ndarray) -> np.ndarray:
@@ -35,9 +39,9 @@ def counterflow_effectiveness(ntu: np.ndarray, capacity_ratio: np.ndarray) -> np
     C_r is capped at 1 − 10⁻⁷, where the formula meets the balanced limit NTU/(1 + NTU) within
     10⁻⁶; C_r = 0 gives 1 − e^{−NTU}.
     """
-    ratio = np.minimum(capacity_ratio, 1.0 - 1e-7)
-    decay = np.exp(-ntu * (1.0 - ratio))
-    return (1.0 - decay) / (1.0 - ratio * decay)
+    ratio = np.minimum(capacity_ratio, _RATIO_CAP)
+    decay = np.exp(ntu * (ratio - _ONE))  # e^{−NTU(1−C_r)}
+    return (_ONE - decay) / (_ONE - ratio * decay)
 
 
 def series_film_ua_w_per_k(
@@ -49,8 +53,8 @@ def series_film_ua_w_per_k(
     ``*_conductance_w_per_k`` are hA at the reference flows, ``*_flow_ratio`` = ṁ/ṁ_ref [1]; a
     ratio of 0 (no flow on that side) gives UA ≈ 0.
     """
-    water = water_conductance_w_per_k * np.maximum(water_flow_ratio, _TINY) ** FILM_EXPONENT
-    air = air_conductance_w_per_k * np.maximum(air_flow_ratio, _TINY) ** FILM_EXPONENT
+    water = water_conductance_w_per_k * np.maximum(water_flow_ratio, _TINY) ** _FILM_EXPONENT
+    air = air_conductance_w_per_k * np.maximum(air_flow_ratio, _TINY) ** _FILM_EXPONENT
     return water * air / (water + air)
 
 

@@ -28,7 +28,10 @@ from service.components.heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat
 
 __all__ = ["HotWaterLoop", "loop_water_flow_m3_per_h", "REFERENCE_WATER_MASS_FLOW"]
 
-_TINY = 1e-9
+# 0-d arrays: numpy's ufuncs take them faster than Python floats
+_TINY, _ZERO, _ONE = np.array(1e-9), np.array(0.0), np.array(1.0)
+#: Opening [m³/h] at or below which the valve passes no water.
+_SHUT_OPENING = np.array(1e-6)
 #: Reference water flow of the water-side film conductance hA_w, kg/s (hA_a: REFERENCE_AIR_MASS_FLOW).
 REFERENCE_WATER_MASS_FLOW = 0.5
 
@@ -37,9 +40,14 @@ def loop_water_flow_m3_per_h(position: np.ndarray, *, kv_valve: np.ndarray, kv_l
                              pressure_bar: np.ndarray) -> np.ndarray:
     """V̇ [m³/h] of the series loop for valve position ``position`` (0–1, linear characteristic): the
     valve's K_v·u [m³/h] in series with ``kv_loop`` [m³/h] under ``pressure_bar`` [bar]."""
-    opening = np.minimum(np.maximum(position, 0.0), 1.0) * kv_valve
-    resistance = 1.0 / np.maximum(opening, _TINY) ** 2 + 1.0 / kv_loop**2
-    return np.sqrt(np.maximum(pressure_bar, 0.0) / resistance) * (opening > 1e-6)
+    return _series_flow_m3_per_h(np.minimum(np.maximum(position, 0.0), 1.0) * kv_valve, kv_loop, pressure_bar)
+
+
+def _series_flow_m3_per_h(opening: np.ndarray, kv_loop: np.ndarray, pressure_bar: np.ndarray) -> np.ndarray:
+    """V̇ [m³/h] through an opening K_v·u ≥ 0 [m³/h] in series with ``kv_loop`` [m³/h] under
+    ``pressure_bar`` [bar] (module docstring); 0 at an opening of 10⁻⁶ m³/h or less."""
+    resistance = _ONE / np.maximum(opening, _TINY) ** 2 + _ONE / kv_loop**2
+    return np.sqrt(np.maximum(pressure_bar, _ZERO) / resistance) * (opening > _SHUT_OPENING)
 
 
 class HotWaterLoop(ComponentModel):
@@ -82,41 +90,50 @@ class HotWaterLoop(ComponentModel):
     settling_s = 86400.0
 
     def _water_flow(self, params, position):
-        flow_m3_per_h = loop_water_flow_m3_per_h(
-            position, kv_valve=params["valve_flow_coefficient"], kv_loop=params["loop_flow_coefficient"],
-            pressure_bar=params["loop_pressure_difference"],
-        )
+        """ṁ_w [kg/s] at valve position ``position``, already clipped to 0–1."""
+        flow_m3_per_h = _series_flow_m3_per_h(position * params["valve_flow_coefficient"],
+                                              params["loop_flow_coefficient"], params["loop_pressure_difference"])
         return WATER_DENSITY_KG_PER_M3 * flow_m3_per_h / 3600.0
 
-    def _static_heat(self, params, air_in, air_flow, water_flow, water_in):
-        """Q_static [W], C_w and C_a [W/K], the capacity rates floored at 10⁻⁹ W/K (module docstring)."""
+    def _static_heat(self, params, air_in, air_flow, water_flow, water_flow_ratio, water_in):
+        """Q_static [W], C_w and C_a [W/K], the capacity rates floored at 10⁻⁹ W/K (module docstring);
+        ``water_flow_ratio`` = ṁ_w/ṁ_ref."""
         ua = series_film_ua_w_per_k(
-            water_conductance_w_per_k=params["water_side_conductance"],
-            water_flow_ratio=water_flow / REFERENCE_WATER_MASS_FLOW,
+            water_conductance_w_per_k=params["water_side_conductance"], water_flow_ratio=water_flow_ratio,
             air_conductance_w_per_k=params["air_side_conductance"], air_flow_ratio=air_flow / REFERENCE_AIR_MASS_FLOW,
         )
         c_water = np.maximum(water_flow * WATER_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
         c_air = np.maximum(air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
         heat = coil_heat_rate_w(ua, water_capacity_w_per_k=c_water, air_capacity_w_per_k=c_air,
-                                water_inlet_temperature=water_in, air_inlet_temperature=air_in) * (water_flow > 0.0)
+                                water_inlet_temperature=water_in, air_inlet_temperature=air_in) * (water_flow > _ZERO)
         return heat, c_water, c_air
 
-    def _moved_water(self, params, temperature, entering, water_flow, transport_time_s, dt_s):
-        """Water temperature [°C] after ``dt_s`` of dT/dt = (ṁ_w/ṁ_ref)·(T_entering − T)/τ + (T_amb − T)/τ_loss
+    @staticmethod
+    def _standing_loss(params):
+        """1/τ_loss [1/s] and T_amb/τ_loss [K/s] of water standing in the pipes."""
+        loss = _ONE / params["standing_water_time_constant"]
+        return loss, loss * params["pipe_surroundings_temperature"]
+
+    @staticmethod
+    def _moved_water(temperature, entering, transport, loss, loss_drive, dt_s):
+        """Water temperature [°C] after ``dt_s`` of dT/dt = k·(T_entering − T) + (T_amb − T)/τ_loss, with
+        ``transport`` k = (ṁ_w/ṁ_ref)/τ [1/s] and ``loss``, ``loss_drive`` from :meth:`_standing_loss`
         (module docstring), exact for inputs held over the step; ``temperature`` None: its steady state."""
-        transport = (water_flow / REFERENCE_WATER_MASS_FLOW) / transport_time_s
-        loss = 1.0 / params["standing_water_time_constant"]
         rate = transport + loss
-        steady = (transport * entering + loss * params["pipe_surroundings_temperature"]) / rate
-        return steady if temperature is None else steady + (temperature - steady) * np.exp(-rate * dt_s)
+        steady = (transport * entering + loss_drive) / rate
+        return steady if temperature is None else steady + (temperature - steady) * np.exp(rate * -dt_s)
 
     def initial_state(self, params, inputs, dt_s):
         shape = np.broadcast(inputs["supply_water_temperature"], params["air_side_conductance"]).shape
         supply = np.broadcast_to(inputs["supply_water_temperature"], shape).astype(float)
         air_in = np.broadcast_to(inputs["inlet_air_temperature"], shape).astype(float)
         water_flow = self._water_flow(params, np.clip(inputs["valve_position"], 0.0, 1.0))
-        water_in = self._moved_water(params, None, supply, water_flow, params["supply_pipe_time_constant"], dt_s)
-        heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0), water_flow, water_in)
+        water_ratio = water_flow / REFERENCE_WATER_MASS_FLOW
+        loss, loss_drive = self._standing_loss(params)
+        water_in = self._moved_water(None, supply, water_ratio / params["supply_pipe_time_constant"], loss, loss_drive,
+                                     dt_s)
+        heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0),
+                                                 water_flow, water_ratio, water_in)
         low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
         water_target = np.clip(water_in - heat / c_water, low, high)
         return {
@@ -126,36 +143,40 @@ class HotWaterLoop(ComponentModel):
             "inlet_water_temperature": water_in + 0.0 * supply,
             "heat_rate": heat + 0.0 * supply,
             "outlet_air_temperature": np.clip(air_in + heat / c_air, low, high),
-            "outlet_water_temperature": self._moved_water(params, None, water_target, water_flow,
-                                                          params["water_side_time_constant"], dt_s) + 0.0 * supply,
+            "outlet_water_temperature": self._moved_water(
+                None, water_target, water_ratio / params["water_side_time_constant"], loss, loss_drive, dt_s,
+            ) + 0.0 * supply,
         }
 
     def step(self, params, inputs, state, dt_s):
+        # each state is replaced by a new array, never changed in place: the outputs share them
         air_in = inputs["inlet_air_temperature"]
-        air_flow = np.maximum(inputs["air_mass_flow"], 0.0)
-        position = np.minimum(np.maximum(inputs["valve_position"], 0.0), 1.0)
+        air_flow = np.maximum(inputs["air_mass_flow"], _ZERO)
+        position = np.minimum(np.maximum(inputs["valve_position"], _ZERO), _ONE)
         water_flow = self._water_flow(params, position)
-        water_in = state["inlet_water_temperature"]
-        water_in[...] = self._moved_water(params, water_in, inputs["supply_water_temperature"], water_flow,
-                                          params["supply_pipe_time_constant"], dt_s)
-        heat_static, c_water, c_air = self._static_heat(params, air_in, air_flow, water_flow, water_in)
+        water_ratio = water_flow / REFERENCE_WATER_MASS_FLOW
+        loss, loss_drive = self._standing_loss(params)
+        water_in = state["inlet_water_temperature"] = self._moved_water(
+            state["inlet_water_temperature"], inputs["supply_water_temperature"],
+            water_ratio / params["supply_pipe_time_constant"], loss, loss_drive, dt_s)
+        heat_static, c_water, c_air = self._static_heat(params, air_in, air_flow, water_flow, water_ratio, water_in)
         heat = state["heat_rate"]
-        heat += state["_metal_factor"] * (heat_static - heat)
+        heat = state["heat_rate"] = heat + state["_metal_factor"] * (heat_static - heat)
         low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
         # T_a,out = T_a,in + Q/(ṁ_a·c_p), the same C_a as the heat rate's (energy balance); clipped to
         # [T_a,in, T_w,in]: stagnant air (fan off) in a warm coil approaches the water temperature
         air_target = np.minimum(np.maximum(air_in + heat / c_air, low), high)
         water_target = np.minimum(np.maximum(water_in - heat / c_water, low), high)
         air_out = state["outlet_air_temperature"]
-        air_out += state["_air_factor"] * (air_target - air_out)
-        water_out = state["outlet_water_temperature"]
-        water_out[...] = self._moved_water(params, water_out, water_target, water_flow,
-                                           params["water_side_time_constant"], dt_s)
+        air_out = state["outlet_air_temperature"] = air_out + state["_air_factor"] * (air_target - air_out)
+        water_out = state["outlet_water_temperature"] = self._moved_water(
+            state["outlet_water_temperature"], water_target, water_ratio / params["water_side_time_constant"],
+            loss, loss_drive, dt_s)
         return {
-            "outlet_air_temperature": air_out.copy(),
-            "inlet_water_temperature": water_in.copy(),
-            "outlet_water_temperature": water_out.copy(),
+            "outlet_air_temperature": air_out,
+            "inlet_water_temperature": water_in,
+            "outlet_water_temperature": water_out,
             "water_mass_flow": water_flow,
-            "heat_rate": heat.copy(),
+            "heat_rate": heat,
             "valve_position": position,
         }

@@ -9,6 +9,9 @@ from service.components.component import ComponentModel, Parameter, Port
 
 __all__ = ["PIController", "DirectActingPIController"]
 
+# 0-d arrays: numpy's ufuncs take them faster than Python floats
+_ZERO, _ONE = np.array(0.0), np.array(1.0)
+
 
 class PIController(ComponentModel):
     """u = clip(v, 0, 1),  v = K_p · (e + I / T_i),  e = a · (w − y)   [1]
@@ -38,17 +41,18 @@ class PIController(ComponentModel):
     #: Six hours: the integral a warm-up builds on a repeated first day is not the plant's, and the
     #: loop carries the difference for hours (``docs/components.md``, *Start memory*).
     start_memory_s = 6 * 3600.0
-    #: a in the error e = a · (w − y): +1 reverse acting, −1 direct acting
+    #: a in the error e = a · (w − y): +1 reverse acting, −1 direct acting (no other value)
     action = 1.0
 
     def initial_state(self, params, inputs, dt_s):
         return {"integral": np.zeros_like(np.asarray(inputs["setpoint"], dtype=float) + params["proportional_gain"])}
 
     def step(self, params, inputs, state, dt_s):
-        error = self.action * (inputs["setpoint"] - inputs["measured_value"])
+        setpoint, measured = inputs["setpoint"], inputs["measured_value"]
+        error = setpoint - measured if self.action > 0.0 else measured - setpoint  # a·(w − y), a = ±1
         gain, integral_time, integral = params["proportional_gain"], params["integral_time"], state["integral"]
         unlimited = gain * (error + integral / integral_time)
-        signal = np.minimum(np.maximum(unlimited, 0.0), 1.0)
+        signal = np.minimum(np.maximum(unlimited, _ZERO), _ONE)
         tracking_s = np.maximum(integral_time, dt_s)
         integral += dt_s * (error + (signal - unlimited) * integral_time / (gain * tracking_s))
         return {"control_signal": signal}

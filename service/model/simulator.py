@@ -356,23 +356,26 @@ class Simulator:
         # the rest, step by step (a loop's state or a delayed input); what they need of `early`
         # is one row per step, and what `behind` needs of them is recorded at the data steps
         needed_late = {src for iri in self.behind for _, src, _ in links[iri] if src[0] not in ahead}
-        feeding_steps = sorted({src for iri in stepped for _, src, _ in links[iri] if src[0] in ahead})
+        feeding_steps = [(src, early[src]) for src in sorted({src for iri in stepped for _, src, _ in links[iri]
+                                                              if src[0] in ahead})]
         buffers: dict[tuple[str, str], np.ndarray] = {}
         plan = []
         for iri in stepped:
             record_ports = sorted(set(kept[iri]) | {port for source, port in needed_late if source == iri})
             for port in record_ports:
                 buffers[(iri, port)] = np.empty((n_kept, n_ens))
-            plan.append((iri, self.instances[iri], params[iri],
+            # the parameter and input dicts are made once and refilled at every step
+            plan.append((iri, self.instances[iri], dict(params[iri]),
+                         {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])},
                          [(name, source) for name, source, late in links[iri] if not late],
                          [(name, source) for name, source, late in links[iri] if late],
-                         series.get(iri) if iri in self.model.boundary_inputs else None, record_ports,
-                         {name: np.full(n_ens, np.nan) for name in self.unconnected.get(iri, [])},
-                         scheduled.get(iri)))
+                         series.get(iri) if iri in self.model.boundary_inputs else None,
+                         [(port, buffers[(iri, port)]) for port in record_ports],
+                         list(scheduled.get(iri, {}).items())))
 
         current: dict[tuple[str, str], np.ndarray] = {}
         previous: dict[tuple[str, str], np.ndarray] = {}
-        for (iri, _port) in {src for entry in plan for _, src in entry[4]}:
+        for (iri, _port) in {src for entry in plan for _, src in entry[5]}:
             start = series.get(iri)
             previous[(iri, _port)] = start[0].copy() if start is not None else np.zeros(n_ens)
         states: dict[str, dict] = {}
@@ -380,12 +383,11 @@ class Simulator:
         def advance(i: int, record: bool) -> None:
             """Step every stepped component from internal step ``i`` (initialising it at 0)."""
             k, offset = divmod(i, substeps)
-            for key in feeding_steps:
-                current[key] = early[key][i]
-            for iri, instance, p, live, late, measured, keep, constant, varying in plan:
-                if varying:
-                    p = p | {name: values[i] for name, values in varying.items()}
-                inputs = dict(constant)
+            for key, values in feeding_steps:
+                current[key] = values[i]
+            for iri, instance, p, inputs, live, late, measured, keep, varying in plan:
+                for name, values in varying:
+                    p[name] = values[i]
                 for name, source in live:
                     inputs[name] = current[source]
                 for name, source in late:
@@ -398,8 +400,8 @@ class Simulator:
                 for port, value in outputs.items():
                     current[(iri, port)] = value
                 if record and offset == 0 and k >= warmup_steps:
-                    for port in keep:
-                        buffers[(iri, port)][k - warmup_steps] = outputs[port]
+                    for port, buffer in keep:
+                        buffer[k - warmup_steps] = outputs[port]
 
         # a delayed input off a feedback port and without a measured seed starts from its source's
         # output of a first pass over step 0 (docs/assembly.md, *Order and feedback*)
