@@ -1,10 +1,12 @@
-"""Concurrent fits whose simulate calls share one ensemble run.
+"""Simulate calls shared: by concurrent fits, and by steps that know their members ahead.
 
 A run of the vectorised simulator costs the same for 1 member as for ~60 (the per-step overhead of
 its time loop dominates, ``docs/benchmarks.md``), so local fits from several starts, each in its own
 thread, gain by waiting for each other: :class:`LockstepRuns` holds each call until every fit still
 running has asked, then simulates all their members in one call and hands each its rows. A batch is
-ordered by fit, so results do not depend on which thread asked first.
+ordered by fit, so results do not depend on which thread asked first. Steps run one after the other
+whose members are known before the first (a score test's differences, a probe's grid, a fit's
+screened starts) share one call through :func:`with_prefetched_rows`.
 """
 
 from __future__ import annotations
@@ -12,11 +14,14 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from typing import TypeVar
 
 import numpy as np
 
-__all__ = ["LockstepRuns", "run_in_lockstep"]
+from service.calibration.problem import CalibrationProblem
+
+__all__ = ["LockstepRuns", "run_in_lockstep", "with_prefetched_rows"]
 
 Result = TypeVar("Result")
 Outputs = dict[str, np.ndarray]
@@ -82,3 +87,33 @@ def run_in_lockstep(simulate: Callable[[np.ndarray], Outputs], starts: Sequence,
 
     with ThreadPoolExecutor(max_workers=len(starts)) as pool:
         return list(pool.map(one, range(len(starts))))
+
+
+#: Rows of θ match a prefetched row when they agree to this share of each parameter's prior width (a
+#: start's trip through the unit cube, or a clip into the bounds, moves it by a few ulps).
+PREFETCH_MATCH = 1e-12
+
+
+def with_prefetched_rows(problem: CalibrationProblem, *ensembles: np.ndarray) -> CalibrationProblem:
+    """``problem`` whose simulate serves the rows of ``ensembles`` (θ ``ndarray[n, n_parameters]``,
+    physical units), all simulated now in one call; a later call simulates, in one call, only the
+    rows it lacks (and keeps none of them)."""
+    width = problem.upper - problem.lower
+
+    def key(row: np.ndarray) -> bytes:
+        return np.round((row - problem.lower) / width / PREFETCH_MATCH).tobytes()
+
+    theta = np.vstack(ensembles)
+    outputs = problem.simulate(theta)
+    kept = {key(row): {target: values[i] for target, values in outputs.items()} for i, row in enumerate(theta)}
+
+    def simulate(theta: np.ndarray) -> dict[str, np.ndarray]:
+        rows = [kept.get(key(row)) for row in theta]
+        missing = [i for i, row in enumerate(rows) if row is None]
+        if missing:
+            fresh = problem.simulate(theta[missing])
+            for j, i in enumerate(missing):
+                rows[i] = {target: values[j] for target, values in fresh.items()}
+        return {target: np.stack([row[target] for row in rows]) for target in rows[0]}
+
+    return replace(problem, simulate=simulate)

@@ -53,6 +53,8 @@ class PointCalibrator(BaseEstimator):
     :param random_state: seed (int), ``numpy.random.RandomState`` or None.
     :param max_nfev: residual evaluations per start (each Jacobian is one more simulate call).
     :param diff_step: forward-difference step in the unit-scaled parameters.
+    :param tolerance: ``least_squares``' ``ftol`` and ``xtol``: a local fit stops when a step changes
+        the cost, or the unit-scaled θ, by less than this share.
     :param jacobian_with_residuals: simulate each trial point's Jacobian members in the same call as
         the point (one call per accepted step: right for a vectorised simulator, not for an FMU per
         member); None follows the problem's ``vectorised_simulate``.
@@ -82,6 +84,7 @@ class PointCalibrator(BaseEstimator):
         random_state: int | np.random.RandomState | None = None,
         max_nfev: int = 60,
         diff_step: float = 1e-4,
+        tolerance: float = 1e-8,
         flat_ratio: float = 1e-3,
         flat_loading: float = 0.2,
         correlation_threshold: float = 0.95,
@@ -96,6 +99,7 @@ class PointCalibrator(BaseEstimator):
         self.random_state = random_state
         self.max_nfev = max_nfev
         self.diff_step = diff_step
+        self.tolerance = tolerance
         self.flat_ratio = flat_ratio
         self.flat_loading = flat_loading
         self.correlation_threshold = correlation_threshold
@@ -157,12 +161,16 @@ class PointCalibrator(BaseEstimator):
         self.n_simulated_members_ += theta.shape[0]
         return problem.run(theta)
 
+    def screen_points(self, problem: CalibrationProblem) -> np.ndarray:
+        """The seeded Latin hypercube :meth:`fit` screens for its starts, ``ndarray[n_candidates,
+        n_parameters]`` in [0, 1] (the same points at every call for an int ``random_state``)."""
+        rng = check_random_state(self.random_state)
+        return qmc.LatinHypercube(d=problem.n_parameters, seed=rng.randint(2**31 - 1)).random(self.n_candidates)
+
     def _screen_starts(self, problem: CalibrationProblem, extra: np.ndarray | None = None) -> np.ndarray:
         """The ``n_starts`` lowest-cost points of a seeded Latin hypercube (+ the default and
         ``extra``), in [0, 1]."""
-        rng = check_random_state(self.random_state)
-        sampler = qmc.LatinHypercube(d=problem.n_parameters, seed=rng.randint(2**31 - 1))
-        candidates = sampler.random(self.n_candidates)
+        candidates = self.screen_points(problem)
         if extra is not None:
             candidates = np.vstack([problem.to_unit(np.atleast_2d(extra)), candidates])
         if problem.default is not None:
@@ -188,7 +196,8 @@ class PointCalibrator(BaseEstimator):
             return self._evaluate(problem, unit_theta, simulate, with_jacobian=True)[2]
 
         return least_squares(
-            residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev
+            residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev,
+            ftol=self.tolerance, xtol=self.tolerance,
         )
 
     def _evaluate(self, problem: CalibrationProblem, unit_theta: np.ndarray, simulate: Callable, *,

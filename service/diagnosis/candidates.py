@@ -18,6 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from service.calibration.lockstep import with_prefetched_rows
 from service.calibration.model_data import ModelData
 from service.calibration.point import PointCalibrator
 from service.calibration.problem import CalibrationProblem
@@ -37,6 +38,7 @@ from service.diagnosis.ranking import (
     effective_sample_fraction,
     per_target_rss,
     rank_evidence,
+    score_ensemble,
     score_test,
     step_errors,
     target_rows,
@@ -157,13 +159,11 @@ def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice,
     return [{k: v[member][offset:] for k, v in outputs.items()} for member in range(len(thetas))]
 
 
-def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None,
-                 *, active_only: bool = False) -> np.ndarray:
-    """The refit's start: a base estimate with the effect parameters at the best point of a grid
-    (the null and ``PROBE_SHARES`` of each prior width; all combinations, one simulate call), laid on
-    ``theta0`` (the base refitted on the fit windows) and on ``theta_train`` (the base as trained).
-    ``active_only`` leaves out the grid points where any effect parameter sits at its value in
-    ``theta0`` (its null): the best start with the effect switched on."""
+def _probe_ensemble(problem, theta0: np.ndarray, effect_columns: list[int],
+                    theta_train: np.ndarray | None = None) -> np.ndarray:
+    """The members :func:`_probe_start` simulates: a grid of the effect parameters (the null and
+    ``PROBE_SHARES`` of each prior width; all combinations) laid on ``theta0`` (the base refitted on
+    the fit windows) and on ``theta_train`` (the base as trained)."""
     axes = []
     for column in effect_columns:
         lo, hi = problem.lower[column], problem.upper[column]
@@ -172,17 +172,32 @@ def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_t
     starts = [theta0] if theta_train is None else [theta0, theta_train]
     ensemble = np.concatenate([np.repeat(start[None, :], len(grid), axis=0) for start in starts])
     ensemble[:, effect_columns] = np.tile(grid, (len(starts), 1))
+    return ensemble
+
+
+def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None,
+                 *, active_only: bool = False) -> np.ndarray:
+    """The refit's start: the best point of :func:`_probe_ensemble` (one simulate call). ``active_only``
+    leaves out the grid points where any effect parameter sits at its value in ``theta0`` (its
+    null): the best start with the effect switched on."""
+    ensemble = _probe_ensemble(problem, theta0, effect_columns, theta_train)
     cost = np.sum(problem.weighted_residuals(problem.run(ensemble)) ** 2, axis=1)
     if active_only:
         cost[np.any(ensemble[:, effect_columns] == theta0[effect_columns], axis=1)] = np.inf
     return ensemble[int(np.argmin(cost))]
 
 
+#: A refit stops at a step that changes its cost, or its unit-scaled θ, by less than this share: the
+#: comparison reads ΔBIC = n_eff·ln(RSS ratio) + penalty, which moved by < 0.1 against 10⁻⁸ on the demo.
+REFIT_TOLERANCE = 1e-5
+
+
 def _refit_calibrator(seed: int, max_nfev: int, *, n_starts: int = 1, n_candidates: int = 8) -> PointCalibrator:
-    """The least squares of the comparison's refits: continued once where it stops at ``max_nfev``,
-    without the jump check (a refit is read for θ, its standard errors and residuals)."""
+    """The least squares of the comparison's refits: stopped at :data:`REFIT_TOLERANCE`, continued
+    once where it stops at ``max_nfev``, without the jump check (a refit is read for θ, its standard
+    errors and residuals)."""
     return PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev,
-                           continuations=1, check_jumps=False)
+                           tolerance=REFIT_TOLERANCE, continuations=1, check_jumps=False)
 
 
 class _Fit(NamedTuple):
@@ -233,14 +248,17 @@ def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effec
         )
 
     at_null = null[free]
-    probe = effect_problem(at_null)
     own = list(range(len(effect_columns)))
-    problem = effect_problem(_probe_start(probe, at_null, own))
+    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev, n_starts=2 if host else 1,
+                                   n_candidates=32 if host else 8)
+    probe = effect_problem(at_null)  # the probe's grid and the fit's screen in one simulate call
+    probe = with_prefetched_rows(probe, _probe_ensemble(probe, at_null, own),
+                                 probe.from_unit(calibrator.screen_points(probe)))
+    problem = replace(probe, default=_probe_start(probe, at_null, own))
     # with its host as trained the effect could only overshoot: the best start with it switched on
     # competes too, and the host's parameters get a wider screen
     active = _probe_start(probe, at_null, own, active_only=True)[None, :] if host else None
-    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev, n_starts=2 if host else 1,
-                                   n_candidates=32 if host else 8).fit(problem, candidates=active)
+    calibrator.fit(problem, candidates=active)
     theta = null.copy()
     theta[free] = calibrator.theta_
     standard_errors = np.zeros_like(theta)
@@ -300,6 +318,11 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
                                             job.target_scales))
         md = ModelData(job.model, job.data, job.substeps, job.compared)
     problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
+    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev)
+    # the score test's members, the probe's grid and the refit's screen in one simulate call
+    problem = with_prefetched_rows(problem, score_ensemble(problem, theta0),
+                                   _probe_ensemble(problem, theta0, effect_columns, theta_train),
+                                   problem.from_unit(calibrator.screen_points(problem)))
     keys = problem.target_keys
     score = score_test(problem, theta0, effect_columns, sample_fractions=[job.sample_fractions[k] for k in keys])
     counts = np.array([problem.masks[k].sum() for k in keys], dtype=float)
@@ -308,9 +331,8 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         return delta_bic([before[k] * c for k, c in zip(keys, counts)], [after[k] * c for k, c in zip(keys, counts)],
                          counts * np.array([fractions[k] for k in keys]), freed)
 
-    problem = md.problem(job.fit_windows, default=_probe_start(problem, theta0, effect_columns, theta_train),
-                         target_scales=job.target_scales)
-    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev).fit(problem)
+    problem = replace(problem, default=_probe_start(problem, theta0, effect_columns, theta_train))
+    calibrator.fit(problem)
     fits = {"present throughout": _Fit(calibrator.theta_, calibrator.standard_errors_,
                                        _mean_squares(calibrator.residuals_, job.target_scales),
                                        _sample_fractions(calibrator.residuals_),
@@ -333,12 +355,20 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     # base model's, not the effect's: "before" is the better of the base refit and that
     theta_null = theta.copy()
     theta_null[effect_columns] = _null(refs, effect_columns)
-    null_residuals = problem.weighted_residuals(problem.run(theta_null[None, :]))[0]
+    runs = md.simulate_targets(job.run_window, np.vstack([theta_null, theta]))
+    fit = job.fit_windows[0]
+    if len(job.fit_windows) == 1 and fit.start == job.run_window.start and fit.stop <= job.run_window.stop:
+        # a run is the same over its window's first part as over that part alone (tested)
+        null_outputs = {key: values[:1, :fit.stop - fit.start] for key, values in runs.items()}
+    else:
+        null_outputs = problem.run(theta_null[None, :])
+    null_residuals = problem.weighted_residuals(null_outputs)[0]
     null_mean_squares = dict(zip(keys, per_target_rss(null_residuals, target_rows(problem)) / counts))
     base_mean_squares = min((job.base_mean_squares, null_mean_squares),
                             key=lambda before: bic_against(job.base_mean_squares, before, job.sample_fractions, 0))
     observed = md.observed(job.evaluation)
-    null, after = _predict_evaluation(md, job.run_window, job.evaluation, theta_null, theta)
+    offset = job.evaluation.start - job.run_window.start
+    null, after = ({key: values[member][offset:] for key, values in runs.items()} for member in (0, 1))
     before = min((job.base_evaluation_prediction, null),
                  key=lambda prediction: weighted_test_error(observed, prediction, job.target_scales))
     effect, effect_iri, label = job.identity()

@@ -27,7 +27,7 @@ from service.model.assembled_model import AssembledModel
 MIN_TEST_IMPROVEMENT = 0.2
 
 __all__ = [
-    "MIN_TEST_IMPROVEMENT", "ScoreTest", "EffectEvidence", "score_test", "effective_sample_fraction", "rank_evidence", "delta_bic",
+    "MIN_TEST_IMPROVEMENT", "ScoreTest", "EffectEvidence", "score_test", "score_ensemble", "effective_sample_fraction", "rank_evidence", "delta_bic",
     "weighted_test_error",
 ]
 
@@ -120,6 +120,21 @@ def bounded_null_p_value(statistic: float, interior: int, on_bound: int) -> floa
     return float(sum(w * chi2.sf(statistic, interior + j) for j, w in enumerate(weights) if interior + j > 0))
 
 
+def score_ensemble(problem: CalibrationProblem, theta_null: np.ndarray, relative_step: float = 1e-3) -> np.ndarray:
+    """The members :func:`score_test` simulates: ``theta_null`` and, per parameter, ``theta_null``
+    moved by ``relative_step`` of its prior width (backwards at the upper bound)."""
+    theta_null = np.asarray(theta_null, dtype=float)
+    n_par = theta_null.size
+    ensemble = np.repeat(theta_null[None, :], n_par + 1, axis=0)
+    ensemble[np.arange(1, n_par + 1), np.arange(n_par)] += _score_steps(problem, theta_null, relative_step)
+    return ensemble
+
+
+def _score_steps(problem: CalibrationProblem, theta_null: np.ndarray, relative_step: float) -> np.ndarray:
+    steps = relative_step * (problem.upper - problem.lower)
+    return np.where(np.asarray(theta_null, dtype=float) + steps > problem.upper, -steps, steps)
+
+
 def score_test(
     problem: CalibrationProblem,
     theta_null: np.ndarray,
@@ -141,13 +156,9 @@ def score_test(
         (taken backwards when the parameter sits at its upper bound).
     :param sample_fractions: fₖ per target in the problem's order; from each target's base residuals when None.
     """
-    theta_null = np.asarray(theta_null, dtype=float)
-    n_par = theta_null.size
-    width = problem.upper - problem.lower
-    steps = relative_step * width
-    steps = np.where(theta_null + steps > problem.upper, -steps, steps)
-    ensemble = np.repeat(theta_null[None, :], n_par + 1, axis=0)
-    ensemble[np.arange(1, n_par + 1), np.arange(n_par)] += steps
+    ensemble = score_ensemble(problem, theta_null, relative_step)
+    n_par = ensemble.shape[1]
+    steps = _score_steps(problem, theta_null, relative_step)
     residuals = problem.weighted_residuals(problem.run(ensemble))
     base_residual = residuals[0]
     jacobian = (residuals[1:] - base_residual).T / steps
@@ -181,7 +192,7 @@ def score_test(
     acting = [c for c in effect if np.any(jacobian[:, c] != 0.0)]
     on_bound = sum(bool(np.isclose(theta_null[c], problem.lower[c]) or np.isclose(theta_null[c], problem.upper[c]))
                    for c in acting)
-    moved = [c for c, d in zip(effect, step) if abs(d) > 1e-9 * width[c] and c in acting]
+    moved = [c for c, d in zip(effect, step) if abs(d) > 1e-9 * (problem.upper[c] - problem.lower[c]) and c in acting]
     return ScoreTest(
         statistic=statistic, loglik_gain=statistic / 2.0,
         p_value=bounded_null_p_value(statistic, len(acting) - on_bound, on_bound),

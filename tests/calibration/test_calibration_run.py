@@ -429,3 +429,16 @@ def test_test_inputs_beyond_what_the_training_saw_are_a_note(synthetic):
     [note] = [n for n in inputs_beyond_training(md, train, test) if n not in before]
     assert note.startswith(f"the test window drives supply_air_flow_meter beyond what the training window saw (3 steps, "
                            f"up to {1.5 * seen:.3g} m³/s where training reached {seen:.3g})"), note
+
+
+def test_a_run_over_a_windows_first_part_is_that_part_run_alone(point_run):
+    """The comparison reads a fit window's prediction off the run of the window it starts
+    (``service.diagnosis.candidates``): the same warm-up, inputs and states give the same values."""
+    md = point_run.model_data
+    whole = slice(point_run.train.start, point_run.test.stop)
+    part = slice(whole.start, whole.start + (whole.stop - whole.start) // 2)
+    lower, upper = md.bounds()
+    theta = lower + np.random.default_rng(5).random((3, lower.size)) * (upper - lower)
+    long, short = md.simulate_targets(whole, theta), md.simulate_targets(part, theta)
+    for node, values in short.items():
+        np.testing.assert_array_equal(long[node][:, :values.shape[1]], values, err_msg=node)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from synthetic_zone import NAMES, TRUTH, zone_windows
 
+from service.calibration.lockstep import with_prefetched_rows
 from service.calibration.point import PointCalibrator
 from service.calibration.problem import CalibrationProblem
 
@@ -202,3 +203,28 @@ def test_a_fit_stopped_at_its_evaluation_limit_says_so_and_can_run_on_from_where
     full = PointCalibrator(n_starts=1, n_candidates=4, random_state=0).fit(problem)
     assert not stopped.converged_ and full.converged_
     assert full.cost_ <= continued.cost_ < stopped.cost_
+
+
+def test_prefetched_rows_are_served_without_a_call_and_only_missing_rows_are_simulated():
+    """Two ensembles simulated ahead in one call; a later call asking for some of their rows (one
+    moved by a few ulps, as a trip through the unit cube moves it) and one new row simulates the new
+    row alone, and every row is what a direct call gives."""
+    t = np.linspace(0.0, 1.0, 20)
+    calls = []
+
+    def simulate(theta):
+        calls.append(theta.shape[0])
+        return {"y": theta[:, :1] * t + theta[:, 1:2] * t**2}
+
+    problem = CalibrationProblem(parameter_names=("a", "b"), lower=np.array([0.0, -1.0]), upper=np.array([3.0, 1.0]),
+                                 simulate=simulate, observed={"y": t})
+    first, second = np.array([[1.0, 0.2], [2.0, -0.5]]), np.array([[0.3, 0.9]])
+    ahead = with_prefetched_rows(problem, first, second)
+    assert calls == [3]
+    trip = problem.from_unit(problem.to_unit(second))
+    asked = np.vstack([trip, first[1:], [[2.5, 0.1]]])
+    served = ahead.run(asked)
+    assert calls == [3, 1]
+    np.testing.assert_allclose(served["y"], simulate(asked)["y"], rtol=1e-12)
+    ahead.run(first)
+    assert calls == [3, 1, 3]
