@@ -53,8 +53,6 @@ class PointCalibrator(BaseEstimator):
     :param random_state: seed (int), ``numpy.random.RandomState`` or None.
     :param max_nfev: residual evaluations per start (each Jacobian is one more simulate call).
     :param diff_step: forward-difference step in the unit-scaled parameters.
-    :param tolerance: ``least_squares``' ``ftol`` and ``xtol``: a local fit stops when a step changes
-        the cost, or the unit-scaled θ, by less than this share.
     :param jacobian_with_residuals: simulate each trial point's Jacobian members in the same call as
         the point (one call per accepted step: right for a vectorised simulator, not for an FMU per
         member); None follows the problem's ``vectorised_simulate``.
@@ -84,7 +82,6 @@ class PointCalibrator(BaseEstimator):
         random_state: int | np.random.RandomState | None = None,
         max_nfev: int = 60,
         diff_step: float = 1e-4,
-        tolerance: float = 1e-8,
         flat_ratio: float = 1e-3,
         flat_loading: float = 0.2,
         correlation_threshold: float = 0.95,
@@ -99,7 +96,6 @@ class PointCalibrator(BaseEstimator):
         self.random_state = random_state
         self.max_nfev = max_nfev
         self.diff_step = diff_step
-        self.tolerance = tolerance
         self.flat_ratio = flat_ratio
         self.flat_loading = flat_loading
         self.correlation_threshold = correlation_threshold
@@ -196,8 +192,7 @@ class PointCalibrator(BaseEstimator):
             return self._evaluate(problem, unit_theta, simulate, with_jacobian=True)[2]
 
         return least_squares(
-            residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev,
-            ftol=self.tolerance, xtol=self.tolerance,
+            residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev
         )
 
     def _evaluate(self, problem: CalibrationProblem, unit_theta: np.ndarray, simulate: Callable, *,

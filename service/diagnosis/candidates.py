@@ -187,17 +187,11 @@ def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_t
     return ensemble[int(np.argmin(cost))]
 
 
-#: A refit stops at a step that changes its cost, or its unit-scaled θ, by less than this share: the
-#: comparison reads ΔBIC = n_eff·ln(RSS ratio) + penalty, which moved by < 0.1 against 10⁻⁸ on the demo.
-REFIT_TOLERANCE = 1e-5
-
-
 def _refit_calibrator(seed: int, max_nfev: int, *, n_starts: int = 1, n_candidates: int = 8) -> PointCalibrator:
-    """The least squares of the comparison's refits: stopped at :data:`REFIT_TOLERANCE`, continued
-    once where it stops at ``max_nfev``, without the jump check (a refit is read for θ, its standard
-    errors and residuals)."""
+    """The least squares of the comparison's refits: continued once where it stops at ``max_nfev``,
+    without the jump check (a refit is read for θ, its standard errors and residuals)."""
     return PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev,
-                           tolerance=REFIT_TOLERANCE, continuations=1, check_jumps=False)
+                           continuations=1, check_jumps=False)
 
 
 class _Fit(NamedTuple):
