@@ -154,9 +154,14 @@ def _predict_evaluation(md: ModelData, run_window: slice, evaluation: slice,
                         *thetas: np.ndarray) -> list[dict[str, np.ndarray]]:
     """Each θ's prediction of the evaluation window (target → ndarray[n_steps]), run from
     ``run_window``'s start, all in one simulate call."""
+    return _evaluation_rows(md.simulate_targets(run_window, np.vstack(thetas)), run_window, evaluation)
+
+
+def _evaluation_rows(runs: dict[str, np.ndarray], run_window: slice, evaluation: slice) -> list[dict[str, np.ndarray]]:
+    """Each member's part of ``runs`` (target → ndarray[n_members, n_steps] over ``run_window``) in
+    the evaluation window."""
     offset = evaluation.start - run_window.start
-    outputs = md.simulate_targets(run_window, np.vstack(thetas))
-    return [{k: v[member][offset:] for k, v in outputs.items()} for member in range(len(thetas))]
+    return [{k: v[member][offset:] for k, v in runs.items()} for member in range(len(next(iter(runs.values()))))]
 
 
 def _probe_ensemble(problem, theta0: np.ndarray, effect_columns: list[int],
@@ -361,8 +366,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     base_mean_squares = min((job.base_mean_squares, null_mean_squares),
                             key=lambda before: bic_against(job.base_mean_squares, before, job.sample_fractions, 0))
     observed = md.observed(job.evaluation)
-    offset = job.evaluation.start - job.run_window.start
-    null, after = ({key: values[member][offset:] for key, values in runs.items()} for member in (0, 1))
+    null, after = _evaluation_rows(runs, job.run_window, job.evaluation)
     before = min((job.base_evaluation_prediction, null),
                  key=lambda prediction: weighted_test_error(observed, prediction, job.target_scales))
     effect, effect_iri, label = job.identity()
