@@ -1,13 +1,15 @@
 """Hot-water heating coil with its motorised valve, check valve and pump (Bjørnskov, Jradi & Wetter, Sec. 5.1).
 
-Hydraulics: V̇ = sqrt(Δp_loop / (1/(K_v·u)² + 1/K_v,loop²)) [m³/h, bar], ṁ_w = ρ_w·V̇/3600 [kg/s].
+Hydraulics: V̇ = sqrt(Δp_loop / (1/(K_v·φ(u))² + 1/K_v,loop²)) [m³/h, bar], ṁ_w = ρ_w·V̇/3600 [kg/s],
+with the valve's inherent characteristic φ(u) = R^(u−1) − (1−u)/R of rangeability R (R = 1: linear;
+R ≫ 1: equal-percentage, shut tight at u = 0).
 Heat: counter-flow ε-NTU, Q_static = ε·C_min·(T_w,in − T_a,in) [W], with
 1/UA = 1/(hA_w·(ṁ_w/0.5)^0.8) + 1/(hA_a·(ṁ_a/2)^0.8) [K/W] (:mod:`service.components.heat_exchanger`).
 Water in the supply pipe and on the water side moves with the flow and loses heat where it stands:
 dT/dt = (ṁ_w/ṁ_ref)·(T_entering − T)/τ + (T_amb − T)/τ_loss, τ the transport time at the reference
 flow ṁ_ref = 0.5 kg/s (τ_pipe, τ_w; hours near shut-off), advanced exactly. The coil metal and the
-air-side outlet are first-order lags. Parameters (11): K_v (mapped from ``s4bldg:flowCoefficient``),
-Δp_loop, K_v,loop, hA_w, hA_a, four time constants, T_amb and τ_loss. Equations, bounds and why these
+air-side outlet are first-order lags. Parameters (12): K_v (mapped from ``s4bldg:flowCoefficient``),
+R, Δp_loop, K_v,loop, hA_w, hA_a, four time constants, T_amb and τ_loss. Equations, bounds and why these
 parameter groups: ``docs/components.md``.
 """
 
@@ -26,7 +28,7 @@ from service.components.component import (
 )
 from service.components.heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
 
-__all__ = ["HotWaterLoop", "loop_water_flow_m3_per_h", "REFERENCE_WATER_MASS_FLOW"]
+__all__ = ["HotWaterLoop", "REFERENCE_WATER_MASS_FLOW", "valve_flow_share"]
 
 # 0-d arrays: numpy's ufuncs take them faster than Python floats
 _TINY, _ZERO, _ONE = np.array(1e-9), np.array(0.0), np.array(1.0)
@@ -36,15 +38,15 @@ _SHUT_OPENING = np.array(1e-6)
 REFERENCE_WATER_MASS_FLOW = 0.5
 
 
-def loop_water_flow_m3_per_h(position: np.ndarray, *, kv_valve: np.ndarray, kv_loop: np.ndarray,
-                             pressure_bar: np.ndarray) -> np.ndarray:
-    """V̇ [m³/h] of the series loop for valve position ``position`` (0–1, linear characteristic): the
-    valve's K_v·u [m³/h] in series with ``kv_loop`` [m³/h] under ``pressure_bar`` [bar]."""
-    return _series_flow_m3_per_h(np.minimum(np.maximum(position, 0.0), 1.0) * kv_valve, kv_loop, pressure_bar)
+def valve_flow_share(position: np.ndarray, rangeability: np.ndarray) -> np.ndarray:
+    """φ(u) = R^(u−1) − (1−u)/R [1]: the valve's flow coefficient at stem position ``position`` u (0–1)
+    as a share of the fully open one, for ``rangeability`` R ≥ 1 (R = 1 linear, φ(0) = 0, φ(1) = 1,
+    increasing in u)."""
+    return rangeability ** (position - _ONE) - (_ONE - position) / rangeability
 
 
 def _series_flow_m3_per_h(opening: np.ndarray, kv_loop: np.ndarray, pressure_bar: np.ndarray) -> np.ndarray:
-    """V̇ [m³/h] through an opening K_v·u ≥ 0 [m³/h] in series with ``kv_loop`` [m³/h] under
+    """V̇ [m³/h] through an opening K_v·φ(u) ≥ 0 [m³/h] in series with ``kv_loop`` [m³/h] under
     ``pressure_bar`` [bar] (module docstring); 0 at an opening of 10⁻⁶ m³/h or less."""
     resistance = _ONE / np.maximum(opening, _TINY) ** 2 + _ONE / kv_loop**2
     return np.sqrt(np.maximum(pressure_bar, _ZERO) / resistance) * (opening > _SHUT_OPENING)
@@ -71,6 +73,8 @@ class HotWaterLoop(ComponentModel):
     )
     parameters = (
         Parameter("valve_flow_coefficient", "m3/h", 2.5, 0.3, 40.0, "motorised valve flow coefficient, K_v"),
+        Parameter("valve_rangeability", "1", 25.0, 1.0, 100.0,
+                  "inherent characteristic, R: 1 linear, 25–50 an equal-percentage heating valve"),
         Parameter("loop_flow_coefficient", "m3/h", 3.3, 0.5, 40.0, "check valve, pipes and coil in series, K_v,loop"),
         Parameter("loop_pressure_difference", "bar", 0.45, 0.05, 1.5, "pump rise plus source–sink difference, Δp_loop"),
         Parameter("water_side_conductance", "W/K", 1600.0, 300.0, 6000.0, "water-side hA at 0.5 kg/s, hA_w"),
@@ -91,8 +95,8 @@ class HotWaterLoop(ComponentModel):
 
     def _water_flow(self, params, position):
         """ṁ_w [kg/s] at valve position ``position``, already clipped to 0–1."""
-        flow_m3_per_h = _series_flow_m3_per_h(position * params["valve_flow_coefficient"],
-                                              params["loop_flow_coefficient"], params["loop_pressure_difference"])
+        opening = valve_flow_share(position, params["valve_rangeability"]) * params["valve_flow_coefficient"]
+        flow_m3_per_h = _series_flow_m3_per_h(opening, params["loop_flow_coefficient"], params["loop_pressure_difference"])
         return WATER_DENSITY_KG_PER_M3 * flow_m3_per_h / 3600.0
 
     def _static_heat(self, params, air_in, air_flow, water_flow, water_flow_ratio, water_in):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from service.components.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_SPECIFIC_HEAT_J_PER_KG_K
-from service.components.hot_water_loop import HotWaterLoop
+from service.components.hot_water_loop import HotWaterLoop, valve_flow_share
 
 DT = 60.0
 
@@ -22,12 +22,29 @@ def _steps(params, state, inputs, steps):
 
 
 def test_water_flow_by_hand(run_model, params_for):
-    # defaults K_v = 2.5, K_v,loop = 3.3 m³/h, Δp = 0.45 bar; u = 0.6:
-    # V̇ = sqrt(0.45 / (1/1.5² + 1/3.3²)) = 0.91604 m³/h, ṁ_w = 988·0.91604/3600 = 0.25140 kg/s
+    # defaults K_v = 2.5, K_v,loop = 3.3 m³/h, Δp = 0.45 bar, R = 25; u = 0.6:
+    # φ = 25^(−0.4) − 0.4/25 = 0.259946, V̇ = sqrt(0.45 / (1/(2.5·φ)² + 1/3.3²)) m³/h, ṁ_w = 988·V̇/3600
     out = run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(0.6))[0]
-    by_hand = 988.0 / 3600.0 * math.sqrt(0.45 / (1 / 1.5**2 + 1 / 3.3**2))
+    share = 25.0**-0.4 - 0.4 / 25.0
+    by_hand = 988.0 / 3600.0 * math.sqrt(0.45 / (1 / (2.5 * share) ** 2 + 1 / 3.3**2))
+    assert share == pytest.approx(0.259946, abs=1e-6)
     assert out["water_mass_flow"][0] == pytest.approx(by_hand, rel=1e-12)
-    assert out["water_mass_flow"][0] == pytest.approx(0.25140, abs=1e-5)
+    # R = 1 is a linear valve: K_v·u = 1.5 m³/h, V̇ = 0.91604 m³/h, ṁ_w = 0.25140 kg/s
+    linear = run_model(HotWaterLoop, params_for(HotWaterLoop, valve_rangeability=1.0), _inputs(0.6))[0]
+    assert linear["water_mass_flow"][0] == pytest.approx(0.25140, abs=1e-5)
+
+
+@pytest.mark.parametrize("rangeability", [1.0, 25.0, 50.0, 100.0])
+def test_the_valve_characteristic_shuts_tight_opens_fully_and_is_equal_percentage_in_its_middle(rangeability):
+    position = np.linspace(0.0, 1.0, 1001)
+    share = valve_flow_share(position, np.array(rangeability))
+    assert share[0] == pytest.approx(0.0, abs=1e-15) and share[-1] == pytest.approx(1.0, rel=1e-15)
+    assert np.all(np.diff(share) > 0.0)
+    if rangeability == 1.0:
+        np.testing.assert_allclose(share, position, atol=1e-15)
+    else:  # each tenth of the stroke above 60 % multiplies the flow by R^0.1 within 5 % (the −(1−u)/R term)
+        ratio = share[600:1001:100][1:] / share[600:1001:100][:-1]
+        np.testing.assert_allclose(ratio, rangeability**0.1, rtol=0.05)
 
 
 def test_closed_valve_gives_no_flow_and_no_heat(run_model, params_for):

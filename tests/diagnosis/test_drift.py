@@ -102,7 +102,8 @@ def test_a_constant_factor_is_the_parameter_scaled(case_data, suffix):
 def test_a_step_schedule_equals_two_runs_spliced(case_data, suffix):
     """Before the step every target is the run at the old value; after it a memoryless component's
     (the fan's power) is the run at the new value at once, a stepped one's once its states and the
-    control loop have followed (within 1 % of the change's effect after 6 h)."""
+    control loop have followed (within 1 % of the change's effect after 12 h: near shut-off an
+    equal-percentage valve passes a trickle, and the water in the pipes takes hours to be replaced)."""
     md = case_data
     key, column = _key(md, suffix)
     window, step = slice(36, 250), 100  # the step at the window's 100th step
@@ -112,7 +113,7 @@ def test_a_step_schedule_equals_two_runs_spliced(case_data, suffix):
     factor = np.where(md.time_s(window) >= (window.start + step) * md.data.step_s, 0.7, 1.0)[None, :]
     scheduled = md.simulate_targets(window, old, factors={key: factor})
     before, after = md.simulate_targets(window, old), md.simulate_targets(window, new)
-    settled = step + int(6 * 3600 / md.data.step_s)
+    settled = step + int(12 * 3600 / md.data.step_s)
     moved = False
     for node in scheduled:
         np.testing.assert_array_equal(scheduled[node][0, :step], before[node][0, :step])

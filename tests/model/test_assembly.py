@@ -27,7 +27,7 @@ def test_case_study_assembles_like_the_paper(case_store):
         "coil_outlet_water_temperature_sensor", "fan_power_meter", "valve_position_sensor"]
     mapped = {ref.name: ref.value for ref in model.mapped_parameters}
     assert mapped == {"nominal_air_flow": 1.5, "nominal_power": pytest.approx(1800.0), "valve_flow_coefficient": 2.5}
-    assert len(model.estimated_parameters) == 16
+    assert len(model.estimated_parameters) == 17
     loop = model.component_for_node(EX + "heating_valve")
     assert loop.signature.id == "HotWaterLoop" and EX + "check_valve" in loop.modeled_nodes
     wires = {(model.components[c.source].signature.id, c.source_port, model.components[c.target].node.rsplit("#")[-1], c.target_port)
