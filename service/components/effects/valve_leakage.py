@@ -10,9 +10,10 @@ __all__ = ["ValveLeakage"]
 class ValveLeakage(SplicedEffect):
     """u_eff = u + λ · (1 − u)   [1]
 
-    u the commanded position (0 shut … 1 open), λ the leakage as a fraction of the fully open flow
-    coefficient: a linear valve with a parallel leak path of Kv_leak = λ·Kv. Null: λ = 0. The flow
-    opening changes, not the stem: the host's position feedback reads the command (the signature's
+    u the commanded position (0 shut … 1 open), λ the leak as the stem position whose flow a shut
+    valve passes: on a linear valve the share λ of the open flow coefficient (a parallel leak path
+    Kv_leak = λ·Kv), on a valve with characteristic φ the share φ(λ). Null: λ = 0. The flow opening
+    changes, not the stem: the host's position feedback reads the command (the signature's
     ``readings_unchanged``). Behind an actuator dead band u₀ a leak λ ≤ u₀ cannot be told from a
     tight valve (``docs/components.md``).
     """
@@ -20,7 +21,7 @@ class ValveLeakage(SplicedEffect):
     inputs = (Port("value_in", "1", "commanded valve position"),)
     outputs = (Port("value_out", "1", "effective valve position"),)
     parameters = (
-        Parameter("leakage_fraction", "1", 0.0, 0.0, 0.8, "leak flow coefficient as a share of the open one, λ", null=0.0),
+        Parameter("leakage_fraction", "1", 0.0, 0.0, 0.8, "leak as the stem position whose flow it passes, λ", null=0.0),
     )
 
     def step(self, params, inputs, state, dt_s):
