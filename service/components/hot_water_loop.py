@@ -96,7 +96,8 @@ class HotWaterLoop(ComponentModel):
     def _water_flow(self, params, position):
         """ṁ_w [kg/s] at valve position ``position``, already clipped to 0–1."""
         opening = valve_flow_share(position, params["valve_rangeability"]) * params["valve_flow_coefficient"]
-        flow_m3_per_h = _series_flow_m3_per_h(opening, params["loop_flow_coefficient"], params["loop_pressure_difference"])
+        flow_m3_per_h = _series_flow_m3_per_h(opening, params["loop_flow_coefficient"],
+                                              params["loop_pressure_difference"])
         return WATER_DENSITY_KG_PER_M3 * flow_m3_per_h / 3600.0
 
     def _static_heat(self, params, air_in, air_flow, water_flow, water_flow_ratio, water_in):

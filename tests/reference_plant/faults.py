@@ -5,10 +5,10 @@ to (None: outside the catalog).
 Sizes: valve leakage, the seat's Kv as a fraction of Kvs; valve stuck, the stem position (0–1) it
 sticks at; sensor offset, K; sensor lag, the added time constant in s; fan motor heat, the extra
 fraction of the electric power heating the air on top of the impeller's losses (0.27–0.31 of it: at
-most ~0.69 can be added before the air receives more heat than the fan draws); constant heat gain, W into the air; duct heat
-exchange, the casing's UA in W/K to a space (the case-study graph has none); coil thermal mass,
-the factor on the coil's metal heat capacity; coil fouling, the fraction of UA lost per day;
-supply pipe heat loss, the pipe's added UA in W/K.
+most ~0.69 can be added before the air receives more heat than the fan draws); constant heat gain,
+W into the air; duct heat exchange, the casing's UA in W/K to a space (the case-study graph has
+none); coil thermal mass, the factor on the coil's metal heat capacity; coil fouling, the fraction
+of UA lost per day; supply pipe heat loss, the pipe's added UA in W/K.
 """
 
 from __future__ import annotations
