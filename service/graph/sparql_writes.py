@@ -12,8 +12,10 @@ from __future__ import annotations
 
 from pyparsing import ParseBaseException
 from rdflib import URIRef
-from rdflib.plugins.sparql import prepareUpdate
+from rdflib.plugins.sparql.algebra import translateUpdate
+from rdflib.plugins.sparql.parser import parseUpdate
 from rdflib.plugins.sparql.parserutils import CompValue
+from rdflib.plugins.sparql.sparql import Update
 
 from service.graph.sparql_reads import RDFLIB_PARSER_LOCK
 
@@ -26,9 +28,12 @@ def written_graphs(text: str) -> frozenset[str] | None:
     grammar is the one that counts: it runs the update, or refuses it with its own message)."""
     try:
         with RDFLIB_PARSER_LOCK:
-            operations = prepareUpdate(text).algebra
+            update = translateUpdate(parseUpdate(text))
     except ParseBaseException:
         return None
+    # an update of no operation (a prologue or a comment alone) translates to [], not an Update,
+    # which rdflib's prepareUpdate then fails on
+    operations = update.algebra if isinstance(update, Update) else []
     graphs: set[str] = set()
     for operation in operations:
         named = list(_named_graphs(operation))

@@ -18,6 +18,8 @@ G = "https://example.org/g/"
     (f"MOVE <{G}10> TO <{G}11> ; COPY DEFAULT TO <{G}12> ; ADD <{G}13> TO DEFAULT", {"10", "11", "12"}),
     (f"LOAD <urn:x> INTO GRAPH <{G}14> ; LOAD <urn:y>", {"14"}),
     ("INSERT { ?s ?p ?o } WHERE { ?s ?p ?o }", set()),
+    ("# a comment alone", set()),  # an empty update (valid SPARQL) changes nothing
+    ("PREFIX ex: <https://example.org/>", set()),
 ])
 def test_the_graphs_an_update_names(update, graphs):
     assert written_graphs(update) == {G + g for g in graphs}
