@@ -13,21 +13,17 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
 from service.calibration.lockstep import with_prefetched_rows
 from service.calibration.model_data import ModelData
-from service.calibration.point import PointCalibrator
-from service.calibration.problem import CalibrationProblem
-from service.data.measurements import MeasuredData
 from service.diagnosis.drift import (
     DriftEvidence,
     drift_candidates,
     drift_fields,
-    drift_identity,
     drift_sentence,
     step_onset,
 )
@@ -35,7 +31,6 @@ from service.diagnosis.plausibility import bound_note, demotion_reasons
 from service.diagnosis.ranking import (
     EffectEvidence,
     delta_bic,
-    effective_sample_fraction,
     per_target_rss,
     rank_evidence,
     score_ensemble,
@@ -43,6 +38,18 @@ from service.diagnosis.ranking import (
     step_errors,
     target_rows,
     weighted_test_error,
+)
+from service.diagnosis.refits import (
+    CandidateJob,
+    Fit,
+    fit_onset,
+    host_columns,
+    mean_squares,
+    null_values,
+    probe_ensemble,
+    probe_start,
+    refit_calibrator,
+    sample_fractions,
 )
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
@@ -53,11 +60,7 @@ from service.model.assembly import assemble
 from service.model.effect_splicing import EffectRequest, recorded_effects
 from service.runtime import exit_with_parent, usable_cpu_count
 
-__all__ = ["Candidate", "effect_candidates", "split_windows", "rank_catalog", "PROBE_SHARES"]
-
-#: Shares of an effect parameter's prior width probed before the refit (0 is its lower bound).
-PROBE_SHARES = (0.05, 0.15, 0.35, 0.65, 1.0)
-
+__all__ = ["Candidate", "effect_candidates", "split_windows", "rank_catalog"]
 
 class Candidate(NamedTuple):
     """An effect signature at one building node, and the model assembled with it."""
@@ -92,50 +95,6 @@ def effect_candidates(store: GraphStore, model_name: str,
     return candidates, skipped
 
 
-@dataclass(frozen=True, kw_only=True)
-class _CandidateJob:
-    """What a worker needs to evaluate one candidate (picklable).
-
-    ``fit_windows``, ``run_window``, ``evaluation``: :func:`split_windows`; ``base_theta``: the base
-    refitted on the fit windows (parameter key → value) and ``base_mean_squares`` its mean squared
-    weighted residual there per target; ``train_theta`` the base as calibrated on the training window, and
-    ``train_unidentified`` the keys that training did not identify; ``sample_fractions``: n_eff/n of
-    each target's base residuals; ``target_scales``: the residual weights; ``base_evaluation_prediction``: the
-    better base prediction of the evaluation half; ``onset_windows``: (training windows, first half
-    of the test window) for the fit of a fault appearing in the test window; ``compared``: the
-    operating filter's steps (``ModelData.compared``). A drift candidate
-    (:mod:`service.diagnosis.drift`) has no ``signature``: its model carries the drift, and a step's
-    onset is picked among the data steps ``drift_onsets``.
-    """
-
-    signature: Signature | None
-    node: str
-    model: AssembledModel
-    data: MeasuredData
-    substeps: int
-    fit_windows: list[slice]
-    run_window: slice
-    evaluation: slice
-    base_theta: dict[str, float]
-    base_mean_squares: dict[str, float]
-    sample_fractions: dict[str, float]
-    target_scales: dict[str, float]
-    base_evaluation_prediction: dict[str, np.ndarray]
-    seed: int
-    refit_max_nfev: int
-    train_theta: dict[str, float] = field(default_factory=dict)
-    train_unidentified: frozenset[str] = frozenset()
-    onset_windows: tuple[list[slice], slice] | None = None
-    compared: np.ndarray | None = None
-    drift_onsets: tuple[int, ...] = ()
-
-    def identity(self) -> tuple[str, str, str]:
-        """(effect id, IRI, label) of the candidate."""
-        if self.signature is None:
-            return drift_identity(self.model.drifts[0])
-        return self.signature.id, self.signature.iri, self.signature.label
-
-
 def split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]:
     """(fit windows, simulated window, evaluation window) of the effect comparison: fitted on the
     training window and the first half of the test window, judged on the second half, predicted as
@@ -164,137 +123,6 @@ def _evaluation_rows(runs: dict[str, np.ndarray], run_window: slice, evaluation:
     return [{k: v[member][offset:] for k, v in runs.items()} for member in range(len(next(iter(runs.values()))))]
 
 
-def _probe_ensemble(problem, theta0: np.ndarray, effect_columns: list[int],
-                    theta_train: np.ndarray | None = None) -> np.ndarray:
-    """The members :func:`_probe_start` simulates: a grid of the effect parameters (the null and
-    ``PROBE_SHARES`` of each prior width; all combinations) laid on ``theta0`` (the base refitted on
-    the fit windows) and on ``theta_train`` (the base as trained)."""
-    axes = []
-    for column in effect_columns:
-        lo, hi = problem.lower[column], problem.upper[column]
-        axes.append(np.unique(np.clip(np.r_[theta0[column], lo + np.array(PROBE_SHARES) * (hi - lo)], lo, hi)))
-    grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T if axes else np.empty((1, 0))
-    starts = [theta0] if theta_train is None else [theta0, theta_train]
-    ensemble = np.concatenate([np.repeat(start[None, :], len(grid), axis=0) for start in starts])
-    ensemble[:, effect_columns] = np.tile(grid, (len(starts), 1))
-    return ensemble
-
-
-def _probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_train: np.ndarray | None = None,
-                 *, active_only: bool = False) -> np.ndarray:
-    """The refit's start: the best point of :func:`_probe_ensemble` (one simulate call). ``active_only``
-    leaves out the grid points where any effect parameter sits at its value in ``theta0`` (its
-    null): the best start with the effect switched on."""
-    ensemble = _probe_ensemble(problem, theta0, effect_columns, theta_train)
-    cost = np.sum(problem.weighted_residuals(problem.run(ensemble)) ** 2, axis=1)
-    if active_only:
-        cost[np.any(ensemble[:, effect_columns] == theta0[effect_columns], axis=1)] = np.inf
-    return ensemble[int(np.argmin(cost))]
-
-
-def _refit_calibrator(seed: int, max_nfev: int, *, n_starts: int = 1, n_candidates: int = 8) -> PointCalibrator:
-    """The least squares of the comparison's refits: continued once where it stops at ``max_nfev``,
-    without the jump check (a refit is read for θ, its standard errors and residuals)."""
-    return PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev,
-                           continuations=1, check_jumps=False)
-
-
-class _Fit(NamedTuple):
-    """One hypothesis's fit: θ (all estimated parameters) and standard errors, the mean squared
-    weighted residual and the effective sample fraction n_eff/n of its residuals per target, and
-    the number of parameters it frees beyond the base's; whether the least-squares fit converged
-    (continued once where it stopped at its evaluation limit)."""
-
-    theta: np.ndarray
-    standard_errors: np.ndarray
-    mean_squares: dict[str, float]
-    sample_fractions: dict[str, float]
-    freed: int
-    converged: bool = True
-
-
-def _fit_onset(md: ModelData, job: _CandidateJob, theta_train: np.ndarray, effect_columns: list[int],
-               host: list[int] = ()):
-    """The effect fitted as a fault that appears in the test window: the base parameters held at
-    their training estimate, the effect null in the training window and fitted on the test window's
-    first half, together with the base parameters in ``host`` (columns; :func:`_host_columns`).
-    The :class:`_Fit` over the training window and that half."""
-    before, after = job.onset_windows
-    null = theta_train.copy()
-    null[effect_columns] = _null(job.model.estimated_parameters, effect_columns)
-    host = list(host)
-    free = effect_columns + host
-    whole = md.problem([*before, after], default=null, target_scales=job.target_scales)
-    unfaulted = ({} if host else
-                 {i: md.simulate_targets(w, null[None, :]) for i, w in enumerate(before)})
-
-    def simulate(theta_free: np.ndarray) -> dict[str, np.ndarray]:
-        full = np.repeat(null[None, :], len(theta_free), axis=0)
-        full[:, free] = theta_free
-        faulted = md.simulate_targets(after, full)
-        healthy = full.copy()
-        healthy[:, effect_columns] = null[effect_columns]
-        runs = [{k: np.repeat(v, len(theta_free), axis=0) for k, v in unfaulted[i].items()} if i in unfaulted
-                else md.simulate_targets(w, healthy) for i, w in enumerate(before)]
-        return {node: np.concatenate([run[node] for run in runs] + [faulted[node]], axis=1) for node in faulted}
-
-    def effect_problem(default: np.ndarray) -> CalibrationProblem:
-        return CalibrationProblem(
-            parameter_names=tuple(whole.parameter_names[c] for c in free),
-            lower=whole.lower[free], upper=whole.upper[free], simulate=simulate,
-            observed=whole.observed, target_scales=job.target_scales, units=whole.units, default=default,
-            vectorised_simulate=whole.vectorised_simulate,
-        )
-
-    at_null = null[free]
-    own = list(range(len(effect_columns)))
-    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev, n_starts=2 if host else 1,
-                                   n_candidates=32 if host else 8)
-    probe = effect_problem(at_null)  # the probe's grid and the fit's screen in one simulate call
-    probe = with_prefetched_rows(probe, _probe_ensemble(probe, at_null, own),
-                                 probe.from_unit(calibrator.screen_points(probe)))
-    problem = replace(probe, default=_probe_start(probe, at_null, own))
-    # with its host as trained the effect could only overshoot: the best start with it switched on
-    # competes too, and the host's parameters get a wider screen
-    active = _probe_start(probe, at_null, own, active_only=True)[None, :] if host else None
-    calibrator.fit(problem, candidates=active)
-    theta = null.copy()
-    theta[free] = calibrator.theta_
-    standard_errors = np.zeros_like(theta)
-    standard_errors[free] = calibrator.standard_errors_
-    return _Fit(theta, standard_errors, _mean_squares(calibrator.residuals_, job.target_scales),
-                _sample_fractions(calibrator.residuals_), len(free), calibrator.converged_)
-
-
-def _mean_squares(residuals: dict[str, np.ndarray], scales: dict[str, float]) -> dict[str, float]:
-    """Mean squared weighted residual ((y − ŷ)/s)² per target (NaN where not measured)."""
-    return {key: float(np.nanmean((values / scales[key]) ** 2)) for key, values in residuals.items()}
-
-
-def _sample_fractions(residuals: dict[str, np.ndarray]) -> dict[str, float]:
-    """n_eff/n per target from the lag-1 autocorrelation of its own residual series (concatenating
-    a power meter's watts with temperatures would let the watts decide every target's)."""
-    return {key: effective_sample_fraction(values[np.isfinite(values)]) for key, values in residuals.items()}
-
-
-def _null(refs, columns: list[int]) -> np.ndarray:
-    """The values at which the effect parameters in ``columns`` vanish."""
-    return np.array([refs[c].spec.null if refs[c].spec.null is not None else refs[c].spec.default for c in columns])
-
-
-def _host_columns(job: _CandidateJob) -> list[int]:
-    """Columns of the parameters of the component the effect is spliced into (its host) when the
-    training data identified none of them (then fitted with the effect); a host with some
-    identified parameter was exercised, and stays as trained: no columns."""
-    refs = job.model.estimated_parameters
-    effect_components = {r.component for r in refs if r.key not in job.base_theta}
-    hosts = {c.target for c in job.model.connections if c.source in effect_components} | {
-        c.source for c in job.model.connections if c.target in effect_components}
-    hosts -= effect_components
-    columns = [j for j, r in enumerate(refs) if r.component in hosts]
-    return columns if columns and all(refs[j].key in job.train_unidentified for j in columns) else []
-
-
 def _estimate_text(name: str, value: float, standard_error: float, spec) -> str:
     """``name = value ± se`` (with :func:`_bound_note`), or, where the standard error spans the
     prior range or is not finite, that the data do not identify it."""
@@ -303,24 +131,24 @@ def _estimate_text(name: str, value: float, standard_error: float, spec) -> str:
     return f"{name} = {value:.3g} ± {standard_error:.2g}" + bound_note(value, spec)
 
 
-def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
+def _evaluate_candidate(job: CandidateJob) -> EffectEvidence:
     """Score test, refit under both hypotheses, ΔBIC and the evaluation half's error before and after."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     md = ModelData(job.model, job.data, job.substeps, job.compared)
     refs = job.model.estimated_parameters
     effect_columns = [j for j, r in enumerate(refs) if r.key not in job.base_theta]
     theta0 = np.array([job.base_theta.get(r.key, np.nan) for r in refs])
-    theta0[effect_columns] = _null(refs, effect_columns)
+    theta0[effect_columns] = null_values(refs, effect_columns)
     theta_train = np.array([job.train_theta.get(r.key, theta0[j]) for j, r in enumerate(refs)])
     if job.drift_onsets:  # a step drift: its onset picked by the fit, on the grid
         job = replace(job, model=step_onset(md, job.fit_windows, [theta0, theta_train], job.drift_onsets,
                                             job.target_scales))
         md = ModelData(job.model, job.data, job.substeps, job.compared)
     problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
-    calibrator = _refit_calibrator(job.seed, job.refit_max_nfev)
+    calibrator = refit_calibrator(job.seed, job.refit_max_nfev)
     # the score test's members, the probe's grid and the refit's screen in one simulate call
     problem = with_prefetched_rows(problem, score_ensemble(problem, theta0),
-                                   _probe_ensemble(problem, theta0, effect_columns, theta_train),
+                                   probe_ensemble(problem, theta0, effect_columns, theta_train),
                                    problem.from_unit(calibrator.screen_points(problem)))
     keys = problem.target_keys
     score = score_test(problem, theta0, effect_columns, sample_fractions=[job.sample_fractions[k] for k in keys])
@@ -330,30 +158,30 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
         return delta_bic([before[k] * c for k, c in zip(keys, counts)], [after[k] * c for k, c in zip(keys, counts)],
                          counts * np.array([fractions[k] for k in keys]), freed)
 
-    problem = replace(problem, default=_probe_start(problem, theta0, effect_columns, theta_train))
+    problem = replace(problem, default=probe_start(problem, theta0, effect_columns, theta_train))
     calibrator.fit(problem)
-    fits = {"present throughout": _Fit(calibrator.theta_, calibrator.standard_errors_,
-                                       _mean_squares(calibrator.residuals_, job.target_scales),
-                                       _sample_fractions(calibrator.residuals_),
+    fits = {"present throughout": Fit(calibrator.theta_, calibrator.standard_errors_,
+                                       mean_squares(calibrator.residuals_, job.target_scales),
+                                       sample_fractions(calibrator.residuals_),
                                        len(effect_columns) + (1 if job.drift_onsets else 0), calibrator.converged_)}
     if job.onset_windows is not None and effect_columns and job.signature is not None and job.signature.can_appear:
-        fits["appearing in the test window"] = _fit_onset(md, job, theta_train, effect_columns)
-        host = _host_columns(job)
+        fits["appearing in the test window"] = fit_onset(md, job, theta_train, effect_columns)
+        host = host_columns(job)
         if host:  # an unexercised host may hide what the effect does: fit it with the effect too
-            fits["appearing in the test window, its host refitted"] = _fit_onset(
+            fits["appearing in the test window, its host refitted"] = fit_onset(
                 md, job, theta_train, effect_columns, host)
     # the hypotheses compared by their ΔBIC against one base, each counting what it frees; n_eff from
     # the hypothesis's own residuals (the base's hold the very misfit the effect explains: on a
     # FLEXLAB fault day their ρ₁ ≈ 0.98 left ~3 effective observations per sensor)
-    def bic_of(fit: _Fit) -> float:
+    def bic_of(fit: Fit) -> float:
         return bic_against(job.base_mean_squares, fit.mean_squares, fit.sample_fractions, fit.freed)
 
     onset = min(fits, key=lambda name: bic_of(fits[name]))
-    theta, standard_errors, mean_squares, fractions, freed, converged = fits[onset]
+    theta, standard_errors, fit_mean_squares, fractions, freed, converged = fits[onset]
     # what the refit gains with the base parameters alone (the effect set back to its null) is the
     # base model's, not the effect's: "before" is the better of the base refit and that
     theta_null = theta.copy()
-    theta_null[effect_columns] = _null(refs, effect_columns)
+    theta_null[effect_columns] = null_values(refs, effect_columns)
     runs = md.simulate_targets(job.run_window, np.vstack([theta_null, theta]))
     fit = job.fit_windows[0]
     if len(job.fit_windows) == 1 and fit.start == job.run_window.start and fit.stop <= job.run_window.stop:
@@ -375,7 +203,7 @@ def _evaluate_candidate(job: _CandidateJob) -> EffectEvidence:
     evidence = (DriftEvidence if drifts else EffectEvidence)(
         effect=effect, effect_iri=effect_iri, node=job.node, label=label,
         parameter_names=tuple(refs[j].name for j in effect_columns), score=score,
-        delta_bic=bic_against(base_mean_squares, mean_squares, fractions, freed), freed_parameters=freed,
+        delta_bic=bic_against(base_mean_squares, fit_mean_squares, fractions, freed), freed_parameters=freed,
         estimates={refs[j].name: float(theta[j]) for j in effect_columns},
         standard_errors={refs[j].name: float(standard_errors[j]) for j in effect_columns}, **described,
     )
@@ -430,7 +258,7 @@ def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: di
     )
 
 
-def _told(evaluated, jobs: list[_CandidateJob], say) -> list[EffectEvidence]:
+def _told(evaluated, jobs: list[CandidateJob], say) -> list[EffectEvidence]:
     """The candidates' evidence in order, saying how far the catalog is as each one is done."""
     evidence = []
     for done, item in enumerate(evaluated, start=1):
@@ -456,8 +284,8 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
     fit_windows, run_window, evaluation = split_windows(train_slice, test_slice)
     scales = dict(md.problem(train_slice).target_scales)
     say("refitting the base model on the comparison's fit windows")
-    refit = _refit_calibrator(seed, refit_max_nfev).fit(md.problem(fit_windows, default=base.theta, target_scales=scales))
-    fractions = _sample_fractions(refit.residuals_)
+    refit = refit_calibrator(seed, refit_max_nfev).fit(md.problem(fit_windows, default=base.theta, target_scales=scales))
+    fractions = sample_fractions(refit.residuals_)
     base_theta = {ref.key: float(v) for ref, v in zip(model.estimated_parameters, refit.theta_)}
     # judged against the better base prediction of the evaluation half: refitted on the fit windows,
     # or as trained (a fault in the test window's first half can bend the refit)
@@ -469,10 +297,10 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
     drifts = drift_candidates(md, base.theta, drifting, test=test_slice, fit_windows=fit_windows,
                               noise=failing_noise or {}) if drifting else []
     jobs = [
-        _CandidateJob(
+        CandidateJob(
             signature=signature, node=node, model=candidate_model, drift_onsets=onsets, data=data, substeps=substeps,
             fit_windows=fit_windows, run_window=run_window, evaluation=evaluation, base_theta=base_theta,
-            base_mean_squares=_mean_squares(refit.residuals_, scales), sample_fractions=fractions, target_scales=scales,
+            base_mean_squares=mean_squares(refit.residuals_, scales), sample_fractions=fractions, target_scales=scales,
             base_evaluation_prediction=base_evaluation, seed=seed, refit_max_nfev=refit_max_nfev,
             train_theta=train_theta, train_unidentified=unidentified,
             onset_windows=([train_slice], slice(test_slice.start, evaluation.start)), compared=md.compared,

@@ -95,16 +95,19 @@ def admitted_pairs() -> set[tuple[str, str]]:
     return {(c.signature.id, c.node) for c in candidates}
 
 
-def plan(seeds: int, free_seeds: int, outside_seeds: int) -> list[Run]:
+def plan(seeds: int, free_seeds: int, outside_seeds: int, first_seed: int = 0) -> list[Run]:
+    """The runs of the matrix, every cell's seeds counted from ``first_seed`` (so that a later run
+    adds draws to those already measured instead of repeating them)."""
     admitted = admitted_pairs()
-    runs = [Run("fault-free", None, "-", 0.0, seed) for seed in range(free_seeds)]
+    runs = [Run("fault-free", None, "-", 0.0, seed) for seed in range(first_seed, first_seed + free_seeds)]
     for name, kind in FAULTS.items():
         expected = (EFFECT_IDS.get(kind.catalog_effect or ""), EX + kind.node)
         if expected in admitted:
             runs += [Run("catalog", name, label, getattr(kind, label), seed)
-                     for label in ("clear", "subtle") for seed in range(seeds)]
+                     for label in ("clear", "subtle") for seed in range(first_seed, first_seed + seeds)]
         else:
-            runs += [Run("outside", name, "clear", kind.clear, seed) for seed in range(outside_seeds)]
+            runs += [Run("outside", name, "clear", kind.clear, seed)
+                     for seed in range(first_seed, first_seed + outside_seeds)]
     return runs
 
 
@@ -166,8 +169,20 @@ def diagnose_run(run: Run) -> dict:
         "rmse_over_noise": {n.removeprefix(EX): v.rmse_over_noise for n, v in report.sensors.items()},
         "affected_sensor": affected.removeprefix(EX), "share_removed": _share_removed(top, affected),
         "true_share_removed": _share_removed(true, affected),
+        "noise": {n.removeprefix(EX): v.noise for n, v in report.sensors.items()},
+        "candidates": [_candidate_row(e) for e in report.effects],
         "wall_s": time.perf_counter() - started,
     }
+
+
+def _candidate_row(evidence) -> dict:
+    """What a decision rule can be judged on afterwards: ΔBIC, the weighted test-error share removed,
+    the demotion, and each sensor's RMSE on the evaluation half before and after the effect."""
+    return {"candidate": f"{evidence.effect}@{evidence.node.removeprefix(EX)}", "delta_bic": evidence.delta_bic,
+            "test_improvement": evidence.test_improvement, "significant": evidence.significant,
+            "demoted": evidence.demoted,
+            "rmse_before": {n.removeprefix(EX): v for n, v in evidence.rmse_before.items()},
+            "rmse_after": {n.removeprefix(EX): v for n, v in evidence.rmse_after.items()}}
 
 
 def _rate(rows: list[dict], key: str) -> str:
@@ -210,6 +225,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10, help="seeds per catalog effect and size")
     parser.add_argument("--free-seeds", type=int, default=20, help="seeds of fault-free data")
     parser.add_argument("--outside-seeds", type=int, default=5, help="seeds per fault outside the catalog")
+    parser.add_argument("--first-seed", type=int, default=0, help="every cell's first seed (to add draws)")
     parser.add_argument("--only", default="", help="only the cells whose name contains this")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", type=Path, default=None, help="write every run's row here")
@@ -217,7 +233,7 @@ def main() -> None:
     if args.quick:
         args.seeds = args.free_seeds = args.outside_seeds = 1
     started = time.perf_counter()
-    runs = [r for r in plan(args.seeds, args.free_seeds, args.outside_seeds) if args.only in r.cell]
+    runs = [r for r in plan(args.seeds, args.free_seeds, args.outside_seeds, args.first_seed) if args.only in r.cell]
     print(f"{len(runs)} diagnoses on {args.workers} processes")
     rows = []
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"),
