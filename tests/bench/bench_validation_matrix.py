@@ -177,10 +177,12 @@ def diagnose_run(run: Run) -> dict:
 
 def _candidate_row(evidence) -> dict:
     """What a decision rule can be judged on afterwards: ΔBIC, the weighted test-error share removed,
-    the demotion, and each sensor's RMSE on the evaluation half before and after the effect."""
+    the demotion, the fitted effect parameters, and each sensor's RMSE on the evaluation half before
+    and after the effect."""
     return {"candidate": f"{evidence.effect}@{evidence.node.removeprefix(EX)}", "delta_bic": evidence.delta_bic,
             "test_improvement": evidence.test_improvement, "significant": evidence.significant,
             "demoted": evidence.demoted,
+            "estimates": {name.rsplit("/", 1)[-1]: value for name, value in evidence.estimates.items()},
             "rmse_before": {n.removeprefix(EX): v for n, v in evidence.rmse_before.items()},
             "rmse_after": {n.removeprefix(EX): v for n, v in evidence.rmse_after.items()}}
 
