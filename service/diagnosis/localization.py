@@ -1,8 +1,9 @@
 """Where along the flow path the model fails: between the last sensor it matches and the first it doesn't.
 
 The flow topology (``queries/flow-edges.rq``: fluid edges, and heat couplings as edges both ways;
-off-path sensors placed at the node they observe, ``queries/observed-node.rq``) is a directed graph,
-possibly with loops. For a failing sensor, the walk upstream stops at the nearest sensors; a failure
+off-path sensors placed at the node they observe, ``queries/observed-node.rq``; a closed control loop,
+``queries/control-edges.rq``, as edges from what decides the controlled sensor's reading to the device
+the controller moves) is a directed graph, possibly with loops. For a failing sensor, the walk upstream stops at the nearest sensors; a failure
 a failing upstream sensor carries down (``carries(u, f)``, the caller's) is not reported again; the
 suspects are the nodes on a walk from a bounding upstream sensor to the failing one that passes no
 other sensor. The algorithm and its rationale: ``docs/diagnosis.md``, "Localisation on the flow path".
@@ -28,24 +29,30 @@ class FailureLocation:
     matching_sensor: str | None
     components: tuple[str, ...]
     upstream_fails: bool = False  # ``matching_sensor`` fails too, by less than the error that reaches ``failing_sensor``
+    #: The device a controller moves, when some suspects are upstream of its controlled sensor: a
+    #: disturbance there is answered by the controller and shows on the device's side.
+    through_controller_of: str | None = None
 
     def describe(self) -> str:
         where = " or ".join(local_name(c) for c in self.components) or "no modelled component"
+        loop = (f" (through the controller that moves {local_name(self.through_controller_of)}: a disturbance "
+                "upstream of its sensor shows on the side it moves)" if self.through_controller_of else "")
         if self.matching_sensor is None:
-            return f"The model fails at {local_name(self.failing_sensor)} with no matching sensor upstream: look at {where}."
+            return (f"The model fails at {local_name(self.failing_sensor)} with no matching sensor upstream: "
+                    f"look at {where}{loop}.")
         if self.upstream_fails:
             return (
                 f"The error grows from {local_name(self.matching_sensor)}, which fails too, to "
-                f"{local_name(self.failing_sensor)}: a missing effect sits in {where} between them."
+                f"{local_name(self.failing_sensor)}: a missing effect sits in {where} between them{loop}."
             )
         return (
             f"The model matches {local_name(self.matching_sensor)} but not {local_name(self.failing_sensor)}: "
-            f"the missing effect sits in {where} between them."
+            f"the missing effect sits in {where} between them{loop}."
         )
 
     def to_dict(self) -> dict:
         return {"between": [self.matching_sensor, self.failing_sensor], "components": list(self.components),
-                "upstream_fails": self.upstream_fails}
+                "upstream_fails": self.upstream_fails, "through_controller_of": self.through_controller_of}
 
 
 class FlowTopology:
@@ -54,20 +61,35 @@ class FlowTopology:
     :param edges: (upstream IRI, downstream IRI) pairs.
     :param observed_owner: sensor IRI → IRI of the node whose property it observes.
     :param heat_couplings: (IRI, IRI) pairs that exchange heat (``fso:transfersHeatTo``), edges both ways.
+    :param control_loops: (controlled sensor IRI, actuated node IRI) pairs of closed control loops
+        (``queries/control-edges.rq``): edges from the nodes that decide the sensor's reading (its
+        upstream neighbours in the flow path, or the node it observes) to the actuated node.
     """
 
     def __init__(self, edges: Iterable[tuple[str, str]], observed_owner: Mapping[str, str] | None = None,
-                 heat_couplings: Iterable[tuple[str, str]] = ()):
+                 heat_couplings: Iterable[tuple[str, str]] = (), control_loops: Iterable[tuple[str, str]] = ()):
         self.downstream: dict[str, set[str]] = defaultdict(set)
         self.upstream: dict[str, set[str]] = defaultdict(set)
         for source, target in [*edges, *((b, a) for a, b in heat_couplings), *heat_couplings]:
-            self.downstream[source].add(target)
-            self.upstream[target].add(source)
+            self._add(source, target)
         self.observed_owner = dict(observed_owner or {})
+        #: (node, actuated node) edges a control loop adds, and the actuated node of each
+        self.control_edges: set[tuple[str, str]] = set()
+        for sensor, actuated in control_loops:
+            deciding = set(self.upstream.get(sensor, ())) if self.in_flow_path(sensor) else {self.place(sensor)}
+            for source in deciding - {actuated, sensor}:
+                self.control_edges.add((source, actuated))
+        for source, target in self.control_edges:
+            self._add(source, target)
+
+    def _add(self, source: str, target: str) -> None:
+        self.downstream[source].add(target)
+        self.upstream[target].add(source)
 
     @classmethod
     def from_store(cls, store, model_name: str) -> FlowTopology:
-        """Read the topology of ``model_name`` with ``queries/flow-edges.rq`` and ``observed-node.rq``."""
+        """Read the topology of ``model_name`` with ``queries/flow-edges.rq``, ``observed-node.rq`` and
+        ``control-edges.rq``."""
         rows = store.run_named_query("flow-edges", dataset=model_name)
         edges = [(r["from"].value, r["to"].value) for r in rows if r["kind"].value == "fluid"]
         couplings = [(r["from"].value, r["to"].value) for r in rows if r["kind"].value == "heat"]
@@ -75,7 +97,9 @@ class FlowTopology:
         for row in store.run_named_query("observed-node", dataset=model_name):
             if row.get("owner") is not None:
                 owners.setdefault(row["device"].value, row["owner"].value)
-        return cls(edges, owners, couplings)
+        loops = [(r["sensor"].value, r["actuated"].value)
+                 for r in store.run_named_query("control-edges", dataset=model_name)]
+        return cls(edges, owners, couplings, loops)
 
     def in_flow_path(self, node: str) -> bool:
         return node in self.downstream or node in self.upstream
@@ -103,6 +127,13 @@ class FlowTopology:
         """Sensors reached first on every upstream branch of ``node`` (the walk stops at sensors)."""
         reached = self._reach(node, self.upstream, sensors)
         return {s for s in reached if s in sensors and s != node}
+
+    def loop_actuated(self, upstream: str, between: set[str], node: str) -> str | None:
+        """The node a control loop moves, when a walk ``upstream → between → node`` takes one of its
+        edges (the suspects then include what lies upstream of the loop's sensor); else None."""
+        inside = between | {upstream, node}
+        return next((target for source, target in sorted(self.control_edges)
+                     if source in inside and target in inside), None)
 
     def nodes_between(self, upstream_sensor: str, node: str, sensors: set[str]) -> set[str]:
         """Nodes on a walk ``upstream_sensor → n → node`` passing no other sensor (ends excluded
@@ -150,5 +181,7 @@ def localize_failures(
             continue
         for reference in good + grows_from:
             between = topology.nodes_between(reference, place, sensor_set)
-            locations.append(FailureLocation(sensor, reference, tuple(sorted(between)), upstream_fails=reference in grows_from))
+            locations.append(FailureLocation(sensor, reference, tuple(sorted(between)),
+                                             upstream_fails=reference in grows_from,
+                                             through_controller_of=topology.loop_actuated(reference, between, place)))
     return locations

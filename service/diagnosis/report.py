@@ -213,5 +213,7 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
         if location.matching_sensor:
             upstream = GT.failingUpstreamSensor if location.upstream_fails else GT.matchingSensor
             t.append(ox.Triple(node, upstream, ox.NamedNode(location.matching_sensor)))
+        if location.through_controller_of:
+            t.append(ox.Triple(node, GT.throughControllerOf, ox.NamedNode(location.through_controller_of)))
         t += [ox.Triple(node, GT.suspect, ox.NamedNode(c)) for c in location.components]
     return t

@@ -91,8 +91,11 @@ def topology_svg(
     below the node it observes, joined by a dotted line. Suspects are drawn red, failing sensors with
     a red border, matching sensors with a green one (``class`` attributes ``suspect``, ``failing``,
     ``matching`` and ``data-node`` say the same for machines)."""
+    # the physical paths only: a control loop's edges (the localisation's) are not drawn
+    downstream = {n: {m for m in ms if (n, m) not in topology.control_edges} for n, ms in topology.downstream.items()}
+    upstream = {n: {m for m in ms if (m, n) not in topology.control_edges} for n, ms in topology.upstream.items()}
     flow_nodes = sorted(set(topology.downstream) | set(topology.upstream))
-    layer, back = _layers(flow_nodes, topology.downstream)
+    layer, back = _layers(flow_nodes, downstream)
     off_path = sorted(sensors - set(flow_nodes))
     for sensor in off_path:
         layer[sensor] = layer.get(topology.place(sensor), 0)
@@ -109,7 +112,7 @@ def topology_svg(
             columns[index].append(node)
 
         in_path = [n for n in flow_nodes if layer[n] == index]
-        wants = {n: [row[u] for u in topology.upstream.get(n, ()) if u in row] for n in in_path}
+        wants = {n: [row[u] for u in upstream.get(n, ()) if u in row] for n in in_path}
         for n in sorted(in_path, key=lambda n: (float(np.mean(wants[n])) if wants[n] else 0.0, n)):
             put(n, int(round(float(np.mean(wants[n])))) if wants[n] else 0)
         for sensor in (s for s in off_path if layer[s] == index):
@@ -133,7 +136,7 @@ def topology_svg(
 
     parts = []
     for source in flow_nodes:
-        for target in sorted(topology.downstream.get(source, ())):
+        for target in sorted(downstream.get(source, ())):
             if (target, source) in heat_edges:  # the localisation's reverse of a heat coupling: drawn once, as stated
                 continue
             kind = "heat" if (source, target) in heat_edges else "fluid"

@@ -80,6 +80,38 @@ def test_a_coils_water_outlet_has_the_air_side_upstream_among_its_suspects():
     assert located == {"fan_inlet": {"fan", "coil_air", "coil_water"}, "coil_inlet_water": {"coil_water", "coil_air"}}
 
 
+def test_a_disturbance_a_controller_rejects_is_located_on_the_side_it_moves():
+    """The case study's closed loop: a controller holds the coil outlet air temperature by moving the
+    hot-water valve. Heat a fan adds upstream leaves that sensor matching and shows at the valve's
+    position and the coil inlet water instead; through the loop, the fan and the coil's air side are
+    among the suspects of both, and the location says so. Without the loop the walk from the water
+    side never reaches the air path."""
+    fluid = [("fan_inlet", "fan"), ("fan", "coil_air"), ("coil_air", "coil_outlet_air"),
+             ("swt", "valve"), ("valve", "pump"), ("pump", "coil_inlet_water"), ("coil_inlet_water", "coil_water"),
+             ("coil_water", "coil_outlet_water")]
+    sensors = {"fan_inlet", "coil_outlet_air", "swt", "coil_inlet_water", "coil_outlet_water", "valve_pos"}
+    matches = {s: s not in ("valve_pos", "coil_inlet_water") for s in sensors}
+    owners = {"valve_pos": "valve"}
+
+    def located(topology):
+        return {(loc.failing_sensor, loc.matching_sensor): (set(loc.components), loc.through_controller_of)
+                for loc in localize_failures(topology, matches, sensors)}
+
+    open_loop = located(FlowTopology(fluid, owners, heat_couplings=[("coil_water", "coil_air")]))
+    assert open_loop == {("coil_inlet_water", "swt"): ({"valve", "pump"}, None),
+                         ("valve_pos", "swt"): ({"valve"}, None)}
+    closed = FlowTopology(fluid, owners, heat_couplings=[("coil_water", "coil_air")],
+                          control_loops=[("coil_outlet_air", "valve")])
+    assert closed.control_edges == {("coil_air", "valve")}
+    loop = located(closed)
+    assert loop[("valve_pos", "fan_inlet")] == ({"fan", "coil_air", "coil_water", "valve"}, "valve")
+    assert loop[("coil_inlet_water", "fan_inlet")] == ({"fan", "coil_air", "coil_water", "valve", "pump"}, "valve")
+    assert loop[("valve_pos", "swt")] == ({"valve"}, None)  # the water path alone does not pass the loop
+    describe = next(loc for loc in localize_failures(closed, matches, sensors)
+                    if loc.matching_sensor == "fan_inlet" and loc.failing_sensor == "valve_pos").describe()
+    assert "fan" in describe and "through the controller that moves valve" in describe
+
+
 def test_the_diagnosis_carries_a_failure_down_only_where_the_residuals_say_so():
     import numpy as np
 
