@@ -62,6 +62,7 @@ from service.runtime import exit_with_parent, usable_cpu_count
 
 __all__ = ["Candidate", "effect_candidates", "split_windows", "rank_catalog"]
 
+
 class Candidate(NamedTuple):
     """An effect signature at one building node, and the model assembled with it."""
 

@@ -73,7 +73,7 @@ class FlowTopology:
         for source, target in [*edges, *((b, a) for a, b in heat_couplings), *heat_couplings]:
             self._add(source, target)
         self.observed_owner = dict(observed_owner or {})
-        #: (node, actuated node) edges a control loop adds, and the actuated node of each
+        #: the (node, actuated node) edges control loops add to the walks (not a physical path)
         self.control_edges: set[tuple[str, str]] = set()
         for sensor, actuated in control_loops:
             deciding = set(self.upstream.get(sensor, ())) if self.in_flow_path(sensor) else {self.place(sensor)}
@@ -100,6 +100,13 @@ class FlowTopology:
         loops = [(r["sensor"].value, r["actuated"].value)
                  for r in store.run_named_query("control-edges", dataset=model_name)]
         return cls(edges, owners, couplings, loops)
+
+    def physical_paths(self) -> tuple[dict[str, set[str]], dict[str, set[str]]]:
+        """(downstream, upstream) adjacency without the control loops' edges: the flow and heat
+        paths as the building graph states them (what a picture of the system draws)."""
+        control = self.control_edges
+        return ({n: {m for m in ms if (n, m) not in control} for n, ms in self.downstream.items()},
+                {n: {m for m in ms if (m, n) not in control} for n, ms in self.upstream.items()})
 
     def in_flow_path(self, node: str) -> bool:
         return node in self.downstream or node in self.upstream

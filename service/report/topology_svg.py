@@ -91,9 +91,7 @@ def topology_svg(
     below the node it observes, joined by a dotted line. Suspects are drawn red, failing sensors with
     a red border, matching sensors with a green one (``class`` attributes ``suspect``, ``failing``,
     ``matching`` and ``data-node`` say the same for machines)."""
-    # the physical paths only: a control loop's edges (the localisation's) are not drawn
-    downstream = {n: {m for m in ms if (n, m) not in topology.control_edges} for n, ms in topology.downstream.items()}
-    upstream = {n: {m for m in ms if (m, n) not in topology.control_edges} for n, ms in topology.upstream.items()}
+    downstream, upstream = topology.physical_paths()  # a control loop's edges are the walks', not drawn
     flow_nodes = sorted(set(topology.downstream) | set(topology.upstream))
     layer, back = _layers(flow_nodes, downstream)
     off_path = sorted(sensors - set(flow_nodes))
