@@ -7,15 +7,18 @@ Heat: counter-flow ε-NTU, Q_static = ε·C_min·(T_w,in − T_a,in) [W], with
 1/UA = 1/(hA_w·(ṁ_w/0.5)^0.8) + 1/(hA_a·(ṁ_a/2)^0.8) [K/W] (:mod:`service.components.heat_exchanger`).
 Water in the supply pipe and on the water side moves with the flow and loses heat where it stands:
 dT/dt = (ṁ_w/ṁ_ref)·(T_entering − T)/τ + (T_amb − T)/τ_loss, τ the transport time at the reference
-flow ṁ_ref = 0.5 kg/s (τ_pipe, τ_w; hours near shut-off), advanced exactly. The coil metal and the
-air-side outlet are first-order lags. Parameters (12): K_v (mapped from ``s4bldg:flowCoefficient``),
-R, Δp_loop, K_v,loop, hA_w, hA_a, four time constants, T_amb and τ_loss. Equations, bounds and why these
-parameter groups: ``docs/components.md``.
+flow ṁ_ref = 0.5 kg/s (τ_pipe, τ_w; hours near shut-off), advanced exactly; the supply pipe as
+``SUPPLY_PIPE_TANKS`` such tanks in series (each τ_pipe/N: plug flow, a front arriving after the
+transport time), the water side as one. The coil metal and the air-side outlet are first-order
+lags. Parameters (12): K_v (mapped from ``s4bldg:flowCoefficient``), R, Δp_loop, K_v,loop, hA_w,
+hA_a, four time constants, T_amb and τ_loss. Equations, bounds and why these parameter groups:
+``docs/components.md``.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.special import gammaln
 
 from service.components.component import (
     AIR_SPECIFIC_HEAT_J_PER_KG_K,
@@ -28,7 +31,7 @@ from service.components.component import (
 )
 from service.components.heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
 
-__all__ = ["HotWaterLoop", "REFERENCE_WATER_MASS_FLOW", "valve_flow_share"]
+__all__ = ["HotWaterLoop", "REFERENCE_WATER_MASS_FLOW", "SUPPLY_PIPE_TANKS", "advance_tank_chain", "valve_flow_share"]
 
 # 0-d arrays: numpy's ufuncs take them faster than Python floats
 _TINY, _ZERO, _ONE = np.array(1e-9), np.array(0.0), np.array(1.0)
@@ -36,6 +39,32 @@ _TINY, _ZERO, _ONE = np.array(1e-9), np.array(0.0), np.array(1.0)
 _SHUT_OPENING = np.array(1e-6)
 #: Reference water flow of the water-side film conductance hA_w, kg/s (hA_a: REFERENCE_AIR_MASS_FLOW).
 REFERENCE_WATER_MASS_FLOW = 0.5
+#: Mixed tanks in series standing for the supply pipe's plug flow: a front arrives spread over
+#: τ/√N of its transport time τ.
+SUPPLY_PIPE_TANKS = 12
+_TANK_POWERS = np.arange(1.0, SUPPLY_PIPE_TANKS + 1.0)
+# the transport kernel's orders 0 … N−1 and one more whose weight is 0 (log m! = ∞): the Toeplitz
+# matrix's upper triangle indexes it, so no mask is needed
+_KERNEL_ORDER = np.arange(SUPPLY_PIPE_TANKS + 1.0)
+_KERNEL_LOG_FACTORIAL = np.append(gammaln(_TANK_POWERS), np.inf)
+_KERNEL_INDEX = np.subtract.outer(np.arange(SUPPLY_PIPE_TANKS), np.arange(SUPPLY_PIPE_TANKS))
+_KERNEL_INDEX[_KERNEL_INDEX < 0] = SUPPLY_PIPE_TANKS
+
+
+def advance_tank_chain(excess: np.ndarray, entering_excess: np.ndarray, transport_dt: np.ndarray,
+                       loss_dt: np.ndarray) -> np.ndarray:
+    """Tanks in series, dθ_i/dt = k·(θ_{i−1} − θ_i) − λ·θ_i with θ_0 held over the step, advanced
+    exactly: with a = k·dt and x = (k + λ)·dt, the steady state θ_i* = θ_0·(a/x)^i and
+
+        θ_i(t+dt) = θ_i* + Σ_{j≤i} e^{−x}·a^{i−j}/(i−j)!·(θ_j(t) − θ_j*)
+
+    (the chain's matrix exponential). ``excess`` [..., N] the tanks' temperatures above their
+    surroundings [K], ``entering_excess`` [...] the water entering, ``transport_dt`` a, ``loss_dt`` λ·dt."""
+    a = np.asarray(transport_dt)[..., None]
+    x = a + np.asarray(loss_dt)[..., None]
+    steady = np.asarray(entering_excess)[..., None] * (a / x) ** _TANK_POWERS
+    kernel = np.exp(_KERNEL_ORDER * np.log(np.maximum(a, 1e-300)) - x - _KERNEL_LOG_FACTORIAL)
+    return steady + np.matmul(kernel[..., _KERNEL_INDEX], (excess - steady)[..., None])[..., 0]
 
 
 def valve_flow_share(position: np.ndarray, rangeability: np.ndarray) -> np.ndarray:
@@ -88,7 +117,7 @@ class HotWaterLoop(ComponentModel):
         Parameter("standing_water_time_constant", "s", 14400.0, 1800.0, 43200.0,
                   "heat loss of standing water to its surroundings, τ_loss"),
     )
-    states = ("inlet_water_temperature", "heat_rate", "outlet_air_temperature", "outlet_water_temperature")
+    states = ("supply_pipe_water_excess", "heat_rate", "outlet_air_temperature", "outlet_water_temperature")
     #: A day: every state forgets its start at least as fast as standing water (τ_loss ≤ 12 h leaves
     #: e⁻² of a wrong start), and the states start in steady state with the first inputs.
     settling_s = 86400.0
@@ -135,8 +164,11 @@ class HotWaterLoop(ComponentModel):
         water_flow = self._water_flow(params, np.clip(inputs["valve_position"], 0.0, 1.0))
         water_ratio = water_flow / REFERENCE_WATER_MASS_FLOW
         loss, loss_drive = self._standing_loss(params)
-        water_in = self._moved_water(None, supply, water_ratio / params["supply_pipe_time_constant"], loss, loss_drive,
-                                     dt_s)
+        transport = SUPPLY_PIPE_TANKS * water_ratio / params["supply_pipe_time_constant"]
+        surroundings = params["pipe_surroundings_temperature"]
+        kept = (transport / (transport + loss))[..., None]  # a tank's steady excess over the one before
+        pipe_excess = (supply - surroundings)[..., None] * kept ** _TANK_POWERS
+        water_in = surroundings + pipe_excess[..., -1]
         heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0),
                                                  water_flow, water_ratio, water_in)
         low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
@@ -145,7 +177,7 @@ class HotWaterLoop(ComponentModel):
             # lag factors of the constant time constants, computed once per run
             "_metal_factor": first_order_lag_factor(dt_s, params["metal_time_constant"]) + 0.0 * supply,
             "_air_factor": first_order_lag_factor(dt_s, params["air_side_time_constant"]) + 0.0 * supply,
-            "inlet_water_temperature": water_in + 0.0 * supply,
+            "supply_pipe_water_excess": pipe_excess + 0.0 * supply[..., None],
             "heat_rate": heat + 0.0 * supply,
             "outlet_air_temperature": np.clip(air_in + heat / c_air, low, high),
             "outlet_water_temperature": self._moved_water(
@@ -161,9 +193,11 @@ class HotWaterLoop(ComponentModel):
         water_flow = self._water_flow(params, position)
         water_ratio = water_flow / REFERENCE_WATER_MASS_FLOW
         loss, loss_drive = self._standing_loss(params)
-        water_in = state["inlet_water_temperature"] = self._moved_water(
-            state["inlet_water_temperature"], inputs["supply_water_temperature"],
-            water_ratio / params["supply_pipe_time_constant"], loss, loss_drive, dt_s)
+        surroundings = params["pipe_surroundings_temperature"]
+        pipe_excess = state["supply_pipe_water_excess"] = advance_tank_chain(
+            state["supply_pipe_water_excess"], inputs["supply_water_temperature"] - surroundings,
+            SUPPLY_PIPE_TANKS * dt_s * water_ratio / params["supply_pipe_time_constant"], loss * dt_s)
+        water_in = surroundings + pipe_excess[..., -1]
         heat_static, c_water, c_air = self._static_heat(params, air_in, air_flow, water_flow, water_ratio, water_in)
         heat = state["heat_rate"]
         heat = state["heat_rate"] = heat + state["_metal_factor"] * (heat_static - heat)

@@ -4,9 +4,17 @@ import math
 
 import numpy as np
 import pytest
+from scipy.linalg import expm
+from scipy.special import gammaincc
 
 from service.components.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, WATER_SPECIFIC_HEAT_J_PER_KG_K
-from service.components.hot_water_loop import HotWaterLoop, valve_flow_share
+from service.components.hot_water_loop import (
+    REFERENCE_WATER_MASS_FLOW,
+    SUPPLY_PIPE_TANKS,
+    HotWaterLoop,
+    advance_tank_chain,
+    valve_flow_share,
+)
 
 DT = 60.0
 
@@ -90,15 +98,23 @@ def test_heat_rate_follows_a_valve_step_with_the_metal_time_constant(params_for)
     np.testing.assert_allclose(heats, expected, rtol=1e-9)
 
 
-def test_coil_inlet_water_follows_the_supply_through_the_pipe_lag(params_for):
-    """A supply step 65 → 75 °C: T_w,in,k = 75 − 10·(1 − b)^{k+1}, b = 1 − e^{−Δt/(τ_pipe·ṁ_ref/ṁ_w)}."""
-    params = params_for(HotWaterLoop, **NO_LOSS)
-    state = HotWaterLoop().initial_state(params, _inputs(1.0), DT)
-    outs = _steps(params, state, _inputs(1.0, supply=75.0), 8)
-    flow = outs[0]["water_mass_flow"]
-    b = 1.0 - math.exp(-DT / (90.0 * 0.5 / flow))
-    np.testing.assert_allclose([o["inlet_water_temperature"] for o in outs],
-                               [75.0 - 10.0 * (1.0 - b) ** (k + 1) for k in range(8)], rtol=1e-12)
+def test_a_supply_step_reaches_the_coil_as_a_front_after_the_pipe_s_transport_time(params_for):
+    """A supply step 65 → 75 °C through N tanks in series of total transport time τ = τ_pipe·ṁ_ref/ṁ_w
+    arrives as the Erlang distribution's CDF: T_w,in(t) = 75 − 10·Q(N, N·t/τ) (Q the regularised
+    upper incomplete gamma function), exact at every step; half the step is there within a tenth of
+    τ of the transport time, and under 2 % of it before half of it."""
+    params = params_for(HotWaterLoop, supply_pipe_time_constant=300.0, **NO_LOSS)
+    state = HotWaterLoop().initial_state(params, _inputs(0.6), DT)
+    outs = _steps(params, state, _inputs(0.6, supply=75.0), 60)
+    transport_s = 300.0 * REFERENCE_WATER_MASS_FLOW / outs[0]["water_mass_flow"]
+    t = DT * np.arange(1, 61)
+    inlet = np.array([o["inlet_water_temperature"] for o in outs])
+    np.testing.assert_allclose(inlet, 75.0 - 10.0 * gammaincc(SUPPLY_PIPE_TANKS, SUPPLY_PIPE_TANKS * t / transport_s),
+                               rtol=1e-12)
+    half = t[np.argmax(inlet >= 70.0)]
+    assert 2 * DT < transport_s < t[-1] / 2
+    assert abs(half - transport_s) < 0.1 * transport_s + DT
+    assert inlet[t < 0.5 * transport_s].max() < 65.2  # under 2 % of the step
 
 
 def test_standing_water_cools_to_its_surroundings_with_tau_loss_and_moves_again_with_the_flow(params_for):
@@ -108,7 +124,8 @@ def test_standing_water_cools_to_its_surroundings_with_tau_loss_and_moves_again_
     params = params_for(HotWaterLoop)
     model = HotWaterLoop()
     state = model.initial_state(params, _inputs(1.0), DT)
-    start = {k: state[k][0] for k in ("inlet_water_temperature", "outlet_water_temperature")}
+    start = {"inlet_water_temperature": 18.0 + state["supply_pipe_water_excess"][0, -1],
+             "outlet_water_temperature": state["outlet_water_temperature"][0]}
     shut = _steps(params, state, _inputs(0.0), 240)  # four hours
     decay = math.exp(-240 * DT / 14400.0)
     for port, t0 in start.items():
@@ -121,3 +138,18 @@ def test_standing_water_cools_to_its_surroundings_with_tau_loss_and_moves_again_
 def test_the_reported_valve_position_is_the_clipped_command(run_model, params_for):
     for command, reached in ((1.3, 1.0), (-0.1, 0.0), (0.42, 0.42)):
         assert run_model(HotWaterLoop, params_for(HotWaterLoop), _inputs(command))[0]["valve_position"][0] == reached
+
+
+@pytest.mark.parametrize(("rate_per_s", "loss_per_s"), [(0.02, 1e-4), (0.0, 1e-4), (2.0, 0.0)])
+def test_the_tank_chain_advances_as_its_matrix_exponential(rate_per_s, loss_per_s):
+    """dθ/dt = A·θ + b·θ₀ (A = −(k + λ)·I + k·S, S the shift, b = k·e₁), held θ₀, against scipy's
+    expm of the system augmented by θ₀ (no flow: every tank only loses heat)."""
+    n, dt = SUPPLY_PIPE_TANKS, 120.0
+    system = np.zeros((n + 1, n + 1))
+    system[:n, :n] = -(rate_per_s + loss_per_s) * np.eye(n) + rate_per_s * np.eye(n, k=-1)
+    system[0, n] = rate_per_s
+    start = np.linspace(30.0, 5.0, n)
+    expected = (expm(system * dt) @ np.append(start, 40.0))[:n]
+    advanced = advance_tank_chain(start[None, :], np.array([40.0]), np.array([rate_per_s * dt]),
+                                  np.array([loss_per_s * dt]))[0]
+    np.testing.assert_allclose(advanced, expected, rtol=1e-10, atol=1e-12)
