@@ -36,8 +36,6 @@ def bayesian_run(tmp_path_factory):
     return store, data, outcome
 
 
-@pytest.mark.xfail(strict=False, reason="2026-11-28: the fan power band's width check fails after the coil model "
-                                        "gained two parameters; to be reworked (closing note)")
 def test_the_bayesian_band_is_the_stored_posterior_predictive_and_covers_the_held_out_data(bayesian_run):
     store, data, outcome = bayesian_run
     run = read_run(store, outcome.record.run_id)
