@@ -31,7 +31,8 @@ from service.components.component import (
 )
 from service.components.heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
 
-__all__ = ["HotWaterLoop", "REFERENCE_WATER_MASS_FLOW", "SUPPLY_PIPE_TANKS", "advance_tank_chain", "valve_flow_share"]
+__all__ = ["HotWaterLoop", "REFERENCE_WATER_MASS_FLOW", "SUPPLY_PIPE_TANKS", "advance_tank_chain", "steady_tank_chain",
+           "valve_flow_share"]
 
 # 0-d arrays: numpy's ufuncs take them faster than Python floats
 _TINY, _ZERO, _ONE = np.array(1e-9), np.array(0.0), np.array(1.0)
@@ -51,10 +52,17 @@ _KERNEL_INDEX = np.subtract.outer(np.arange(SUPPLY_PIPE_TANKS), np.arange(SUPPLY
 _KERNEL_INDEX[_KERNEL_INDEX < 0] = SUPPLY_PIPE_TANKS
 
 
+def steady_tank_chain(entering_excess: np.ndarray, transport: np.ndarray, loss: np.ndarray) -> np.ndarray:
+    """The tanks' steady excesses [..., N] of :func:`advance_tank_chain`'s chain, θ_i* = θ_0·(k/(k + λ))^i,
+    for ``entering_excess`` θ_0 [K], ``transport`` k and ``loss`` λ (rates, or both times one dt)."""
+    share = np.asarray(transport)[..., None] / (np.asarray(transport)[..., None] + np.asarray(loss)[..., None])
+    return np.asarray(entering_excess)[..., None] * share ** _TANK_POWERS
+
+
 def advance_tank_chain(excess: np.ndarray, entering_excess: np.ndarray, transport_dt: np.ndarray,
                        loss_dt: np.ndarray) -> np.ndarray:
     """Tanks in series, dθ_i/dt = k·(θ_{i−1} − θ_i) − λ·θ_i with θ_0 held over the step, advanced
-    exactly: with a = k·dt and x = (k + λ)·dt, the steady state θ_i* = θ_0·(a/x)^i and
+    exactly: with a = k·dt and x = (k + λ)·dt, the steady state θ_i* (:func:`steady_tank_chain`) and
 
         θ_i(t+dt) = θ_i* + Σ_{j≤i} e^{−x}·a^{i−j}/(i−j)!·(θ_j(t) − θ_j*)
 
@@ -62,7 +70,7 @@ def advance_tank_chain(excess: np.ndarray, entering_excess: np.ndarray, transpor
     surroundings [K], ``entering_excess`` [...] the water entering, ``transport_dt`` a, ``loss_dt`` λ·dt."""
     a = np.asarray(transport_dt)[..., None]
     x = a + np.asarray(loss_dt)[..., None]
-    steady = np.asarray(entering_excess)[..., None] * (a / x) ** _TANK_POWERS
+    steady = steady_tank_chain(entering_excess, transport_dt, loss_dt)
     kernel = np.exp(_KERNEL_ORDER * np.log(np.maximum(a, 1e-300)) - x - _KERNEL_LOG_FACTORIAL)
     return steady + np.matmul(kernel[..., _KERNEL_INDEX], (excess - steady)[..., None])[..., 0]
 
@@ -164,10 +172,9 @@ class HotWaterLoop(ComponentModel):
         water_flow = self._water_flow(params, np.clip(inputs["valve_position"], 0.0, 1.0))
         water_ratio = water_flow / REFERENCE_WATER_MASS_FLOW
         loss, loss_drive = self._standing_loss(params)
-        transport = SUPPLY_PIPE_TANKS * water_ratio / params["supply_pipe_time_constant"]
         surroundings = params["pipe_surroundings_temperature"]
-        kept = (transport / (transport + loss))[..., None]  # a tank's steady excess over the one before
-        pipe_excess = (supply - surroundings)[..., None] * kept ** _TANK_POWERS
+        pipe_excess = steady_tank_chain(supply - surroundings,
+                                        SUPPLY_PIPE_TANKS * water_ratio / params["supply_pipe_time_constant"], loss)
         water_in = surroundings + pipe_excess[..., -1]
         heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0),
                                                  water_flow, water_ratio, water_in)

@@ -3,10 +3,11 @@
 The flow topology (``queries/flow-edges.rq``: fluid edges, and heat couplings as edges both ways;
 off-path sensors placed at the node they observe, ``queries/observed-node.rq``; a closed control loop,
 ``queries/control-edges.rq``, as edges from what decides the controlled sensor's reading to the device
-the controller moves) is a directed graph, possibly with loops. For a failing sensor, the walk upstream stops at the nearest sensors; a failure
-a failing upstream sensor carries down (``carries(u, f)``, the caller's) is not reported again; the
-suspects are the nodes on a walk from a bounding upstream sensor to the failing one that passes no
-other sensor. The algorithm and its rationale: ``docs/diagnosis.md``, "Localisation on the flow path".
+the controller moves) is a directed graph, possibly with loops. For a failing sensor, the walk
+upstream stops at the nearest sensors; a failure a failing upstream sensor carries down
+(``carries(u, f)``, the caller's) is not reported again; the suspects are the nodes on a walk from
+a bounding upstream sensor to the failing one that passes no other sensor. The algorithm and its
+rationale: ``docs/diagnosis.md``, "Localisation on the flow path".
 """
 
 from __future__ import annotations
