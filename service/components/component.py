@@ -19,7 +19,7 @@ import numpy as np
 __all__ = [
     "Port", "Parameter", "ComponentModel", "SplicedEffect", "Params", "Signals", "State",
     "first_order_lag_factor", "AIR_SPECIFIC_HEAT_J_PER_KG_K", "WATER_SPECIFIC_HEAT_J_PER_KG_K",
-    "AIR_DENSITY_KG_PER_M3", "WATER_DENSITY_KG_PER_M3", "DEFAULT_SETTLING_S",
+    "AIR_DENSITY_KG_PER_M3", "WATER_DENSITY_KG_PER_M3", "DEFAULT_SETTLING_S", "MINIMUM_AIR_MASS_FLOW_KG_PER_S",
 ]
 
 Params = dict[str, np.ndarray]
@@ -30,6 +30,8 @@ State = dict[str, np.ndarray]
 AIR_SPECIFIC_HEAT_J_PER_KG_K = 1006.0
 #: c_p of liquid water near 50 °C, J/(kg·K).
 WATER_SPECIFIC_HEAT_J_PER_KG_K = 4181.0
+#: Floor of the air mass flow in heat-to-temperature conversions, kg/s: keeps T finite with the fan off.
+MINIMUM_AIR_MASS_FLOW_KG_PER_S = 0.1
 #: Standard air (20 °C, 101.325 kPa), kg/m³: converts volumetric to mass air flow.
 AIR_DENSITY_KG_PER_M3 = 1.204
 #: Water near 50 °C, kg/m³.
@@ -57,7 +59,10 @@ class Port:
 class Parameter:
     """A model parameter with its unit, default and physical prior bounds ``[lower, upper]``.
 
-    ``null`` is, for an effect, the value at which the effect vanishes (the base model).
+    ``null`` is, for an effect, the value at which the effect vanishes (the base model);
+    ``attainable`` the bounds that are states the physics reaches (a weight of 1: a valve entirely
+    stuck; a position of 0 or 1: stuck shut or wide open), so that a fit there is the effect itself,
+    not a size the prior cut short.
     """
 
     name: str
@@ -67,6 +72,7 @@ class Parameter:
     upper: float
     description: str = ""
     null: float | None = None
+    attainable: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.lower <= self.default <= self.upper:

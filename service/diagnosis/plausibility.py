@@ -1,8 +1,9 @@
 """Whether a fitted effect is physically plausible where it sits: a size at the prior's limit, or heat
 where the graph's component has no source, demotes it in the ranking, and the ranking says why.
 
-An effect parameter at a bound that is not its null means the data ask for more than the prior
-allows (the effect's size is the limit, not an estimate). A heat rate into the air
+An effect parameter at a bound that is neither its null nor a state the physics reaches (its
+``attainable`` bounds: a valve entirely stuck, or stuck wide open) means the data ask for more than
+the prior allows (the effect's size is the limit, not an estimate). A heat rate into the air
 (:attr:`~service.components.component.ComponentModel.heat_rate_parameter`) at a component that can
 only take heat from the air (``air_heat_sign = −1``: a chilled-water coil) has no source there.
 The method: ``docs/diagnosis.md``, "Plausibility".
@@ -24,10 +25,12 @@ BOUND_SHARE = 0.005
 
 def at_bound(value: float, spec) -> str | None:
     """``"lower"`` or ``"upper"`` when ``value`` lies within :data:`BOUND_SHARE` of the prior range
-    of that bound of ``spec`` (a :class:`~service.components.component.Parameter`), else None."""
+    of that bound of ``spec`` (a :class:`~service.components.component.Parameter`), else None; a
+    bound that is the effect's null or ``attainable`` is no limit of the prior: None there."""
     tolerance = BOUND_SHARE * (spec.upper - spec.lower)
+    meaningful = {spec.null, *spec.attainable}
     return next((side for side, bound in (("lower", spec.lower), ("upper", spec.upper))
-                 if abs(value - bound) <= tolerance), None)
+                 if abs(value - bound) <= tolerance and bound not in meaningful), None)
 
 
 def bound_note(value: float, spec) -> str:
@@ -49,7 +52,7 @@ def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect
     for j in effect_columns:
         spec = refs[j].spec
         side = at_bound(theta[j], spec)
-        if side and (spec.null is None or at_bound(spec.null, spec) != side):
+        if side:
             reasons.append(f"{refs[j].name} fits only at its {side} bound {_quantity(getattr(spec, side), spec.unit)}")
     effects = {refs[j].component for j in effect_columns}
     host = next((c for iri, c in model.components.items() if node in c.modeled_nodes and iri not in effects), None)

@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.components.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, Parameter, Port, SplicedEffect
-from service.components.effects.heat_to_air import MINIMUM_AIR_MASS_FLOW_KG_PER_S
+from service.components.component import (
+    AIR_SPECIFIC_HEAT_J_PER_KG_K,
+    MINIMUM_AIR_MASS_FLOW_KG_PER_S,
+    Parameter,
+    Port,
+    SplicedEffect,
+)
 
 __all__ = ["DuctHeatExchange"]
 

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.components.component import AIR_SPECIFIC_HEAT_J_PER_KG_K, Parameter, Port, SplicedEffect
+from service.components.component import (
+    AIR_SPECIFIC_HEAT_J_PER_KG_K,
+    MINIMUM_AIR_MASS_FLOW_KG_PER_S,
+    Parameter,
+    Port,
+    SplicedEffect,
+)
 
-__all__ = ["ConstantHeatGain", "MINIMUM_AIR_MASS_FLOW_KG_PER_S"]
-
-#: Floor of the air mass flow in heat-to-temperature conversions, kg/s: keeps T finite with the fan off.
-MINIMUM_AIR_MASS_FLOW_KG_PER_S = 0.1
+__all__ = ["ConstantHeatGain"]
 
 
 class ConstantHeatGain(SplicedEffect):

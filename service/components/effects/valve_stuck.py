@@ -18,8 +18,9 @@ class ValveStuck(SplicedEffect):
     inputs = (Port("value_in", "1", "commanded position"),)
     outputs = (Port("value_out", "1", "effective position"),)
     parameters = (
-        Parameter("stuck_weight", "1", 0.0, 0.0, 1.0, "share of the response that ignores the command, w", null=0.0),
-        Parameter("stuck_position", "1", 0.5, 0.0, 1.0, "position the actuator is stuck at, s"),
+        Parameter("stuck_weight", "1", 0.0, 0.0, 1.0, "share of the response that ignores the command, w", null=0.0,
+                  attainable=(1.0,)),
+        Parameter("stuck_position", "1", 0.5, 0.0, 1.0, "position the actuator is stuck at, s", attainable=(0.0, 1.0)),
     )
 
     def step(self, params, inputs, state, dt_s):
