@@ -13,20 +13,28 @@ from service.components.component import (
     Port,
 )
 
-__all__ = ["IMPELLER_HEAT_SHARE", "Fan", "fan_heat_rise_k", "part_load_power_fraction"]
+__all__ = ["IMPELLER_HEAT_SHARE", "MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S", "Fan", "fan_heat_rise_k",
+           "part_load_power_fraction"]
 
 #: Share of a fan's electric power that heats the air at the fan with its motor outside the air
 #: stream: the impeller's losses, (1 − η_fan)·η_motor·η_drive = 0.30 for η_fan = 0.65 and
 #: η_motor·η_drive = 0.87 (the fan's useful work is dissipated downstream, in the duct system).
 IMPELLER_HEAT_SHARE = 0.3
 
+#: The most electric power per unit of air flow a fan's heat is counted with [W/(m³/s)]: above
+#: EN 16798-3's worst class, SFP 7 (> 4,500). Where neither a meter nor the graph pins a fan's power,
+#: its fitted power would otherwise be a heat source of any size.
+MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S = 5000.0
+
 
 def fan_heat_rise_k(share: np.ndarray, power_w: np.ndarray, air_mass_flow_kg_per_s: np.ndarray) -> np.ndarray:
-    """ΔT = share·P/(max(ṁ, ṁ_min)·c_p) [K]: the rise of the air temperature across a fan that puts
-    ``share`` of its electric power P [W] into an air stream of ṁ [kg/s] (ṁ_min:
-    ``MINIMUM_AIR_MASS_FLOW_KG_PER_S``)."""
+    """ΔT = share·min(P, SFP_max·ṁ/ρ)/(max(ṁ, ṁ_min)·c_p) [K]: the rise of the air temperature across
+    a fan that puts ``share`` of its electric power P [W] into an air stream of ṁ [kg/s], the power
+    counted up to ``MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S`` (so at most 1.24 K for the impeller's
+    share), ṁ_min ``MINIMUM_AIR_MASS_FLOW_KG_PER_S``."""
+    power = np.minimum(power_w, MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S / AIR_DENSITY_KG_PER_M3 * air_mass_flow_kg_per_s)
     flow = np.maximum(air_mass_flow_kg_per_s, MINIMUM_AIR_MASS_FLOW_KG_PER_S)
-    return share * power_w / (flow * AIR_SPECIFIC_HEAT_J_PER_KG_K)
+    return share * power / (flow * AIR_SPECIFIC_HEAT_J_PER_KG_K)
 
 
 def part_load_power_fraction(flow_fraction: np.ndarray, *, c1: np.ndarray, c2: np.ndarray, c3: np.ndarray,

@@ -56,3 +56,12 @@ def test_motor_heat_adds_its_share_on_top_of_the_impellers_and_the_air_gets_at_m
     fan = _fan(run_model, params_for(Fan), 1.5)
     rise_at_most = 1798.38 / (1.806 * 1006.0)
     assert fan["outlet_air_temperature"] - 4.0 + out - 4.297 == pytest.approx(rise_at_most, rel=1e-5)
+
+
+def test_the_heat_counts_the_power_up_to_the_worst_specific_fan_power_so_an_unpinned_power_is_no_heater(
+        run_model, params_for):
+    """A power fitted at 50 kW for 1.5 m³/s (33 kW per m³/s, where EN 16798-3's worst class starts at
+    4.5) heats the air as 5 kW per m³/s would: 0.3·5000/(1.204·1006) = 1.238 K, not 8.3 K."""
+    out = _fan(run_model, params_for(Fan, nominal_power=50000.0), 1.5)
+    assert out["electric_power"] == pytest.approx(50000.0 * 0.9991)
+    assert out["outlet_air_temperature"] - 4.0 == pytest.approx(0.3 * 5000.0 / (1.204 * 1006.0), rel=1e-9)
