@@ -4,37 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.components.component import (
-    AIR_DENSITY_KG_PER_M3,
-    AIR_SPECIFIC_HEAT_J_PER_KG_K,
-    MINIMUM_AIR_MASS_FLOW_KG_PER_S,
-    ComponentModel,
-    Parameter,
-    Port,
-)
+from service.components.component import AIR_DENSITY_KG_PER_M3, ComponentModel, Parameter, Port
 
-__all__ = ["IMPELLER_HEAT_SHARE", "MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S", "Fan", "fan_heat_rise_k",
-           "part_load_power_fraction"]
-
-#: Share of a fan's electric power that heats the air at the fan with its motor outside the air
-#: stream: the impeller's losses, (1 − η_fan)·η_motor·η_drive = 0.30 for η_fan = 0.65 and
-#: η_motor·η_drive = 0.87 (the fan's useful work is dissipated downstream, in the duct system).
-IMPELLER_HEAT_SHARE = 0.3
-
-#: The most electric power per unit of air flow a fan's heat is counted with [W/(m³/s)]: above
-#: EN 16798-3's worst class, SFP 7 (> 4,500). Where neither a meter nor the graph pins a fan's power,
-#: its fitted power would otherwise be a heat source of any size.
-MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S = 5000.0
-
-
-def fan_heat_rise_k(share: np.ndarray, power_w: np.ndarray, air_mass_flow_kg_per_s: np.ndarray) -> np.ndarray:
-    """ΔT = share·min(P, SFP_max·ṁ/ρ)/(max(ṁ, ṁ_min)·c_p) [K]: the rise of the air temperature across
-    a fan that puts ``share`` of its electric power P [W] into an air stream of ṁ [kg/s], the power
-    counted up to ``MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S`` (so at most 1.24 K for the impeller's
-    share), ṁ_min ``MINIMUM_AIR_MASS_FLOW_KG_PER_S``."""
-    power = np.minimum(power_w, MAXIMUM_SPECIFIC_FAN_POWER_W_PER_M3_S / AIR_DENSITY_KG_PER_M3 * air_mass_flow_kg_per_s)
-    flow = np.maximum(air_mass_flow_kg_per_s, MINIMUM_AIR_MASS_FLOW_KG_PER_S)
-    return share * power / (flow * AIR_SPECIFIC_HEAT_J_PER_KG_K)
+__all__ = ["Fan", "part_load_power_fraction"]
 
 
 def part_load_power_fraction(flow_fraction: np.ndarray, *, c1: np.ndarray, c2: np.ndarray, c3: np.ndarray,
@@ -48,9 +20,8 @@ def part_load_power_fraction(flow_fraction: np.ndarray, *, c1: np.ndarray, c2: n
 class Fan(ComponentModel):
     """P = P_nom · (c1 + c2·f + c3·f² + c4·f³),  f = max(V̇, 0) / V̇_nom   [W];  P = 0 at f = 0 (off)
 
-    ṁ = ρ_air · V̇ [kg/s] with ρ_air = 1.204 kg/m³;  T_out = T_in + ΔT(0.3, P, ṁ) (``fan_heat_rise_k``):
-    the impeller's losses heat the air (``IMPELLER_HEAT_SHARE``; a motor in the air stream adds its
-    own losses, the FanMotorHeat effect). Defaults: the
+    ṁ = ρ_air · V̇ [kg/s] with ρ_air = 1.204 kg/m³; the air leaves at its inlet temperature (motor
+    heat in the air stream is the FanMotorHeat effect, not part of this base model). Defaults: the
     ASHRAE 90.1 Appendix G variable-speed fan curve (c1..c4 = 0.0013, 0.1470, 0.9506, −0.0998,
     sum 0.9991 at f = 1); bounds wide enough for inlet-vane, variable-pitch and EC fans.
     """
@@ -78,10 +49,8 @@ class Fan(ComponentModel):
         fraction = flow / params["nominal_air_flow"]
         power = params["nominal_power"] * part_load_power_fraction(
             fraction, c1=params["c1"], c2=params["c2"], c3=params["c3"], c4=params["c4"])
-        mass_flow = AIR_DENSITY_KG_PER_M3 * flow
         return {
-            "outlet_air_temperature": inputs["inlet_air_temperature"] + fan_heat_rise_k(IMPELLER_HEAT_SHARE, power,
-                                                                                        mass_flow),
-            "outlet_air_mass_flow": mass_flow,
+            "outlet_air_temperature": inputs["inlet_air_temperature"],
+            "outlet_air_mass_flow": AIR_DENSITY_KG_PER_M3 * flow,
             "electric_power": power,
         }
