@@ -79,6 +79,9 @@ class Parameter:
             raise ValueError(
                 f"parameter {self.name}: default {self.default} outside bounds [{self.lower}, {self.upper}]"
             )
+        if not set(self.attainable) <= {self.lower, self.upper}:
+            raise ValueError(f"parameter {self.name}: attainable {self.attainable} are not its bounds "
+                             f"[{self.lower}, {self.upper}]")
 
 
 #: Settling time of a component with states that does not state its own [s]: a day, the period of

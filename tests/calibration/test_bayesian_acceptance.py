@@ -137,10 +137,12 @@ def test_test_window_ace_at_90_percent_within_5_percent(exact_bayes):
 
 
 def _ljung_box(residual: np.ndarray, lags: int = 10) -> float:
-    """Q = n(n + 2)·Σ_{k=1..K} ρ_k²/(n − k): χ² with K degrees of freedom for white residuals."""
-    r = residual[np.isfinite(residual)] - np.nanmean(residual)
-    n = r.size
-    rho = np.array([r[:-k] @ r[k:] for k in range(1, lags + 1)]) / (r @ r)
+    """Q = n(n + 2)·Σ_{k=1..K} ρ_k²/(n − k): χ² with K degrees of freedom for white residuals; a
+    missing value (NaN) drops the pairs it is in, so lags stay steps apart in time, as the lag-1
+    autocorrelation of :func:`~service.calibration.metrics.target_metrics` pairs them."""
+    r = residual - np.nanmean(residual)
+    n = int(np.isfinite(r).sum())
+    rho = np.array([np.nansum(r[:-k] * r[k:]) for k in range(1, lags + 1)]) / np.nansum(r**2)
     return float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
 
 

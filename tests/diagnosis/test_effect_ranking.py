@@ -132,6 +132,8 @@ def test_a_stuck_valve_entirely_stuck_or_wide_open_or_a_fit_at_the_null_is_the_e
     """A stuck valve's weight at 1 (entirely stuck) and its position at 0 or 1 (stuck shut or wide open)
     are states the physics reaches, and an effect fitted at its null bound is absent: none is flagged;
     a leak at its 0.8 limit is."""
+    import dataclasses
+
     from service.components.effects.valve_leakage import ValveLeakage
     from service.components.effects.valve_stuck import ValveStuck
     from service.diagnosis.plausibility import bound_note as _bound_note
@@ -140,6 +142,8 @@ def test_a_stuck_valve_entirely_stuck_or_wide_open_or_a_fit_at_the_null_is_the_e
     assert [_bound_note(v, weight) for v in (0.99999, 0.0, 0.9)] == ["", "", ""]
     assert [_bound_note(v, position) for v in (1.0, 0.0)] == ["", ""]
     assert _bound_note(0.8, ValveLeakage.parameters[0]) == " (at its upper bound 0.8)"
+    with pytest.raises(ValueError, match=r"attainable \(0\.99,\) are not its bounds \[0\.0, 1\.0\]"):
+        dataclasses.replace(weight, attainable=(0.99,))
 
 
 def test_an_effect_fitted_only_at_a_bound_other_than_its_null_or_without_a_heat_source_is_ranked_below():
