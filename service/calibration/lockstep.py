@@ -15,44 +15,50 @@ import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import TypeVar
+from typing import Generic, TypeVar
 
 import numpy as np
 
 from service.calibration.problem import CalibrationProblem
 
-__all__ = ["LockstepRuns", "run_in_lockstep", "with_prefetched_rows"]
+__all__ = ["GatheredCalls", "LockstepRuns", "run_in_lockstep", "with_prefetched_rows"]
 
+Request = TypeVar("Request")
 Result = TypeVar("Result")
 Outputs = dict[str, np.ndarray]
 
 
-class LockstepRuns:
-    """``run(theta)`` of ``n_fits`` concurrent fits gathered into calls of ``simulate`` (θ rows →
-    target → ``ndarray[n_rows, n_steps]``); a fit calls :meth:`leave` when it ends."""
+class GatheredCalls(Generic[Request, Result]):
+    """Calls of ``n_callers`` concurrent callers gathered into batches: a call blocks until every
+    caller still running has asked (or left), then ``batch`` answers all requests at once (a list of
+    requests ordered by caller → their results in that order); a caller calls :meth:`leave` when it
+    ends, a new one :meth:`join` before it asks. Callers are named by comparable keys (the batch's order)."""
 
-    def __init__(self, simulate: Callable[[np.ndarray], Outputs], n_fits: int):
-        self._simulate = simulate
-        self._active = n_fits
+    def __init__(self, batch: Callable[[list[Request]], list[Result]], n_callers: int):
+        self._batch = batch
+        self._active = n_callers
         self._waiting: dict[int, dict] = {}
         self._condition = threading.Condition()
 
-    def caller(self, fit: int) -> Callable[[np.ndarray], Outputs]:
-        """The ``run`` of fit number ``fit``: blocks until its batch is simulated."""
-        def run(theta: np.ndarray) -> Outputs:
-            slot = {"theta": np.atleast_2d(theta)}
-            with self._condition:
-                self._waiting[fit] = slot
-                self._flush_when_all_wait()
-                while "outputs" not in slot and "error" not in slot:
-                    self._condition.wait()
-            if "error" in slot:
-                raise slot["error"]
-            return slot["outputs"]
-        return run
+    def ask(self, caller: int, request: Request) -> Result:
+        """``request``'s result, from the batch it joins."""
+        slot = {"request": request}
+        with self._condition:
+            self._waiting[caller] = slot
+            self._flush_when_all_wait()
+            while "result" not in slot and "error" not in slot:
+                self._condition.wait()
+        if "error" in slot:
+            raise slot["error"]
+        return slot["result"]
+
+    def join(self) -> None:
+        """One more caller: batches wait for it too."""
+        with self._condition:
+            self._active += 1
 
     def leave(self) -> None:
-        """One fit ended: the others no longer wait for it."""
+        """One caller ended: the others no longer wait for it."""
         with self._condition:
             self._active -= 1
             self._flush_when_all_wait()
@@ -60,17 +66,33 @@ class LockstepRuns:
     def _flush_when_all_wait(self) -> None:
         if not self._waiting or len(self._waiting) < self._active:
             return
-        batch = [self._waiting.pop(fit) for fit in sorted(self._waiting)]
-        sizes = np.cumsum([0] + [slot["theta"].shape[0] for slot in batch])
+        batch = [self._waiting.pop(caller) for caller in sorted(self._waiting)]
         try:
-            outputs = self._simulate(np.vstack([slot["theta"] for slot in batch]))
-        except BaseException as exc:  # every fit of the batch sees the failure
+            results = self._batch([slot["request"] for slot in batch])
+        except BaseException as exc:  # every caller of the batch sees the failure
             for slot in batch:
                 slot["error"] = exc
         else:
-            for slot, start, stop in zip(batch, sizes[:-1], sizes[1:]):
-                slot["outputs"] = {key: values[start:stop] for key, values in outputs.items()}
+            for slot, result in zip(batch, results):
+                slot["result"] = result
         self._condition.notify_all()
+
+
+class LockstepRuns(GatheredCalls[np.ndarray, Outputs]):
+    """``run(theta)`` of ``n_fits`` concurrent fits gathered into calls of ``simulate`` (θ rows →
+    target → ``ndarray[n_rows, n_steps]``); a fit calls :meth:`leave` when it ends."""
+
+    def __init__(self, simulate: Callable[[np.ndarray], Outputs], n_fits: int):
+        def batch(thetas: list[np.ndarray]) -> list[Outputs]:
+            sizes = np.cumsum([0] + [theta.shape[0] for theta in thetas])
+            outputs = simulate(np.vstack(thetas))
+            return [{key: values[start:stop] for key, values in outputs.items()}
+                    for start, stop in zip(sizes[:-1], sizes[1:])]
+        super().__init__(batch, n_fits)
+
+    def caller(self, fit: int) -> Callable[[np.ndarray], Outputs]:
+        """The ``run`` of fit number ``fit``: blocks until its batch is simulated."""
+        return lambda theta: self.ask(fit, np.atleast_2d(theta))
 
 
 def run_in_lockstep(simulate: Callable[[np.ndarray], Outputs], starts: Sequence,

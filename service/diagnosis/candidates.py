@@ -11,9 +11,11 @@ Candidates are evaluated in worker processes. The method: ``docs/diagnosis.md``,
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
+from multiprocessing import Manager
+from queue import Empty
 from typing import NamedTuple
 
 import numpy as np
@@ -51,6 +53,7 @@ from service.diagnosis.refits import (
     refit_calibrator,
     sample_fractions,
 )
+from service.diagnosis.shared_runs import OwnRuns, SharedRuns, shared_model
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.matching.matcher import match_signature
@@ -132,10 +135,11 @@ def _estimate_text(name: str, value: float, standard_error: float, spec) -> str:
     return f"{name} = {value:.3g} ± {standard_error:.2g}" + bound_note(value, spec)
 
 
-def _evaluate_candidate(job: CandidateJob) -> EffectEvidence:
-    """Score test, refit under both hypotheses, ΔBIC and the evaluation half's error before and after."""
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    md = ModelData(job.model, job.data, job.substeps, job.compared)
+def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> EffectEvidence:
+    """Score test, refit under both hypotheses, ΔBIC and the evaluation half's error before and after;
+    ``runs``: where its simulations run (default: its own model's simulator, :class:`OwnRuns`)."""
+    runs = runs or OwnRuns(job.data, job.substeps, job.compared)
+    md = runs.data_for(job.model)
     refs = job.model.estimated_parameters
     effect_columns = [j for j, r in enumerate(refs) if r.key not in job.base_theta]
     theta0 = np.array([job.base_theta.get(r.key, np.nan) for r in refs])
@@ -144,33 +148,43 @@ def _evaluate_candidate(job: CandidateJob) -> EffectEvidence:
     if job.drift_onsets:  # a step drift: its onset picked by the fit, on the grid
         job = replace(job, model=step_onset(md, job.fit_windows, [theta0, theta_train], job.drift_onsets,
                                             job.target_scales))
-        md = ModelData(job.model, job.data, job.substeps, job.compared)
-    problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
-    calibrator = refit_calibrator(job.seed, job.refit_max_nfev)
-    # the score test's members, the probe's grid and the refit's screen in one simulate call
-    problem = with_prefetched_rows(problem, score_ensemble(problem, theta0),
-                                   probe_ensemble(problem, theta0, effect_columns, theta_train),
-                                   problem.from_unit(calibrator.screen_points(problem)))
+        md = runs.data_for(job.model)
+    appearing = []  # the fits of a fault appearing in the test window, independent of the fit throughout
+    if job.onset_windows is not None and effect_columns and job.signature is not None and job.signature.can_appear:
+        appearing.append(("appearing in the test window",
+                          lambda data: fit_onset(data, job, theta_train, effect_columns)))
+        host = host_columns(job)
+        if host:  # an unexercised host may hide what the effect does: fit it with the effect too
+            appearing.append(("appearing in the test window, its host refitted",
+                              lambda data: fit_onset(data, job, theta_train, effect_columns, host)))
+
+    def present_throughout():
+        """(the fit windows' problem, the score test at the null, the fit of the effect present throughout)."""
+        problem = md.problem(job.fit_windows, default=theta0, target_scales=job.target_scales)
+        calibrator = refit_calibrator(job.seed, job.refit_max_nfev)
+        # the score test's members, the probe's grid and the refit's screen in one simulate call
+        problem = with_prefetched_rows(problem, score_ensemble(problem, theta0),
+                                       probe_ensemble(problem, theta0, effect_columns, theta_train),
+                                       problem.from_unit(calibrator.screen_points(problem)))
+        score = score_test(problem, theta0, effect_columns,
+                           sample_fractions=[job.sample_fractions[k] for k in problem.target_keys])
+        problem = replace(problem, default=probe_start(problem, theta0, effect_columns, theta_train))
+        calibrator.fit(problem)
+        return problem, score, Fit(calibrator.theta_, calibrator.standard_errors_,
+                                   mean_squares(calibrator.residuals_, job.target_scales),
+                                   sample_fractions(calibrator.residuals_),
+                                   len(effect_columns) + (1 if job.drift_onsets else 0), calibrator.converged_)
+
+    (problem, score, throughout), onsets = runs.alongside(job.model, present_throughout, [f for _, f in appearing])
+    fits = {"present throughout": throughout} | {name: fit for (name, _), fit in zip(appearing, onsets)}
     keys = problem.target_keys
-    score = score_test(problem, theta0, effect_columns, sample_fractions=[job.sample_fractions[k] for k in keys])
     counts = np.array([problem.masks[k].sum() for k in keys], dtype=float)
 
-    def bic_against(before: dict[str, float], after: dict[str, float], fractions: dict[str, float], freed: int) -> float:
+    def bic_against(before: dict[str, float], after: dict[str, float], fractions: dict[str, float],
+                    freed: int) -> float:
         return delta_bic([before[k] * c for k, c in zip(keys, counts)], [after[k] * c for k, c in zip(keys, counts)],
                          counts * np.array([fractions[k] for k in keys]), freed)
 
-    problem = replace(problem, default=probe_start(problem, theta0, effect_columns, theta_train))
-    calibrator.fit(problem)
-    fits = {"present throughout": Fit(calibrator.theta_, calibrator.standard_errors_,
-                                       mean_squares(calibrator.residuals_, job.target_scales),
-                                       sample_fractions(calibrator.residuals_),
-                                       len(effect_columns) + (1 if job.drift_onsets else 0), calibrator.converged_)}
-    if job.onset_windows is not None and effect_columns and job.signature is not None and job.signature.can_appear:
-        fits["appearing in the test window"] = fit_onset(md, job, theta_train, effect_columns)
-        host = host_columns(job)
-        if host:  # an unexercised host may hide what the effect does: fit it with the effect too
-            fits["appearing in the test window, its host refitted"] = fit_onset(
-                md, job, theta_train, effect_columns, host)
     # the hypotheses compared by their ΔBIC against one base, each counting what it frees; n_eff from
     # the hypothesis's own residuals (the base's hold the very misfit the effect explains: on a
     # FLEXLAB fault day their ρ₁ ≈ 0.98 left ~3 effective observations per sensor)
@@ -183,11 +197,11 @@ def _evaluate_candidate(job: CandidateJob) -> EffectEvidence:
     # base model's, not the effect's: "before" is the better of the base refit and that
     theta_null = theta.copy()
     theta_null[effect_columns] = null_values(refs, effect_columns)
-    runs = md.simulate_targets(job.run_window, np.vstack([theta_null, theta]))
+    predicted = md.simulate_targets(job.run_window, np.vstack([theta_null, theta]))
     fit = job.fit_windows[0]
     if len(job.fit_windows) == 1 and fit.start == job.run_window.start and fit.stop <= job.run_window.stop:
         # a run is the same over its window's first part as over that part alone (tested)
-        null_outputs = {key: values[:1, :fit.stop - fit.start] for key, values in runs.items()}
+        null_outputs = {key: values[:1, :fit.stop - fit.start] for key, values in predicted.items()}
     else:
         null_outputs = problem.run(theta_null[None, :])
     null_residuals = problem.weighted_residuals(null_outputs)[0]
@@ -195,7 +209,7 @@ def _evaluate_candidate(job: CandidateJob) -> EffectEvidence:
     base_mean_squares = min((job.base_mean_squares, null_mean_squares),
                             key=lambda before: bic_against(job.base_mean_squares, before, job.sample_fractions, 0))
     observed = md.observed(job.evaluation)
-    null, after = _evaluation_rows(runs, job.run_window, job.evaluation)
+    null, after = _evaluation_rows(predicted, job.run_window, job.evaluation)
     before = min((job.base_evaluation_prediction, null),
                  key=lambda prediction: weighted_test_error(observed, prediction, job.target_scales))
     effect, effect_iri, label = job.identity()
@@ -259,13 +273,25 @@ def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: di
     )
 
 
-def _told(evaluated, jobs: list[CandidateJob], say) -> list[EffectEvidence]:
-    """The candidates' evidence in order, saying how far the catalog is as each one is done."""
-    evidence = []
-    for done, item in enumerate(evaluated, start=1):
-        evidence.append(item)
-        say(f"effect {done} of {len(jobs)} refitted: {item.effect} at {local_name(item.node)}")
-    return evidence
+def _evaluate_together(jobs: Sequence[CandidateJob], shared: AssembledModel,
+                       tell: Callable[[tuple[str, str]], None]) -> list[EffectEvidence]:
+    """The candidates ``jobs`` evaluated side by side, one thread each, their simulations made by
+    ``shared`` (the base with all their effects, :mod:`service.diagnosis.shared_runs`); ``tell``
+    gets (effect, node) as each is done."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    first = jobs[0]
+    runs = SharedRuns(ModelData(shared, first.data, first.substeps, first.compared), len(jobs))
+
+    def one(index: int) -> EffectEvidence:
+        try:
+            evidence = _evaluate_candidate(jobs[index], runs.seat(index))
+        finally:
+            runs.leave()
+        tell((evidence.effect, evidence.node))
+        return evidence
+
+    with ThreadPoolExecutor(max_workers=len(jobs)) as pool:
+        return list(pool.map(one, range(len(jobs))))
 
 
 def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signature], base, *, seed: int,
@@ -309,12 +335,36 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
         for signature, node, candidate_model, onsets in [(c.signature, c.node, c.model, ()) for c in candidates]
         + [(None, d.node, d.model, d.onsets) for d in drifts]
     ]
-    workers = workers if workers is not None else min(len(jobs), usable_cpu_count())
-    if workers > 1 and len(jobs) > 1:
-        with ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent) as pool:
-            evidence = _told(pool.map(_evaluate_candidate, jobs), jobs, say)
+    if not jobs:
+        return [], skipped
+    workers = max(1, min(len(jobs), workers if workers is not None else usable_cpu_count()))
+    groups = [list(range(start, len(jobs), workers)) for start in range(workers)]
+    shared = [shared_model(store, model_name, library, [EffectRequest(jobs[i].signature.id, jobs[i].node)
+                                                        for i in group if jobs[i].signature is not None])
+              for group in groups]
+    tasks = [([jobs[i] for i in group], model) for group, model in zip(groups, shared)]
+    done = []
+
+    def told(item: tuple[str, str]) -> None:  # saying how far the catalog is as each candidate is done
+        done.append(item)
+        say(f"effect {len(done)} of {len(jobs)} refitted: {item[0]} at {local_name(item[1])}")
+
+    if workers > 1:  # the workers tell through a queue the main thread reads
+        with Manager() as manager, ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent) as pool:
+            queue = manager.Queue()
+            futures = [pool.submit(_evaluate_together, group_jobs, model, queue.put) for group_jobs, model in tasks]
+            while len(done) < len(jobs) and not any(f.done() and f.exception() for f in futures):
+                try:
+                    told(queue.get(timeout=0.2))
+                except Empty:
+                    pass
+            results = [future.result() for future in futures]
     else:
-        evidence = _told(map(_evaluate_candidate, jobs), jobs, say)
+        results = [_evaluate_together(group_jobs, model, told) for group_jobs, model in tasks]
+    evidence: list[EffectEvidence] = [None] * len(jobs)
+    for group, items in zip(groups, results):
+        for i, item in zip(group, items):
+            evidence[i] = item
     for job, item in zip(jobs, evidence):
         item.model = item.model or job.model
     return rank_evidence(evidence), skipped
