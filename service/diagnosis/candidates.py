@@ -11,6 +11,7 @@ Candidates are evaluated in worker processes. The method: ``docs/diagnosis.md``,
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
@@ -343,11 +344,12 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
                                                         for i in group if jobs[i].signature is not None])
               for group in groups]
     tasks = [([jobs[i] for i in group], model) for group, model in zip(groups, shared)]
-    done = []
+    done, counting = [], threading.Lock()
 
     def told(item: tuple[str, str]) -> None:  # saying how far the catalog is as each candidate is done
-        done.append(item)
-        say(f"effect {len(done)} of {len(jobs)} refitted: {item[0]} at {local_name(item[1])}")
+        with counting:
+            done.append(item)
+            say(f"effect {len(done)} of {len(jobs)} refitted: {item[0]} at {local_name(item[1])}")
 
     if workers > 1:  # the workers tell through a queue the main thread reads
         with Manager() as manager, ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent) as pool:
