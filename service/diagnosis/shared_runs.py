@@ -189,11 +189,12 @@ class _Seat:
             finally:
                 runs.leave()
 
+        seats = [runs.member_data(model, (self._index, k)) for k in range(1, len(others) + 1)]
         with ThreadPoolExecutor(max_workers=len(others)) as pool:
             futures = []
-            for k, other in enumerate(others, start=1):
-                runs.join()
-                futures.append(pool.submit(child, other, runs.member_data(model, (self._index, k))))
+            for other, data in zip(others, seats):
+                runs.join()  # counted before it can ask, and only once it will
+                futures.append(pool.submit(child, other, data))
             try:
                 first = main()
             finally:
