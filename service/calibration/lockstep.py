@@ -12,7 +12,7 @@ screened starts) share one call through :func:`with_prefetched_rows`.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from typing import Generic, TypeVar
@@ -21,11 +21,19 @@ import numpy as np
 
 from service.calibration.problem import CalibrationProblem
 
-__all__ = ["GatheredCalls", "LockstepRuns", "run_in_lockstep", "with_prefetched_rows"]
+__all__ = ["GatheredCalls", "LockstepRuns", "run_in_lockstep", "split_rows", "with_prefetched_rows"]
 
+Key = TypeVar("Key")
 Request = TypeVar("Request")
 Result = TypeVar("Result")
 Outputs = dict[str, np.ndarray]
+
+
+def split_rows(outputs: Mapping[Key, np.ndarray], counts: Sequence[int]) -> list[dict[Key, np.ndarray]]:
+    """``outputs`` (key → ``ndarray[n_rows, ...]``) cut into consecutive blocks of ``counts`` rows."""
+    bounds = np.cumsum([0, *counts])
+    return [{key: values[start:stop] for key, values in outputs.items()}
+            for start, stop in zip(bounds[:-1], bounds[1:])]
 
 
 class GatheredCalls(Generic[Request, Result]):
@@ -37,10 +45,10 @@ class GatheredCalls(Generic[Request, Result]):
     def __init__(self, batch: Callable[[list[Request]], list[Result]], n_callers: int):
         self._batch = batch
         self._active = n_callers
-        self._waiting: dict[int, dict] = {}
+        self._waiting: dict[Hashable, dict] = {}
         self._condition = threading.Condition()
 
-    def ask(self, caller: int, request: Request) -> Result:
+    def ask(self, caller: Hashable, request: Request) -> Result:
         """``request``'s result, from the batch it joins."""
         slot = {"request": request}
         with self._condition:
@@ -84,10 +92,7 @@ class LockstepRuns(GatheredCalls[np.ndarray, Outputs]):
 
     def __init__(self, simulate: Callable[[np.ndarray], Outputs], n_fits: int):
         def batch(thetas: list[np.ndarray]) -> list[Outputs]:
-            sizes = np.cumsum([0] + [theta.shape[0] for theta in thetas])
-            outputs = simulate(np.vstack(thetas))
-            return [{key: values[start:stop] for key, values in outputs.items()}
-                    for start, stop in zip(sizes[:-1], sizes[1:])]
+            return split_rows(simulate(np.vstack(thetas)), [theta.shape[0] for theta in thetas])
         super().__init__(batch, n_fits)
 
     def caller(self, fit: int) -> Callable[[np.ndarray], Outputs]:

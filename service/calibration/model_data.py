@@ -82,6 +82,12 @@ class ModelData:
         theta = np.atleast_2d(theta)
         if self.model.drifts:
             factors = self.model.drift_factors(theta, self.time_s(window)) | dict(factors or {})
+        return self._simulate(window, theta, fixed, record, factors)
+
+    def _simulate(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None,
+                  record: Sequence[tuple[str, str]] | None,
+                  factors: Mapping[str, np.ndarray] | None) -> SimulationResult:
+        """:meth:`run`'s simulation, the drifts' factors included: the model's simulator after the warm-up."""
         return self.simulator.run(self.boundary(window), theta, fixed=fixed, record=record,
                                   warmup_steps=self.warmup_steps, factors=factors)
 

@@ -5,7 +5,8 @@ Each candidate is fitted on the training window plus the first half of the test 
 the second half (:func:`split_windows`), against the base model refitted on the same windows or as
 trained: score test at the null, refit (present throughout, or appearing in the test window),
 ΔBIC, test-window error removed (:mod:`service.diagnosis.ranking`), and one sentence of explanation.
-Candidates are evaluated in worker processes. The method: ``docs/diagnosis.md``, "What is missing".
+Candidates are evaluated side by side, their simulations shared
+(:mod:`service.diagnosis.shared_runs`). The method: ``docs/diagnosis.md``, "What is missing".
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from typing import NamedTuple, TypeVar
 
 import numpy as np
 
-from service.calibration.lockstep import GatheredCalls
+from service.calibration.lockstep import GatheredCalls, split_rows
 from service.calibration.model_data import ModelData
 from service.graph.store import GraphStore
 from service.matching.signature import Signature
@@ -71,7 +71,6 @@ class SharedRuns:
         self._null = np.array([ref.spec.null if ref.spec.null is not None else ref.spec.default for ref in refs])
         self._calls = GatheredCalls(self._batch, n_candidates)
         self._by_warmup = {shared.warmup_s: shared}
-        self.n_runs = 0
 
     def seat(self, index: int) -> _Seat:
         """Candidate number ``index``'s access to the shared runs (:class:`OwnRuns`' interface)."""
@@ -120,17 +119,15 @@ class SharedRuns:
             if first.warmup_s not in self._by_warmup:
                 self._by_warmup[first.warmup_s] = replace(self.shared, warmup_s=first.warmup_s)
             shared = self._by_warmup[first.warmup_s]
-            sizes = np.cumsum([0] + [requests[i].theta.shape[0] for i in indices])
             n_steps = first.window.stop - first.window.start + shared.warmup_steps
             keys = sorted({key for i in indices for key in requests[i].factors})
             factors = {key: np.vstack([requests[i].factors.get(key, np.ones((requests[i].theta.shape[0], n_steps)))
                                        for i in indices]) for key in keys}
             result = shared.run(first.window, np.vstack([requests[i].theta for i in indices]), dict(first.fixed),
-                                     record=first.record, factors=factors or None)
-            self.n_runs += 1
-            for i, start, stop in zip(indices, sizes[:-1], sizes[1:]):
-                results[i] = SimulationResult({key: values[start:stop] for key, values in result.outputs.items()},
-                                              result.step_s)
+                                record=first.record, factors=factors or None)
+            rows = split_rows(result.outputs, [requests[i].theta.shape[0] for i in indices])
+            for i, outputs in zip(indices, rows):
+                results[i] = SimulationResult(outputs, result.step_s)
         return results
 
 
@@ -141,12 +138,9 @@ class _MemberData(ModelData):
     runs: SharedRuns | None = None
     caller: tuple[int, int] = (0, 0)
 
-    def run(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None = None, *,
-            record: Sequence[tuple[str, str]] | None = None,
-            factors: Mapping[str, np.ndarray] | None = None) -> SimulationResult:
-        theta = np.atleast_2d(theta)
-        if self.model.drifts:
-            factors = self.model.drift_factors(theta, self.time_s(window)) | dict(factors or {})
+    def _simulate(self, window: slice, theta: np.ndarray, fixed: Mapping[str, float] | None,
+                  record: Sequence[tuple[str, str]] | None,
+                  factors: Mapping[str, np.ndarray] | None) -> SimulationResult:
         return self.runs.run(self.caller, self, window, theta, dict(fixed or {}), record, dict(factors or {}))
 
 
