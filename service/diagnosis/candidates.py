@@ -46,6 +46,7 @@ from service.diagnosis.ranking import (
 from service.diagnosis.refits import (
     CandidateJob,
     Fit,
+    fit_of,
     fit_onset,
     host_columns,
     mean_squares,
@@ -172,10 +173,8 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
                            sample_fractions=[job.sample_fractions[k] for k in problem.target_keys])
         problem = replace(problem, default=probe_start(problem, theta0, effect_columns, theta_train))
         calibrator.fit(problem)
-        return problem, score, Fit(calibrator.theta_, calibrator.standard_errors_,
-                                   mean_squares(calibrator.residuals_, job.target_scales),
-                                   sample_fractions(calibrator.residuals_),
-                                   len(effect_columns) + (1 if job.drift_onsets else 0), calibrator.converged_)
+        return problem, score, fit_of(calibrator, calibrator.theta_, calibrator.standard_errors_, job.target_scales,
+                                      len(effect_columns) + (1 if job.drift_onsets else 0))
 
     (problem, score, throughout), onsets = runs.alongside(job.model, present_throughout, [f for _, f in appearing])
     fits = {"present throughout": throughout} | {name: fit for (name, _), fit in zip(appearing, onsets)}
@@ -194,7 +193,7 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
         return bic_against(job.base_mean_squares, fit.mean_squares, fit.sample_fractions, fit.freed)
 
     onset = min(fits, key=lambda name: bic_of(fits[name]))
-    theta, standard_errors, fit_mean_squares, fractions, freed, converged = fits[onset]
+    theta, standard_errors, fit_mean_squares, fractions, freed, converged, fit_step_errors = fits[onset]
     # what the refit gains with the base parameters alone (the effect set back to its null) is the
     # base model's, not the effect's: "before" is the better of the base refit and that
     theta_null = theta.copy()
@@ -228,13 +227,16 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
     evidence.evaluation_step_errors = step_errors(observed, after, job.target_scales)
     after_error = float(evidence.evaluation_step_errors.sum())
     evidence.theta = theta
+    evidence.fit_step_errors = fit_step_errors
     evidence.test_improvement = 1.0 - after_error / before_error if before_error > 0 else 0.0
     for node, values in observed.items():
         mask = np.isfinite(values)
         evidence.rmse_before[node] = float(np.sqrt(np.mean((values[mask] - before[node][mask]) ** 2)))
         evidence.rmse_after[node] = float(np.sqrt(np.mean((values[mask] - after[node][mask]) ** 2)))
-    evidence.demoted = "; ".join(filter(None, [demotion_reasons(job.model, job.node, theta, effect_columns), "" if converged
-                                              else f"its refit stopped at its limit of {job.refit_max_nfev} evaluations twice"]))
+    physics = demotion_reasons(job.model, job.node, theta, effect_columns)
+    evidence.implausible = bool(physics)
+    stopped = "" if converged else f"its refit stopped at its limit of {job.refit_max_nfev} evaluations twice"
+    evidence.demoted = "; ".join(filter(None, [physics, stopped]))
     demotion = f"; ranked below the plausible effects: {evidence.demoted}" if evidence.demoted else ""
     if drifts:
         lead = drift_sentence(job.model, theta, standard_errors, job.data.timestamps, job.data.step_s,

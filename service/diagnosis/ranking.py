@@ -28,7 +28,7 @@ MIN_TEST_IMPROVEMENT = 0.2
 
 __all__ = [
     "MIN_TEST_IMPROVEMENT", "ScoreTest", "EffectEvidence", "score_test", "score_ensemble", "effective_sample_fraction", "rank_evidence", "delta_bic",
-    "weighted_test_error",
+    "weighted_test_error", "step_errors", "residual_step_errors",
 ]
 
 
@@ -63,10 +63,12 @@ class EffectEvidence:
     significant: bool = False
     explanation: str = ""
     demoted: str = ""  # why the ranking puts it below the plausible effects (empty: it does not)
+    implausible: bool = False  # demoted for its physics (a fit only at a bound, no heat source), not its refit
     # for telling look-alikes apart (service.diagnosis.separation), not part of the report: θ of the
     # fit kept (all estimated parameters), each evaluation step's share of the error after it, the model
     theta: np.ndarray | None = field(default=None, repr=False)
     evaluation_step_errors: np.ndarray | None = field(default=None, repr=False)
+    fit_step_errors: np.ndarray | None = field(default=None, repr=False)  # the same over the fit windows
     model: AssembledModel | None = field(default=None, repr=False)
 
     def error_removed_at(self, node: str) -> float:
@@ -235,11 +237,17 @@ def step_errors(
 ) -> np.ndarray:
     """Each step's share of :func:`weighted_test_error`: Σ_targets ((y − ŷ)/s)² / n_target (0 where
     a target was not measured)."""
-    total = np.zeros(next(iter(observed.values())).shape[-1])
-    for key, values in observed.items():
+    return residual_step_errors({key: values - predicted[key] for key, values in observed.items()}, scales)
+
+
+def residual_step_errors(residuals: Mapping[str, np.ndarray], scales: Mapping[str, float]) -> np.ndarray:
+    """Each step's Σ_targets (r/s)² / n_target of residuals r = y − ŷ aligned in time (NaN where a
+    target was not measured, counted as 0)."""
+    total = np.zeros(next(iter(residuals.values())).shape[-1])
+    for key, values in residuals.items():
         mask = np.isfinite(values)
         if mask.any():
-            total[mask] += ((values[mask] - predicted[key][mask]) / scales[key]) ** 2 / mask.sum()
+            total[mask] += (values[mask] / scales[key]) ** 2 / mask.sum()
     return total
 
 

@@ -17,7 +17,7 @@ from service.calibration.point import PointCalibrator
 from service.calibration.problem import CalibrationProblem
 from service.data.measurements import MeasuredData
 from service.diagnosis.drift import drift_identity
-from service.diagnosis.ranking import effective_sample_fraction
+from service.diagnosis.ranking import effective_sample_fraction, residual_step_errors
 from service.matching.signature import Signature
 from service.model.assembled_model import AssembledModel
 
@@ -114,7 +114,8 @@ class Fit(NamedTuple):
     """One hypothesis's fit: θ (all estimated parameters) and standard errors, the mean squared
     weighted residual and the effective sample fraction n_eff/n of its residuals per target, and
     the number of parameters it frees beyond the base's; whether the least-squares fit converged
-    (continued once where it stopped at its evaluation limit)."""
+    (continued once where it stopped at its evaluation limit); each fitted step's weighted squared
+    error (:func:`~service.diagnosis.ranking.residual_step_errors`)."""
 
     theta: np.ndarray
     standard_errors: np.ndarray
@@ -122,6 +123,7 @@ class Fit(NamedTuple):
     sample_fractions: dict[str, float]
     freed: int
     converged: bool = True
+    step_errors: np.ndarray | None = None
 
 
 def fit_onset(md: ModelData, job: CandidateJob, theta_train: np.ndarray, effect_columns: list[int],
@@ -173,8 +175,15 @@ def fit_onset(md: ModelData, job: CandidateJob, theta_train: np.ndarray, effect_
     theta[free] = calibrator.theta_
     standard_errors = np.zeros_like(theta)
     standard_errors[free] = calibrator.standard_errors_
-    return Fit(theta, standard_errors, mean_squares(calibrator.residuals_, job.target_scales),
-               sample_fractions(calibrator.residuals_), len(free), calibrator.converged_)
+    return fit_of(calibrator, theta, standard_errors, job.target_scales, len(free))
+
+
+def fit_of(calibrator: PointCalibrator, theta: np.ndarray, standard_errors: np.ndarray,
+           scales: dict[str, float], freed: int) -> Fit:
+    """The :class:`Fit` of a fitted ``calibrator`` at θ (all estimated parameters)."""
+    residuals = calibrator.residuals_
+    return Fit(theta, standard_errors, mean_squares(residuals, scales), sample_fractions(residuals), freed,
+               calibrator.converged_, residual_step_errors(residuals, scales))
 
 
 def mean_squares(residuals: dict[str, np.ndarray], scales: dict[str, float]) -> dict[str, float]:

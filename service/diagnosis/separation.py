@@ -2,8 +2,9 @@
 and what would tell them apart.
 
 A candidate is indistinguishable from the answer when their fits and their held-out errors agree
-within noise: ΔBICs less than :data:`BIC_TIE` apart, and held-out errors differing by no more than
-twice the standard error of the difference (per-step differences, autocorrelation counted). What
+within noise: on the fit windows and on the held-out half alike, their errors differ by no more
+than twice the standard error of the difference (a paired test of per-step differences,
+autocorrelation counted; in sample, Vuong's test for non-nested models). What
 would separate them: a quantity the model computes and no sensor measures where the two fitted
 models differ by several sensor accuracies (a sensor the graph lacks, with the triples to add), or
 a boundary input held at another level where their predictions at the existing sensors part
@@ -22,10 +23,8 @@ from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCU
 from service.diagnosis.ranking import EffectEvidence, effective_sample_fraction
 from service.graph.namespaces import local_name
 
-__all__ = ["Lookalike", "indistinguishable", "held_out_tie"]
+__all__ = ["Lookalike", "indistinguishable", "errors_tie"]
 
-#: ΔBICs closer than this (Kass & Raftery's "very strong" is a difference over 10) fit alike.
-BIC_TIE = 10.0
 #: A difference a sensor would see: this many times its accuracy (RMS over the evaluation half).
 SEPARATING_ACCURACIES = 3.0
 #: How far a boundary input is moved for "operation the data lack": ± this in K for a temperature,
@@ -56,12 +55,14 @@ class Lookalike:
                 "would_separate": list(self.would_separate)}
 
 
-def held_out_tie(a: EffectEvidence, b: EffectEvidence) -> bool:
-    """True when the two candidates' held-out errors differ by at most 2 standard errors of the sum
-    of per-step differences d (Var Σd ≈ n·var(d) / (n_eff/n), from d's lag-1 autocorrelation)."""
-    if a.evaluation_step_errors is None or b.evaluation_step_errors is None:
+def errors_tie(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """True when two candidates' per-step errors over the same steps (:attr:`EffectEvidence.fit_step_errors`
+    or ``evaluation_step_errors``) sum to totals at most 2 standard errors of the sum of their
+    differences d apart (Var Σd ≈ n·var(d) / (n_eff/n), from d's lag-1 autocorrelation); False where
+    either is missing or they cover different steps."""
+    if a is None or b is None or a.shape != b.shape:
         return False
-    d = a.evaluation_step_errors - b.evaluation_step_errors
+    d = a - b
     if d.size < 3 or not np.any(d):
         return True
     standard_error = float(np.sqrt(d.size * np.var(d) / effective_sample_fraction(d)))
@@ -70,15 +71,17 @@ def held_out_tie(a: EffectEvidence, b: EffectEvidence) -> bool:
 
 def indistinguishable(answer: EffectEvidence, ranked: list[EffectEvidence], md: ModelData, run_window: slice,
                       evaluation: slice, noise: Mapping[str, float]) -> list[Lookalike]:
-    """The significant candidates other than ``answer`` whose fit (ΔBIC within :data:`BIC_TIE`) and
-    held-out error (:func:`held_out_tie`) tie with its, each with what would separate it from the answer.
+    """The significant candidates other than ``answer`` whose errors on the fit windows and on the
+    held-out half both tie with its (:func:`errors_tie`), each with what would separate it from the
+    answer; one the physics rules out (:attr:`EffectEvidence.implausible`) only beside an answer it rules out too.
 
     :param md: the base model's data (its series, substeps and compared steps are the candidates' too).
     :param run_window: the simulated window; ``evaluation`` the held-out half inside it.
     :param noise: each target sensor's noise level σ (its unit).
     """
-    others = [e for e in ranked if e.significant and e is not answer
-              and abs(e.delta_bic - answer.delta_bic) < BIC_TIE and held_out_tie(answer, e)]
+    others = [e for e in ranked if e.significant and e is not answer and (answer.implausible or not e.implausible)
+              and errors_tie(answer.fit_step_errors, e.fit_step_errors)
+              and errors_tie(answer.evaluation_step_errors, e.evaluation_step_errors)]
     return [Lookalike(other, tuple(_would_separate(answer, other, md, run_window, evaluation, noise)))
             for other in others]
 

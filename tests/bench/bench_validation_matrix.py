@@ -165,6 +165,8 @@ def diagnose_run(run: Run) -> dict:
         "top_significant": bool(top is not None and top.significant),
         "right_first": bool(top is not None and top.significant and (top.effect, top.node) == expected),
         "true_rank": true_rank, "any_significant": bool(significant),
+        "lookalikes": [f"{e.effect.effect}@{e.effect.node.removeprefix(EX)}" for e in report.indistinguishable],
+        "true_lookalike": any((e.effect.effect, e.effect.node) == expected for e in report.indistinguishable),
         "failing": [n.removeprefix(EX) for n in failing], "worst_sensor": worst.removeprefix(EX),
         "rmse_over_noise": {n.removeprefix(EX): v.rmse_over_noise for n, v in report.sensors.items()},
         "affected_sensor": affected.removeprefix(EX), "share_removed": _share_removed(top, affected),
@@ -188,6 +190,9 @@ def _candidate_row(evidence) -> dict:
 
 
 def _rate(rows: list[dict], key: str) -> str:
+    """``key`` true in how many of ``rows`` ("–" where a row predates it)."""
+    if any(key not in r for r in rows):
+        return "–"
     return f"{sum(r[key] for r in rows)}/{len(rows)}"
 
 
@@ -197,12 +202,13 @@ def _median(values: list) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    """Per cell: runs; the right effect at the right node first and significant; anything
-    significant; the median share of the affected sensor's held-out error the top candidate and the
-    true candidate remove; the true candidate's rank; the most common top candidate."""
-    lines = ["| cell | runs | right first | any significant | removed by top | removed by true | true rank | "
-             "top candidate (most often) |",
-             "|---|---|---|---|---|---|---|---|"]
+    """Per cell: runs; the right effect at the right node first and significant; the right effect
+    named indistinguishable from a significant answer instead; anything significant; the median share
+    of the affected sensor's held-out error the top candidate and the true candidate remove; the true
+    candidate's rank; the most common top candidate."""
+    lines = ["| cell | runs | right first | right as look-alike | any significant | removed by top | removed by true | "
+             "true rank | top candidate (most often) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     cells: dict[str, list[dict]] = {}
     for row in rows:
         cells.setdefault(row["cell"], []).append(row)
@@ -211,7 +217,8 @@ def table(rows: list[dict]) -> str:
         ranks = [r["true_rank"] for r in group if r["true_rank"] is not None]
         top, count = Counter(r["top"] + (" (sig.)" if r["top_significant"] else "") for r in group).most_common(1)[0]
         lines.append(f"| {cell} | {len(group)} | {_rate(group, 'right_first') if catalog else '–'} | "
-                     f"{_rate(group, 'any_significant')} | {_median([r['share_removed'] for r in group])} | "
+                     f"{_rate(group, 'true_lookalike') if catalog else '–'} | {_rate(group, 'any_significant')} | "
+                     f"{_median([r['share_removed'] for r in group])} | "
                      f"{_median([r['true_share_removed'] for r in group]) if catalog else '–'} | "
                      f"{statistics.median(ranks) if ranks else '–'} | {top} ×{count} |")
     return "\n".join(lines)

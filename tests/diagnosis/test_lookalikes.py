@@ -7,6 +7,7 @@ study; physics says where they part (the air between fan and coil is warmer only
 and when (at another fan speed the motor's heat changes, a constant gain does not)."""
 
 import csv
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
 from service.data.synthetic import generate_synthetic_data
 from service.diagnosis.ranking import EffectEvidence, ScoreTest
-from service.diagnosis.separation import held_out_tie, indistinguishable
+from service.diagnosis.separation import errors_tie, indistinguishable
 from service.graph.store import GraphStore
 from service.model.assembly import assemble
 from service.model.effect_splicing import EffectRequest
@@ -28,15 +29,33 @@ LIBRARY = SignatureLibrary.load()
 def _evidence(effect: str, node: str, step_errors: np.ndarray, *, model=None, theta=None) -> EffectEvidence:
     return EffectEvidence(effect=effect, effect_iri=effect, node=node, label=effect, parameter_names=("p",),
                           score=ScoreTest(1.0, 0.5, 0.01, ("p",)), delta_bic=-50.0, test_improvement=0.6,
-                          significant=True, evaluation_step_errors=step_errors, model=model, theta=theta)
+                          significant=True, evaluation_step_errors=step_errors, fit_step_errors=step_errors,
+                          model=model, theta=theta)
 
 
-def test_held_out_errors_tie_within_their_noise_and_not_beyond():
+def test_errors_tie_within_their_noise_and_not_beyond():
     rng = np.random.default_rng(0)
     errors = rng.chisquare(1, 144) / 144
-    assert held_out_tie(_evidence("A", "n", errors), _evidence("B", "n", errors))
-    assert held_out_tie(_evidence("A", "n", errors), _evidence("B", "n", errors + rng.normal(0, 1e-3, 144)))
-    assert not held_out_tie(_evidence("A", "n", errors), _evidence("B", "n", 3.0 * errors))
+    assert errors_tie(errors, errors)
+    assert errors_tie(errors, errors + rng.normal(0, 1e-3, 144))
+    assert not errors_tie(errors, 3.0 * errors)
+    assert not errors_tie(errors, None) and not errors_tie(errors, errors[:-1])  # nothing to pair: no tie
+
+
+def test_a_lookalike_ties_on_the_fit_windows_and_held_out_and_is_as_plausible_as_the_answer():
+    rng = np.random.default_rng(1)
+    errors = rng.chisquare(1, 144) / 144
+    answer = _evidence("A", "n", errors)
+    tied = _evidence("B", "n", errors + rng.normal(0, 1e-4, 144))
+    fits_worse = replace(_evidence("C", "n", errors), fit_step_errors=3.0 * errors)
+    impossible = replace(_evidence("D", "n", errors), implausible=True)
+    lookalikes = indistinguishable(answer, [answer, tied, fits_worse, impossible], None, slice(0, 288),
+                                   slice(144, 288), {})
+    assert [lookalike.effect.effect for lookalike in lookalikes] == ["B"]
+    # beside an answer the physics rules out too, an implausible candidate is a look-alike
+    doubtful = replace(answer, implausible=True)
+    assert [lookalike.effect.effect for lookalike in indistinguishable(
+        doubtful, [doubtful, impossible], None, slice(0, 288), slice(144, 288), {})] == ["D"]
 
 
 @pytest.fixture(scope="module")

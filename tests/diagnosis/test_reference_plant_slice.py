@@ -4,7 +4,7 @@ with service/), so a wiring defect both sides would share fails here rather than
 This module: fault-free data and a leaking valve (the catalog's stuck valve and sensor offset:
 ``test_reference_plant_slice_catalog.py``, a module of its own so the two run on two workers).
 
-One seed a cell is a regression guard, not a rate: the rates are the bench's
+One seed a catalog cell is a regression guard, not a rate: the rates are the bench's
 (``python tests/bench/bench_validation_matrix.py``). A cell graphtwin gets wrong is marked
 ``xfail(strict=True)`` with the reason: when it starts passing, the mark must go.
 """
@@ -16,9 +16,12 @@ from tests.bench.bench_validation_matrix import cell_run, diagnose_run
 pytestmark = pytest.mark.slow
 
 
-def test_fault_free_plant_data_raise_no_significant_effect():
-    row = diagnose_run(cell_run(None))
-    assert not row["any_significant"], row
+def test_fault_free_plant_data_raise_nothing_significant_across_seeds():
+    """The decision rule's size on three draws of the fault-free plant (seeds 0–2). Band: were the
+    false-alarm rate the 5 % the docs allow, two or more significant of three would have probability
+    0.7 %; the bench's 60 draws measure the rate itself (docs/validation.md)."""
+    rows = [diagnose_run(cell_run(None, seed=seed)) for seed in range(3)]
+    assert sum(row["any_significant"] for row in rows) <= 1, [(row["seed"], row["top"]) for row in rows]
 
 
 def test_a_leaking_valve_is_named_first():
