@@ -3,8 +3,9 @@
 A :class:`CalibrationProblem` holds the names and physical prior bounds of θ, a vectorised
 ``simulate``: θ ``ndarray[n_ensemble, n_parameters]`` → ``{target: ndarray[n_ensemble, n_steps]}`` in
 ONE call, the targets' measured series (NaN: not measured, masked out), their scales and optionally
-the discrepancy GP's inputs. Residuals are divided by the target scale: unless given, ``1.4826 ·
-MAD`` of the observations (the standard deviation when the MAD is 0), never below the unit's
+the discrepancy GP's inputs. Residuals are divided by the target scale: unless given, the robust
+range of the observations, (P95 − P5) / 3.29 (σ of a normal distribution; the standard deviation
+when that range is 0), never below the unit's
 instrument accuracy (:data:`INSTRUMENT_ACCURACY_FLOOR`, else 1 % of the mean magnitude).
 Why: ``docs/calibration.md``, *The problem and its weights*.
 """
@@ -30,6 +31,9 @@ INSTRUMENT_ACCURACY_FLOOR: dict[str, float] = {"degC": 0.1, "K": 0.1, "1": 0.01}
 #: (power and flow meters are specified as ±1 % of reading).
 RELATIVE_ACCURACY_FLOOR = 0.01
 
+#: P95 − P5 of a normal distribution in standard deviations (2 × 1.6449).
+NORMAL_P5_TO_P95 = 3.2897
+
 Simulate = Callable[[np.ndarray], Mapping[str, np.ndarray]]
 
 
@@ -42,8 +46,8 @@ def default_target_scale(values: np.ndarray, unit: str = "", target: str = "") -
     """
     finite = np.asarray(values, dtype=float)
     finite = finite[np.isfinite(finite)]
-    median = np.median(finite)
-    spread = 1.4826 * np.median(np.abs(finite - median))
+    low, high = np.percentile(finite, [5.0, 95.0])
+    spread = float(high - low) / NORMAL_P5_TO_P95
     if spread == 0.0:
         spread = float(np.std(finite))
     floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.mean(np.abs(finite))))

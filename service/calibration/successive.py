@@ -158,6 +158,8 @@ class SuccessiveCalibrator(BaseEstimator):
         self.stages_: list[CalibrationStage] = []
         for regime, stage_names in self.plan_:
             stage = restricted_problem(problem, [names.index(n) for n in stage_names], theta, labels == regime)
+            if stage.n_observations <= len(stage_names):  # too few steps of the regime here: left to the fine-tuning
+                continue
             before = _cost(stage, stage.default)
             fitted = PointCalibrator(n_starts=self.n_starts, n_candidates=self.n_candidates, random_state=seed(),
                                      max_nfev=self.max_nfev).fit(stage)

@@ -53,7 +53,7 @@ def demo_command(
     console.rule("[bold]2. Calibrate the base model, compare, diagnose")
     diagnosis = DiagnoseRequest(model=base_name, measurements=str(data), train=train, test=test, seed=seed)
     report = diagnose_model(graph_store, diagnosis, data, on_progress=lambda m: console.print(f"[dim]{m}…[/dim]"))
-    print_diagnosis(report)
+    print_diagnosis(report, data=data)
     if not report.significant:
         console.print("No effect is significant: nothing to add.")
         return

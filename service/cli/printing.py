@@ -106,9 +106,10 @@ def plot_run(outcome: CalibrationOutcome, path: Path) -> Path:
                                   title=f"{outcome.record.model_name}: {key} window")
 
 
-def print_diagnosis(report: DiagnosisReport, *, stored: bool = True) -> None:
+def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path | None = None) -> None:
     """The diagnosis as tables and sentences; ``stored``: the run is in a store that outlives this
-    command (not ``--memory``), so its report can be made later."""
+    command (not ``--memory``), so its report can be made later; ``data``: the measurement file the
+    run read (the report command then names it)."""
     print_data_warnings(report.data_warnings)
     table = Table(title="Test window: model vs measurements")
     for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
@@ -139,15 +140,20 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True) -> None:
         table.add_column(column)
     for e in report.effects:
         table.add_row(e.effect, local_name(e.node), f"{e.score.statistic:.1f}", f"{e.delta_bic:.1f}",
-                      f"{100 * e.test_improvement:.0f} %", "yes" if e.significant else "no")
+                      f"{100 * e.test_improvement:.0f} %",
+                      ("yes" if e.significant else "no") + (", ranked below ↓" if e.demoted else ""))
     console.print(table)
+    for e in report.effects:
+        if e.demoted:
+            console.print(f"  ↓ {e.effect} at {local_name(e.node)}: {e.demoted}")
     console.print(f"[bold]{report.summary}[/bold]")
     for lookalike in report.indistinguishable:
         console.print(f"  {lookalike.effect.effect} at {local_name(lookalike.effect.node)} would be told apart by:")
         for text in lookalike.would_separate:
             console.print(f"    – {text}")
     if stored:
-        console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis -o report.html")
+        named = f" --data {data}" if data is not None and data.resolve().parent != Path.cwd().resolve() else ""
+        console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis{named} -o report.html")
     else:
         console.print(f"run {report.run_id} was in a throw-away store (--memory): run again with --store DIR to keep "
                       "it and make its report (graphtwin report)")

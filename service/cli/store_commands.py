@@ -162,6 +162,9 @@ def serve_command(
                                                         "(Oxigraph server layout) instead of an embedded store.")] = None,
     data_dir: Annotated[Path | None, typer.Option("--data-dir", help="Job records and measurement uploads "
                                                   "(default ./graphtwin-service, or GRAPHTWIN_DATA_DIR).")] = None,
+    executor: Annotated[str | None, typer.Option(
+        "--executor", help="Where job work runs: threads, processes or dask://HOST:PORT "
+                           "(default: GRAPHTWIN_EXECUTOR, else processes).")] = None,
     host: Annotated[str, typer.Option(help="Interface to listen on.")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
 ) -> None:
@@ -175,7 +178,7 @@ def serve_command(
 
     if store is not None and sparql_endpoint is not None:
         raise fail("give --store or --sparql-endpoint, not both")
-    overrides = {"store_dir": store, "sparql_endpoint": sparql_endpoint, "data_dir": data_dir}
+    overrides = {"store_dir": store, "sparql_endpoint": sparql_endpoint, "data_dir": data_dir, "executor": executor}
     try:
         settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
     except ValidationError as exc:

@@ -97,10 +97,10 @@ class MeasuredData:
         lo = first if start is None else self._bound(start, "start")
         hi = last if end is None else self._bound(end, "end")
         window, data = f"window {self.shown(lo)} – {self.shown(hi)}", f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
+        if lo > last or hi < first:  # before the order: an open end is the data's, not the user's
+            raise InputError(f"{window} lies outside {data}")
         if hi < lo:
             raise InputError(f"{window}: the end is before the start")
-        if lo > last or hi < first:
-            raise InputError(f"{window} lies outside {data}")
         step = np.timedelta64(int(round(self.step_s)), "s")
         if lo < first - step or hi > last + step:
             side = "starts before" if lo < first - step else "ends after"
@@ -310,6 +310,7 @@ def read_measurements(
     others = {name: np.full(len(rows), np.nan) for name in other_index}
 
     times: list[datetime] = []
+    unreadable: set[int] = set()
     first_with_offset: dict[bool, tuple[int, str]] = {}
     values = {node: np.full(len(rows), np.nan) for node in claimed}
     error_cells: dict[str, int] = {}
@@ -329,6 +330,7 @@ def read_measurements(
                                 f"years {PLAUSIBLE_YEARS[0]}–{PLAUSIBLE_YEARS[1]} (a glitch of the export?)")
         except ValueError as exc:
             problems.append(f"line {line}, column {header[0]!r}: {exc}")
+            unreadable.add(len(times))  # said once: its placeholder is no stamp out of order
             times.append(datetime.min)
         for node, column in claimed.items():
             cell = row[column].strip() if column < len(row) else ""
@@ -363,9 +365,10 @@ def read_measurements(
     stamps = np.array(times, dtype="datetime64[s]")
     if len(times) >= 2:
         steps = np.diff(stamps).astype(np.int64)
-        for i in np.flatnonzero(steps == 0)[:10]:
+        readable = np.array([i not in unreadable and i + 1 not in unreadable for i in range(steps.size)], dtype=bool)
+        for i in np.flatnonzero((steps == 0) & readable)[:10]:
             problems.append(f"line {i + 3}: duplicate time stamp {stamps[i + 1]}")
-        for i in np.flatnonzero(steps < 0)[:10]:
+        for i in np.flatnonzero((steps < 0) & readable)[:10]:
             problems.append(f"line {i + 3}: time stamp {stamps[i + 1]} is before the previous one ({stamps[i]})")
     converted: dict[str, np.ndarray] = {}
     for node, column in claimed.items():

@@ -59,6 +59,7 @@ from service.diagnosis.refits import (
 from service.diagnosis.shared_runs import OwnRuns, SharedRuns, shared_model
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
+from service.graph.units import unit_label
 from service.matching.matcher import match_signature
 from service.matching.signature import Signature
 from service.model.assembled_model import AssembledModel
@@ -133,9 +134,12 @@ def _evaluation_rows(runs: dict[str, np.ndarray], run_window: slice, evaluation:
 def _estimate_text(name: str, value: float, standard_error: float, spec) -> str:
     """``name = value ± se`` (with :func:`_bound_note`), or, where the standard error spans the
     prior range or is not finite, that the data do not identify it."""
+    label = unit_label(spec.unit)
+    unit = f" {label}" if label else ""
     if not np.isfinite(standard_error) or standard_error > spec.upper - spec.lower:
-        return f"{name} = {value:.3g}, not identified (the data leave it anywhere in [{spec.lower:g}, {spec.upper:g}])"
-    return f"{name} = {value:.3g} ± {standard_error:.2g}" + bound_note(value, spec)
+        return (f"{name} = {value:.3g}{unit}, not identified (the data leave it anywhere in "
+                f"[{spec.lower:g}, {spec.upper:g}]{unit})")
+    return f"{name} = {value:.3g} ± {standard_error:.2g}{unit}" + bound_note(value, spec)
 
 
 def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> EffectEvidence:

@@ -73,10 +73,17 @@ def test_unit_cube_round_trip():
 
 
 def test_default_scale_is_the_robust_spread_with_fallbacks_and_floors():
-    values = np.array([10.0, 11.0, 12.0, 13.0, 100.0, np.nan])
-    # median 12, |deviations| 2 1 0 1 88 → MAD 1 → 1.4826 (the outlier does not inflate it)
-    assert default_target_scale(values, "W") == pytest.approx(1.4826)
-    shut_valve = np.array([0.0] * 8 + [0.5, 1.0])  # MAD 0 → plain std
+    rng = np.random.default_rng(0)
+    spiked = np.concatenate([rng.normal(50.0, 2.0, 2000), np.full(20, 5000.0), [np.nan]])
+    assert default_target_scale(spiked, "W") == pytest.approx(2.0, rel=0.05)  # 1 % spikes do not inflate it
+    # a fan at its weekend speed for 54 % of the window and at its weekday speeds for the rest: the
+    # scale sees the swing between the modes (1.4826·MAD saw only the weekend's 6 W)
+    weekend, weekdays = rng.normal(106.0, 4.0, 290), rng.uniform(150.0, 1400.0, 250)
+    fan = np.concatenate([weekend, weekdays])
+    scale = default_target_scale(fan, "W")
+    assert scale == pytest.approx((np.percentile(fan, 95) - np.percentile(fan, 5)) / 3.2897)
+    assert scale > 300.0
+    shut_valve = np.array([0.0] * 99 + [1.0])  # shut 99 % of the time: range 0 → plain std
     assert default_target_scale(shut_valve, "1") == pytest.approx(np.std(shut_valve))
     flat_temperature = np.full(10, 21.0)
     assert default_target_scale(flat_temperature, "degC") == pytest.approx(0.1)

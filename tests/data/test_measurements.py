@@ -97,6 +97,8 @@ def test_windows_outside_the_data_are_refused(tmp_path):
         data.window("2025-01-01 00:10", "2025-01-02")  # a day asked of 20 minutes: not cut silently
     with pytest.raises(ValueError, match="starts before the data"):
         data.window("2024-12-31 23:00", "2025-01-01 00:10")
+    with pytest.raises(ValueError, match=r"lies outside the data .*\(2025-01-01T00:00:00 – 2025-01-01T00:20:00\)"):
+        data.window("2026-01-01", None)  # an open end after the data's: outside, not "the end is before the start"
 
 
 def test_valid_mask_and_select_by_time(tmp_path):
@@ -312,5 +314,9 @@ def test_a_glitched_time_stamp_is_refused_by_line_before_any_grid_is_built(tmp_p
                                                r"2060-01-01T00:00:00 \(1.84e\+06 steps of 600 s\): on a regular grid the "
                                                r"19 rows would stand for 1840753 steps"):
         read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows + "2060-01-01 00:00,20,50\n"), SPECS)
+    typo = rows.replace("2025-01-01 01:20", "2025-01-01 01:2O")  # a letter O: one problem, said once
+    with pytest.raises(MeasurementError) as refused:
+        read_measurements(_write(tmp_path, "time,SAT,valve\n" + typo), SPECS)
+    assert "'2025-01-01 01:2O'" in str(refused.value) and "before the previous one" not in str(refused.value)
     gap = read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows + "2025-01-01 05:00,20,50\n"), SPECS)
     assert gap.n_steps == 31  # a gap of hours is resampled as before, left a gap

@@ -121,7 +121,8 @@ def test_the_report_follows_the_cli_contract_and_is_stored(tmp_path):
 def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tmp_path):
     """Compared only where the fan runs above its median flow: the base and every candidate are
     fitted on the same steps, so an effect (which nests the base at its null) never fits worse,
-    ΔBIC ≤ k·ln n, and the hidden fan motor heat fits best, at its true size (0.805 against 0.8).
+    ΔBIC ≤ k·ln n, and the hidden fan motor heat fits best, its true size within 3 standard errors
+    (0.850 ± 0.035 against 0.8 since the targets are weighted by their robust range).
     On this one filtered day its out-of-sample gain is lost to the fan curve, which its refit moves
     on half the flow range (fan power test RMSE 10.6 → 12.0 W against 5 W of noise): the ranking,
     which puts the out-of-sample gain first, does not list it first here, and calls nothing
@@ -145,7 +146,8 @@ def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tm
         (e.effect, e.node, e.delta_bic) for e in report.effects]
     best = min(report.effects, key=lambda e: e.delta_bic)
     assert best.effect == "FanMotorHeat" and best.delta_bic < -10
-    assert best.estimates["motor_heat_fraction"] == pytest.approx(0.8, abs=0.05)
+    estimate, standard_error = best.estimates["motor_heat_fraction"], best.standard_errors["motor_heat_fraction"]
+    assert abs(estimate - 0.8) <= 3.0 * standard_error < 0.15, (estimate, standard_error)
 
 
 def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():

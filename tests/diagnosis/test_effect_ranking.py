@@ -190,6 +190,8 @@ def test_an_estimate_the_data_leave_anywhere_in_its_prior_is_called_not_identifi
     assert _estimate_text("leakage_fraction", 0.21, float("inf"), leak).endswith("[0, 0.3])")
     assert _estimate_text("leakage_fraction", 0.21, 0.02, leak) == "leakage_fraction = 0.21 ± 0.02"
     assert _estimate_text("leakage_fraction", 0.3, 0.02, leak) == "leakage_fraction = 0.3 ± 0.02 (at its upper bound 0.3)"
+    gain = Parameter("heat_gain", "W", 0.0, -5000.0, 5000.0, "heat", null=0.0)  # a quantity with a unit says it
+    assert _estimate_text("heat_gain", 1150.0, 4.4, gain) == "heat_gain = 1.15e+03 ± 4.4 W"
 
 
 def _two_targets(seed: int, b: float = 0.0, power_scale: float = 0.05) -> CalibrationProblem:

@@ -103,6 +103,7 @@ def test_what_would_separate_motor_heat_from_a_constant_heat_gain(one_fan_speed)
     # where: the air entering the coil is warmer by the motor's heat only with FanMotorHeat
     assert "temperature sensor for the inlet air temperature of heating_coil_air_side" in sensor, sensor
     assert f"fso:suppliesFluidTo <{EX}heating_coil_air_side>" in sensor and "saref:Temperature" in sensor
+    assert f"<{EX}heating_coil_air_side_inlet_air_temperature_sensor> a s4bldg:Sensor" in sensor, sensor  # pastes as is
     # when: at another fan speed the motor's heat changes and a constant gain does not
     assert operation.startswith("operation the data lack: with supply_air_flow_meter held at"), operation
     assert lookalike.to_dict()["would_separate"] == [sensor, operation]

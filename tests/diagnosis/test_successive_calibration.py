@@ -92,6 +92,17 @@ def test_a_stage_never_sees_the_data_of_other_regimes():
     assert corrupted.stages_[1].estimates[0] > reference.stages_[1].estimates[0] + 0.5
 
 
+def test_a_regime_with_fewer_steps_than_its_parameters_is_left_to_the_fine_tuning():
+    """A cross-validation fold can hold a single step of a regime: no stage can fit b and c from it."""
+    problem = analytic_problem()
+    y = np.array(problem.observed["y"])
+    y[LABELS == 2] = np.nan
+    y[np.flatnonzero(LABELS == 2)[0]] = problem.observed["y"][np.flatnonzero(LABELS == 2)[0]]  # one step of regime 2
+    fitted = SuccessiveCalibrator(n_starts=1, n_candidates=8, random_state=0).fit(analytic_problem(y), LABELS)
+    assert [stage.regime for stage in fitted.stages_] == [1, None]  # regime 2's stage skipped, a fitted, then all
+    np.testing.assert_allclose(fitted.theta_[0], 0.3, atol=0.05)
+
+
 def test_contiguous_folds_partition_the_window_without_overlap():
     folds = contiguous_folds(slice(10, 110), 3, min_steps=20)
     held = [h for _, h in folds]
