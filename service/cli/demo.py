@@ -14,7 +14,7 @@ from service.cli.common import SeedOption, StoreOption, app, console, open_store
 from service.cli.printing import print_diagnosis
 from service.components.library import SignatureLibrary
 from service.graph.namespaces import local_name
-from service.graph.units import unit_label
+from service.graph.units import quantity_text
 from service.resources import examples_dir
 from service.workflows.effects import add_effect_to_file
 from service.workflows.requests import CalibrateRequest, DiagnoseRequest
@@ -75,7 +75,7 @@ def demo_command(
         table.add_column(column)
     for node, metrics in after_run.record.metrics["test"].items():
         old = before[node].rmse
-        table.add_row(local_name(node), f"{old:.3g}", f"{metrics.rmse:.3g} {unit_label(metrics.unit)}",
+        table.add_row(local_name(node), f"{old:.3g}", quantity_text(metrics.rmse, metrics.unit),
                       f"{100 * (metrics.rmse - old) / old:+.0f} %")
     console.print(table)
     estimate = next((e for e in after_run.record.estimates if f"/{best.effect}/" in e.component), None)

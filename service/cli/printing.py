@@ -11,7 +11,7 @@ from rich.text import Text
 
 from service.cli.common import console
 from service.graph.namespaces import local_name
-from service.graph.units import unit_label
+from service.graph.units import quantity_text, unit_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
     from service.calibration.record import CalibrationRecord
@@ -19,14 +19,10 @@ if TYPE_CHECKING:  # the calibration and diagnosis modules load with the command
     from service.diagnosis.report import DiagnosisReport
 
 __all__ = ["print_metrics", "print_calibration", "print_regimes", "print_data_warnings", "plot_run", "print_diagnosis",
-           "save_diagnosis_plots", "with_unit"]
+           "save_diagnosis_plots"]
 
 #: A parameter key (``<component IRI>#<name>``) in a sentence, read as ``<component's node>.<name>``.
 _PARAMETER_KEY = re.compile(r"\S*/component/[^/\s]+/([^\s/#]+)#(\w+)")
-
-
-def with_unit(value: float, unit: str) -> str:
-    return f"{value:.3g} {unit_label(unit)}" if value == value else "–"
 
 
 def print_metrics(title: str, metrics: dict) -> None:
@@ -81,7 +77,7 @@ def print_regimes(record: CalibrationRecord) -> None:
         table.add_column(column, overflow="fold")
     for row in record.regimes:
         table.add_row(row["rule"], f"{100 * row['share']:.0f} %",
-                      *(with_unit(row["rmse"][n], units.get(n, "")) for n in sensors))
+                      *(quantity_text(row["rmse"][n], units.get(n, "")) for n in sensors))
     console.print(table)
 
 
@@ -117,7 +113,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     for node, s in report.sensors.items():
         verdict = ("[red]fails[/red]" if s.fails else
                    "[yellow]the missing effect shows[/yellow]" if s.shows_missing_effect else "matches")
-        table.add_row(local_name(node), f"{s.rmse:.3g} {unit_label(s.unit)}", f"{s.rmse_over_noise:.1f}",
+        table.add_row(local_name(node), quantity_text(s.rmse, s.unit), f"{s.rmse_over_noise:.1f}",
                       f"{s.nmbe_percent:+.1f}", verdict)
     console.print(table)
     for location in report.localization:

@@ -14,9 +14,9 @@ import typer
 from rich.table import Table
 
 from service.cli.common import StoreOption, app, console, error_console, fail, open_store, reports_errors
-from service.cli.printing import with_unit
 from service.errors import InputError, NotFoundError
 from service.graph.namespaces import local_name
+from service.graph.units import quantity_text
 
 __all__ = []
 
@@ -96,7 +96,7 @@ def history_command(
     for version in history.versions:
         table.add_column(version)
     for sensor, values in history.rmse.items():
-        table.add_row(local_name(sensor), *[with_unit(v, history.units[sensor]) for v in values])
+        table.add_row(local_name(sensor), *[quantity_text(v, history.units[sensor]) for v in values])
     table.add_row("tested on", *history.tested_on, style="dim")
     console.print(table)
     if not history.comparable:
@@ -111,7 +111,7 @@ def history_command(
             share = next((f" ({100 * s:.0f} %)" for s in shares if s == s), "")
             for i, (sensor, values) in enumerate(sensors.items()):
                 table.add_row(str(number) if i == 0 else "", rule + share if i == 0 else "", local_name(sensor),
-                              *[with_unit(v, history.units.get(sensor, "")) for v in values])
+                              *[quantity_text(v, history.units.get(sensor, "")) for v in values])
             table.add_section()
         console.print(table)
     if plot is not None:

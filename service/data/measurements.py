@@ -365,7 +365,9 @@ def read_measurements(
     stamps = np.array(times, dtype="datetime64[s]")
     if len(times) >= 2:
         steps = np.diff(stamps).astype(np.int64)
-        readable = np.array([i not in unreadable and i + 1 not in unreadable for i in range(steps.size)], dtype=bool)
+        unread = np.zeros(len(times), dtype=bool)
+        unread[sorted(unreadable)] = True
+        readable = ~(unread[:-1] | unread[1:])  # neither stamp of the step a placeholder
         for i in np.flatnonzero((steps == 0) & readable)[:10]:
             problems.append(f"line {i + 3}: duplicate time stamp {stamps[i + 1]}")
         for i in np.flatnonzero((steps < 0) & readable)[:10]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from service.graph.namespaces import local_name
-from service.graph.units import unit_label
+from service.graph.units import quantity_text
 from service.model.assembled_model import AssembledModel
 
 __all__ = ["BOUND_SHARE", "at_bound", "bound_note", "demotion_reasons"]
@@ -36,12 +36,7 @@ def at_bound(value: float, spec) -> str | None:
 def bound_note(value: float, spec) -> str:
     """`` (at its lower/upper bound B)`` where :func:`at_bound`: the data push it further than the prior allows."""
     side = at_bound(value, spec)
-    return f" (at its {side} bound {_quantity(getattr(spec, side), spec.unit)})" if side else ""
-
-
-def _quantity(value: float, unit: str) -> str:
-    """``5000 W``; a dimensionless value without a unit."""
-    return f"{value:g} {unit_label(unit)}".rstrip()
+    return f" (at its {side} bound {quantity_text(getattr(spec, side), spec.unit, 'g')})" if side else ""
 
 
 def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect_columns: list[int]) -> str:
@@ -53,7 +48,8 @@ def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect
         spec = refs[j].spec
         side = at_bound(theta[j], spec)
         if side:
-            reasons.append(f"{refs[j].name} fits only at its {side} bound {_quantity(getattr(spec, side), spec.unit)}")
+            bound = quantity_text(getattr(spec, side), spec.unit, "g")
+            reasons.append(f"{refs[j].name} fits only at its {side} bound {bound}")
     effects = {refs[j].component for j in effect_columns}
     host = next((c for iri, c in model.components.items() if node in c.modeled_nodes and iri not in effects), None)
     for j in effect_columns:
@@ -61,7 +57,8 @@ def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect
         spec = refs[j].spec
         if (host is not None and refs[j].name == heat_parameter and host.model_class.air_heat_sign < 0
                 and theta[j] > BOUND_SHARE * (spec.upper - spec.lower)):
-            reasons.append(f"{refs[j].name} = {_quantity(round(float(theta[j]), 0), spec.unit)} into the air at "
+            heat = quantity_text(round(float(theta[j]), 0), spec.unit, "g")
+            reasons.append(f"{refs[j].name} = {heat} into the air at "
                            f"{local_name(node)}, which can only take heat from the air ({host.signature.label}): "
                            "no heat source there")
     return "; ".join(reasons)

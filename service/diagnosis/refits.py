@@ -122,8 +122,8 @@ class Fit(NamedTuple):
     mean_squares: dict[str, float]
     sample_fractions: dict[str, float]
     freed: int
-    converged: bool = True
-    step_errors: np.ndarray | None = None
+    converged: bool
+    step_errors: np.ndarray
 
 
 def fit_onset(md: ModelData, job: CandidateJob, theta_train: np.ndarray, effect_columns: list[int],

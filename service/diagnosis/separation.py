@@ -22,7 +22,7 @@ from service.calibration.model_data import ModelData
 from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR
 from service.diagnosis.ranking import EffectEvidence, effective_sample_fraction
 from service.graph.namespaces import local_name
-from service.graph.units import unit_label
+from service.graph.units import quantity_text
 
 __all__ = ["Lookalike", "indistinguishable", "errors_tie"]
 
@@ -148,7 +148,7 @@ def _missing_sensor(answer: EffectEvidence, other: EffectEvidence, md: ModelData
     name = f"{local_name(node)}_{port}_sensor"
     sensor = node[: len(node) - len(local_name(node))] + name  # in the namespace of the node it serves
     return (f"a {what} sensor for the {port.replace('_', ' ')} of {local_name(node)}: the two differ there by "
-            f"{_quantity(rms, unit)} RMS, {ratio:.0f}× a sensor's accuracy, and the graph has none. Add it, placed "
+            f"{quantity_text(rms, unit)} RMS, {ratio:.0f}× a sensor's accuracy, and the graph has none. Add it, placed "
             f"just upstream of {local_name(node)} on the flow path: <{sensor}> a {sensor_class} ; saref:observes "
             f"[ a {property_class} ] ; saref:isMeasuredIn {qudt} ; gt:timeSeriesId \"{name}\" ; "
             f"fso:suppliesFluidTo <{node}> .")
@@ -193,12 +193,6 @@ def _missing_operation(answer: EffectEvidence, other: EffectEvidence, md: ModelD
     if best is None or best[0] < SEPARATING_ACCURACIES or best[0] < 2.0 * on_data:
         return None
     ratio, sensor, node, value, unit = best
-    return (f"operation the data lack: with {local_name(node)} held at {_quantity(value, unit)} the two would part at "
-            f"{local_name(sensor)} by {ratio:.1f}× its noise (on these data by {on_data:.1f}×): a day run so "
+    return (f"operation the data lack: with {local_name(node)} held at {quantity_text(value, unit)} the two would "
+            f"part at {local_name(sensor)} by {ratio:.1f}× its noise (on these data by {on_data:.1f}×): a day run so "
             "would tell them apart")
-
-
-def _quantity(value: float, unit: str) -> str:
-    """``value`` (3 significant digits) with its unit's label (none for a plain number)."""
-    label = unit_label(unit)
-    return f"{value:.3g} {label}" if label else f"{value:.3g}"

@@ -17,7 +17,8 @@ import numpy as np
 
 from service.errors import UnitError
 
-__all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit"]
+__all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
+           "quantity_text"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -105,6 +106,16 @@ def unit_label(unit: str) -> str:
     except UnitError:
         return unit
     return "" if spec.label == "1" else spec.label or unit
+
+
+def quantity_text(value: float | None, unit: str, number_format: str = ".3g") -> str:
+    """``0.162 °C``: ``value`` in ``number_format`` with its unit's label (:func:`unit_label`; a
+    plain number shows none, not a trailing space); a missing value (None, NaN) as ``–``."""
+    if value is None or not np.isfinite(value):
+        return "–"
+    label = unit_label(unit)
+    number = format(value, number_format)
+    return f"{number} {label}" if label else number
 
 
 def bracketed_unit(unit: str) -> str:

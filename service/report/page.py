@@ -25,7 +25,7 @@ from service.diagnosis.error_history import error_history
 from service.diagnosis.localization import FlowTopology
 from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
-from service.graph.units import unit_label
+from service.graph.units import quantity_text, unit_label
 from service.report.run_series import INTERVAL_LEVEL, INTERVAL_Z, RunSeries, recompute_series
 from service.report.stored_run import StoredCandidate, StoredDiagnosis, StoredRun, read_diagnosis, read_run
 from service.report.topology_svg import TOPOLOGY_KEY, topology_svg
@@ -60,13 +60,6 @@ def _png(fig: Figure) -> bytes:
 
 def _number(value: float, digits: int = 3) -> str:
     return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}g}"
-
-
-def _quantity(value: float, unit: str, digits: int = 3) -> str:
-    """``0.162 °C``; a plain number's unit (``1``) shows nothing, not a trailing space."""
-    label = unit_label(unit)
-    number = _number(value, digits)
-    return f"{number} {label}" if label and number != "–" else number
 
 
 def _breakable(name: str) -> str:
@@ -141,7 +134,7 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
                    f'ŷ ± {INTERVAL_Z:.3f}·s with s the sensor\'s training RMSE.</p>')
     out += [f'<p class="note">{html.escape(note)}</p>' for note in series.notes]
     for sensor in series.predicted:
-        rmse = _quantity(series.rmse[sensor], series.units[sensor])
+        rmse = quantity_text(series.rmse[sensor], series.units[sensor])
         picture = _png(measured_vs_model_figure(
             series.timestamps, {sensor: series.observed[sensor]}, {model_name: {sensor: series.predicted[sensor]}},
             series.units, {sensor: series.band[sensor]}, title=f"{local_name(sensor)}: {series.window} window, RMSE {rmse}",
@@ -191,7 +184,8 @@ def _regimes_section(run: StoredRun) -> str:
         return out + '<p class="note">The run has no test window, so no error per regime.</p>'
     sensors = [s for s in run.metrics.get("test", {}) if any(s in r["rmse"] for r in run.regimes)]
     rows = [[html.escape(r["regime"]), _rule(r["rule"]), f"{100 * r['share']:.0f} %"]
-            + [html.escape(_quantity(r["rmse"][s], run.units.get(s, ""))) if s in r["rmse"] else "–" for s in sensors]
+            + [html.escape(quantity_text(r["rmse"][s], run.units.get(s, ""))) if s in r["rmse"] else "–"
+               for s in sensors]
             for r in run.regimes]
     header = ["regime", "rule", "share of the test window"] + [f"RMSE {_breakable(s)}" for s in sensors]
     return (out + "<p>Clusters of the boundary inputs (mini-batch k-means), each described by the rule of a "
@@ -259,7 +253,7 @@ def _history_section(store: GraphStore, run: StoredRun) -> str:
         return out[0] + '<p class="note">No calibration of this model with a test window is stored.</p>'
 
     def cells(values: list[float], sensor: str) -> list[str]:
-        return [html.escape(_quantity(v, units.get(sensor, ""))) for v in values]
+        return [html.escape(quantity_text(v, units.get(sensor, ""))) for v in values]
 
     out.append('<p class="note">Each version\'s latest calibration with a test window (this run\'s numbers are in the '
                'tables above where it is that calibration).</p>')

@@ -72,3 +72,12 @@ def test_a_plain_number_has_no_unit_label_in_reports():
 
     assert (unit_label("1"), bracketed_unit("1")) == ("", "")
     assert (unit_label("degC"), bracketed_unit("degC"), unit_label("%"), unit_label("1/K")) == ("°C", "[°C]", "%", "1/K")
+
+
+def test_a_quantity_in_a_sentence_or_a_table_cell():
+    """One formatter for the CLI, the report page and the diagnosis's sentences."""
+    from service.graph.units import quantity_text
+
+    assert quantity_text(0.16234, "degC") == "0.162 °C" and quantity_text(0.0194, "1") == "0.0194"
+    assert quantity_text(5000.0, "W", "g") == "5000 W" and quantity_text(5000.0, "W") == "5e+03 W"
+    assert quantity_text(float("nan"), "W") == quantity_text(None, "degC") == "–"
