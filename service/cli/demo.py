@@ -72,10 +72,10 @@ def demo_command(
     after_run = calibrate_model(graph_store, calibration, data)
     table = Table(title="Test-window RMSE: before and after")
     for column in ("sensor", "before", "after", "change"):
-        table.add_column(column)
+        table.add_column(column, overflow="fold")
     for node, metrics in after_run.record.metrics["test"].items():
         old = before[node].rmse
-        table.add_row(local_name(node), f"{old:.3g}", quantity_text(metrics.rmse, metrics.unit),
+        table.add_row(local_name(node), quantity_text(old, metrics.unit), quantity_text(metrics.rmse, metrics.unit),
                       f"{100 * (metrics.rmse - old) / old:+.0f} %")
     console.print(table)
     estimate = next((e for e in after_run.record.estimates if f"/{best.effect}/" in e.component), None)

@@ -171,7 +171,7 @@ def simulate_command(
         console.print(f"wrote {output}")
     table = Table(title="Simulated against measured")
     for column in ("sensor", "RMSE", "unit"):
-        table.add_column(column)
+        table.add_column(column, overflow="fold")
     for node, values in simulated.items():
         observed = measured.series[node]
         finite = np.isfinite(observed)

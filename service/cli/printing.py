@@ -32,7 +32,7 @@ def print_metrics(title: str, metrics: dict) -> None:
     table = Table(title=title)
     for column in ("sensor", "RMSE", "MAE", "R²", "CV(RMSE) %", "NMBE %", *(("ACE 90 %", "90 % width") if intervals else ()),
                    "unit"):
-        table.add_column(column)
+        table.add_column(column, overflow="fold")
     for node, m in metrics.items():
         interval_cells = []
         if intervals:
@@ -109,7 +109,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     print_data_warnings(report.data_warnings)
     table = Table(title="Test window: model vs measurements")
     for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
-        table.add_column(column)
+        table.add_column(column, overflow="fold")
     for node, s in report.sensors.items():
         verdict = ("[red]fails[/red]" if s.fails else
                    "[yellow]the missing effect shows[/yellow]" if s.shows_missing_effect else "matches")
@@ -133,7 +133,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         return
     table = Table(title="Which effect is missing (best first)")
     for column in ("effect", "at", "score", "ΔBIC", "test error removed", "significant"):
-        table.add_column(column)
+        table.add_column(column, overflow="fold")
     for e in report.effects:
         table.add_row(e.effect, local_name(e.node), f"{e.score.statistic:.1f}", f"{e.delta_bic:.1f}",
                       f"{100 * e.test_improvement:.0f} %",

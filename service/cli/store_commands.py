@@ -105,7 +105,7 @@ def history_command(
     if history.regime_rmse:
         table = Table(title="Test RMSE per operating regime (share of the test window)")
         for column in ("regime", "rule", "sensor", *history.versions):
-            table.add_column(column)
+            table.add_column(column, overflow="fold")
         for number, (rule, sensors) in enumerate(history.regime_rmse.items()):
             shares = history.regime_share[rule]
             share = next((f" ({100 * s:.0f} %)" for s in shares if s == s), "")

@@ -122,6 +122,13 @@ class ComponentModel:
     start_memory_s: ClassVar[float] = 0.0
 
     @classmethod
+    def parameters_fixed_by_measurement(cls, measured_outputs: frozenset[str]) -> dict[str, float]:
+        """Parameters this model fixes instead of estimating, by which of its outputs a calibration
+        target measures (``measured_outputs``, port names): a parameter only a measured output can
+        pin. The assembly maps them (the graph's own value wins). None by default."""
+        return {}
+
+    @classmethod
     def memoryless(cls) -> bool:
         """Outputs at t_k depend on the inputs at t_k alone: no declared state and no
         :meth:`initial_state` of its own (the simulator then evaluates it over all steps at once)."""

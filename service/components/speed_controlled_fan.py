@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from service.components.component import AIR_DENSITY_KG_PER_M3, ComponentModel, Port
-from service.components.fan import Fan, part_load_power_fraction
+from service.components.fan import Fan, fan_heat_rise_k, part_load_power_fraction
 
 __all__ = ["SpeedControlledFan"]
 
@@ -16,9 +16,8 @@ class SpeedControlledFan(ComponentModel):
 
     s the speed command (0–1, clipped; a VFD's logged output frequency over its nominal one). The
     flow is proportional to the speed (fan affinity law at a fixed system curve, i.e. fixed damper
-    positions), so the flow fraction of the part-load curve is s itself. The air leaves at its inlet
-    temperature (motor heat in the air stream is the FanMotorHeat effect). Parameters, defaults and
-    bounds are :class:`service.components.fan.Fan`'s.
+    positions), so the flow fraction of the part-load curve is s itself. The impeller's losses heat
+    the air as in :class:`service.components.fan.Fan`, whose parameters, defaults and bounds these are.
     """
 
     inputs = (
@@ -28,12 +27,18 @@ class SpeedControlledFan(ComponentModel):
     outputs = Fan.outputs
     parameters = Fan.parameters
 
+    @classmethod
+    def parameters_fixed_by_measurement(cls, measured_outputs: frozenset[str]) -> dict[str, float]:
+        return Fan.parameters_fixed_by_measurement(measured_outputs)
+
     def step(self, params, inputs, state, dt_s):
         speed = np.minimum(np.maximum(inputs["speed"], 0.0), 1.0)
         power = params["nominal_power"] * part_load_power_fraction(
             speed, c1=params["c1"], c2=params["c2"], c3=params["c3"], c4=params["c4"])
+        mass_flow = AIR_DENSITY_KG_PER_M3 * params["nominal_air_flow"] * speed
         return {
-            "outlet_air_temperature": inputs["inlet_air_temperature"],
-            "outlet_air_mass_flow": AIR_DENSITY_KG_PER_M3 * params["nominal_air_flow"] * speed,
+            "outlet_air_temperature": inputs["inlet_air_temperature"]
+            + fan_heat_rise_k(params["impeller_heat_share"], power, mass_flow),
+            "outlet_air_mass_flow": mass_flow,
             "electric_power": power,
         }

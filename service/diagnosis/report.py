@@ -191,6 +191,8 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
               ox.Triple(node, GT.rank, ox.Literal(str(rank), datatype=XSD.integer)),
               ox.Triple(node, GT.significant, ox.Literal("true" if item.significant else "false", datatype=XSD.boolean)),
               ox.Triple(node, GT.explanation, ox.Literal(item.explanation))]
+        if item is report.answer:
+            t.append(ox.Triple(run, GT.answer, node))
         if isinstance(item, DriftEvidence):  # not in the signature library: named here
             drift = ox.NamedNode(item.effect_iri)
             t += [ox.Triple(drift, RDF.type, GT.ParameterDrift), ox.Triple(drift, DCTERMS.identifier, ox.Literal(item.effect)),

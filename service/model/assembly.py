@@ -31,6 +31,7 @@ from service.model.wiring import (
     MatchValues,
     best_match_per_anchor,
     instantiate,
+    measured_outputs,
     modeled_nodes,
     short_name,
     split_parameters,
@@ -134,7 +135,7 @@ def assemble(
     notes += [f"{short_name(instances[i].node)}: measured, but no component reads it (what it drives or sets is not "
               f"in the model)" for i in boundary if i not in read]
     targets = tuple(sorted(i for i in devices if i in fed))
-    mapped, estimated = split_parameters(instances)
+    mapped, estimated = split_parameters(instances, measured_outputs(connections, instances, targets))
     notes += [f"{problem}: a calibration refuses it; fix the value (or its unit) in the model graph"
               for problem in mapped_values_outside_bounds(mapped, instances)]
     return AssembledModel(

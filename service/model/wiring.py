@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import pyoxigraph as ox
 
+from service.components.component import SplicedEffect
 from service.components.library import load_model_class
 from service.components.measuring_device import MeasuringDevice
 from service.errors import AssemblyError
@@ -26,7 +27,7 @@ from service.model.assembled_model import ComponentInstance, Connection, Measure
 
 __all__ = [
     "MatchValues", "UnconnectedInput", "component_iri", "without_model", "short_name", "modeled_nodes", "best_match_per_anchor",
-    "instantiate", "wire", "split_parameters",
+    "instantiate", "wire", "measured_outputs", "split_parameters",
 ]
 
 #: A signature match: pattern node id → bound IRI or literal lexical form (None: an optional node left unbound).
@@ -177,16 +178,41 @@ def wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection], 
     return connections, unconnected
 
 
+def measured_outputs(connections: Sequence[Connection], instances: Mapping[str, ComponentInstance],
+                     targets: Sequence[str]) -> dict[str, frozenset[str]]:
+    """Component IRI → the names of its outputs a calibration target reads, directly or through
+    spliced effects (an effect's ``value_in`` → ``value_out``: an offset between a fan and its meter)."""
+    feeds = defaultdict(list)
+    for c in connections:
+        feeds[(c.source, c.source_port)].append((c.target, c.target_port))
+    target_set = set(targets)
+
+    def reaches_target(source: str, port: str, seen: frozenset[str] = frozenset()) -> bool:
+        for target, target_port in feeds[(source, port)]:
+            if target in target_set:
+                return True
+            spliced = issubclass(instances[target].model_class, SplicedEffect) and target_port == "value_in"
+            if spliced and target not in seen and reaches_target(target, "value_out", seen | {target}):
+                return True
+        return False
+
+    return {iri: frozenset(port for port in instance.model_class.output_names() if reaches_target(iri, port))
+            for iri, instance in instances.items()}
+
+
 def split_parameters(
-    instances: Mapping[str, ComponentInstance],
+    instances: Mapping[str, ComponentInstance], measured: Mapping[str, frozenset[str]],
 ) -> tuple[tuple[ParameterRef, ...], tuple[ParameterRef, ...]]:
     """(mapped, estimated): every parameter of ``instances`` with the value the graph maps to it, or
+    the value its model fixes given its ``measured`` outputs
+    (:meth:`~service.components.component.ComponentModel.parameters_fixed_by_measurement`), or
     without a value, to be estimated (Eq. 2); by component IRI, then in the model's parameter order."""
     mapped, estimated = [], []
     for iri, instance in sorted(instances.items()):
+        fixed = instance.model_class.parameters_fixed_by_measurement(measured[iri]) | instance.mapped_parameters
         for spec in instance.model_class.parameters:
-            if spec.name in instance.mapped_parameters:
-                mapped.append(ParameterRef(iri, spec, instance.mapped_parameters[spec.name]))
+            if spec.name in fixed:
+                mapped.append(ParameterRef(iri, spec, fixed[spec.name]))
             else:
                 estimated.append(ParameterRef(iri, spec))
     return tuple(mapped), tuple(estimated)

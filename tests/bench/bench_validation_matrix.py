@@ -35,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script:
 
 from service.components.library import SignatureLibrary  # noqa: E402
 from service.diagnosis.candidates import effect_candidates  # noqa: E402
+from service.diagnosis.drift import DriftEvidence  # noqa: E402
 from service.diagnosis.loop import diagnose  # noqa: E402
 from service.graph.store import GraphStore  # noqa: E402
 from service.resources import examples_dir  # noqa: E402
@@ -165,6 +166,7 @@ def diagnose_run(run: Run) -> dict:
         "top_significant": bool(top is not None and top.significant),
         "right_first": bool(top is not None and top.significant and (top.effect, top.node) == expected),
         "true_rank": true_rank, "any_significant": bool(significant),
+        "catalog_claimed": any(not isinstance(e, DriftEvidence) for e in significant),
         "lookalikes": [f"{e.effect.effect}@{e.effect.node.removeprefix(EX)}" for e in report.indistinguishable],
         "true_lookalike": any((e.effect.effect, e.effect.node) == expected for e in report.indistinguishable),
         "failing": [n.removeprefix(EX) for n in failing], "worst_sensor": worst.removeprefix(EX),
@@ -196,19 +198,36 @@ def _rate(rows: list[dict], key: str) -> str:
     return f"{sum(r[key] for r in rows)}/{len(rows)}"
 
 
+def _count(rows: list[dict], holds) -> str:
+    return f"{sum(map(holds, rows))}/{len(rows)}"
+
+
 def _median(values: list) -> str:
     known = [v for v in values if v is not None]
     return f"{statistics.median(known):.0%}" if known else "–"
 
 
+#: How a drift candidate's name starts (``service.diagnosis.drift.drift_identity``).
+DRIFT_PREFIXES = ("LinearDrift/", "StepDrift/")
+
+
+def _catalog_claimed(row: dict) -> bool:
+    """A catalog effect significant in ``row`` (a parameter drift, the generic candidate for what the
+    catalog lacks, is none); computed from its candidates where the row predates the key."""
+    if "catalog_claimed" in row:
+        return row["catalog_claimed"]
+    return any(c["significant"] and not c["candidate"].startswith(DRIFT_PREFIXES) for c in row["candidates"])
+
+
 def table(rows: list[dict]) -> str:
     """Per cell: runs; the right effect at the right node first and significant; the right effect
-    named indistinguishable from a significant answer instead; anything significant; the median share
-    of the affected sensor's held-out error the top candidate and the true candidate remove; the true
-    candidate's rank; the most common top candidate."""
-    lines = ["| cell | runs | right first | right as look-alike | any significant | removed by top | removed by true | "
-             "true rank | top candidate (most often) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    named indistinguishable from a significant answer instead; anything significant; for a fault
+    outside the catalog, a catalog effect claimed (significant); the median share of the affected
+    sensor's held-out error the top candidate and the true candidate remove; the true candidate's
+    rank; the most common top candidate."""
+    lines = ["| cell | runs | right first | right as look-alike | any significant | catalog effect claimed | "
+             "removed by top | removed by true | true rank | top candidate (most often) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     cells: dict[str, list[dict]] = {}
     for row in rows:
         cells.setdefault(row["cell"], []).append(row)
@@ -218,6 +237,7 @@ def table(rows: list[dict]) -> str:
         top, count = Counter(r["top"] + (" (sig.)" if r["top_significant"] else "") for r in group).most_common(1)[0]
         lines.append(f"| {cell} | {len(group)} | {_rate(group, 'right_first') if catalog else '–'} | "
                      f"{_rate(group, 'true_lookalike') if catalog else '–'} | {_rate(group, 'any_significant')} | "
+                     f"{_count(group, _catalog_claimed) if group[0]['group'] == 'outside' else '–'} | "
                      f"{_median([r['share_removed'] for r in group])} | "
                      f"{_median([r['true_share_removed'] for r in group]) if catalog else '–'} | "
                      f"{statistics.median(ranks) if ranks else '–'} | {top} ×{count} |")

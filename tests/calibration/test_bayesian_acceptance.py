@@ -57,7 +57,8 @@ def exact_bayes(exact):
 
 @pytest.fixture(scope="module")
 def fan_heat(tmp_path_factory):
-    """The truth has fan motor heat in the air stream (f = 0.8, about 1 K); the model lacks it."""
+    """The truth has fan motor heat in the air stream (f_m = 0.6 on top of the impeller's 0.3, about 0.6 K); the
+    model lacks it."""
     return CaseStudyTruth(tmp_path_factory.mktemp("fan_heat"), hidden_effect="FanMotorHeat")
 
 

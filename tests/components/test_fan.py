@@ -17,7 +17,31 @@ def test_nominal_flow_draws_nominal_power_times_the_curve_sum(run_model, params_
     out = _fan(run_model, params_for(Fan), 1.5)
     assert out["electric_power"] == pytest.approx(1800.0 * 0.9991, rel=1e-12)  # 1798.38 W
     assert out["outlet_air_mass_flow"] == pytest.approx(1.204 * 1.5, rel=1e-12)
-    assert out["outlet_air_temperature"] == 4.0
+    # the impeller's losses, 0.3 of the power, into 1.806 kg/s of air: 0.3·1798.38/(1.806·1006) = 0.2970 K
+    assert out["outlet_air_temperature"] == pytest.approx(4.0 + 0.3 * 1798.38 / (1.204 * 1.5 * 1006.0), rel=1e-5)
+
+
+def test_a_fan_that_is_off_or_whose_impeller_heat_is_not_counted_leaves_the_air_at_its_inlet_temperature(
+        run_model, params_for):
+    assert _fan(run_model, params_for(Fan), 0.0)["outlet_air_temperature"] == 4.0
+    assert _fan(run_model, params_for(Fan, impeller_heat_share=0.0), 1.5)["outlet_air_temperature"] == 4.0
+
+
+def test_the_impeller_heat_is_counted_only_where_a_meter_measures_the_power():
+    assert Fan.parameters_fixed_by_measurement(frozenset({"electric_power"})) == {"impeller_heat_share": 0.3}
+    assert Fan.parameters_fixed_by_measurement(frozenset({"outlet_air_temperature"})) == {"impeller_heat_share": 0.0}
+
+
+def test_motor_heat_adds_its_share_on_top_of_the_impellers(run_model, params_for):
+    from service.components.effects.fan_motor_heat import FanMotorHeat
+
+    fan = _fan(run_model, params_for(Fan), 1.5)
+    inputs = {"value_in": np.array([fan["outlet_air_temperature"]]),
+              "electric_power": np.array([fan["electric_power"]]),
+              "air_mass_flow": np.array([fan["outlet_air_mass_flow"]])}
+    out = run_model(FanMotorHeat, params_for(FanMotorHeat, motor_heat_fraction=0.6), inputs)[0]["value_out"][0]
+    # 0.3 + 0.6 of 1798.38 W into 1.806 kg/s: 0.9·1798.38/(1.806·1006) = 0.8909 K
+    assert out - 4.0 == pytest.approx(0.9 * 1798.38 / (1.806 * 1006.0), rel=1e-5)
 
 
 def test_half_flow_follows_the_cubic(run_model, params_for):

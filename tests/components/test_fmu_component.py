@@ -114,8 +114,10 @@ def test_runs_inside_the_simulator_beside_the_python_fan_without_leaking_instanc
             iri="urn:pyfan", signature=python_fan, bindings={"n": "urn:pyfan"}, modeled_nodes=("urn:pyfan",),
             mapped_parameters={})},
         connections=(*model.connections, Connection("urn:flow", "measured_value", "urn:pyfan", "air_volume_flow")),
-        mapped_parameters=(*model.mapped_parameters,
-                           *(ParameterRef("urn:pyfan", Fan.parameter(name), value) for name, value in FAN_CURVE.items())),
+        mapped_parameters=(
+            *model.mapped_parameters,
+            *(ParameterRef("urn:pyfan", Fan.parameter(name), value) for name, value in FAN_CURVE.items()),
+            ParameterRef("urn:pyfan", Fan.parameter("impeller_heat_share"), 0.0)),
         estimated_parameters=(*model.estimated_parameters, ParameterRef("urn:pyfan", Fan.parameter("nominal_power"))),
     )
     theta = np.array([[900.0, 60.0, 900.0], [1800.0, 120.0, 1800.0], [5000.0, 30.0, 5000.0]])

@@ -147,7 +147,8 @@ def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tm
     best = min(report.effects, key=lambda e: e.delta_bic)
     assert best.effect == "FanMotorHeat" and best.delta_bic < -10
     estimate, standard_error = best.estimates["motor_heat_fraction"], best.standard_errors["motor_heat_fraction"]
-    assert abs(estimate - 0.8) <= 3.0 * standard_error < 0.15, (estimate, standard_error)
+    truth = LIBRARY["FanMotorHeat"].extra["synthetic_truth"]["motor_heat_fraction"]
+    assert abs(estimate - truth) <= 3.0 * standard_error < 0.15, (estimate, truth, standard_error)
 
 
 def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():

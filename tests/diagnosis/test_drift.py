@@ -101,8 +101,9 @@ def test_a_constant_factor_is_the_parameter_scaled(case_data, suffix):
 @pytest.mark.parametrize("suffix", ["#c1", AIR_SIDE])
 def test_a_step_schedule_equals_two_runs_spliced(case_data, suffix):
     """Before the step every target is the run at the old value; after it a memoryless component's
-    (the fan's power) is the run at the new value at once, a stepped one's once its states and the
-    control loop have followed (within 1 % of the change's effect after 12 h: near shut-off an
+    output (the fan's power) is the run at the new value at once, what passes through states (the
+    fan's impeller heat through the coil, a stepped component's outputs) once they and the control
+    loop have followed (within 1 % of the change's effect after 12 h: near shut-off an
     equal-percentage valve passes a trickle, and the water in the pipes takes hours to be replaced)."""
     md = case_data
     key, column = _key(md, suffix)
@@ -119,7 +120,7 @@ def test_a_step_schedule_equals_two_runs_spliced(case_data, suffix):
         np.testing.assert_array_equal(scheduled[node][0, :step], before[node][0, :step])
         change = np.max(np.abs(after[node][0] - before[node][0]))
         moved |= change > 1e-6
-        if suffix == "#c1":
+        if suffix == "#c1" and node == EX + "fan_power_meter":
             np.testing.assert_allclose(scheduled[node][0, step:], after[node][0, step:], rtol=1e-12, atol=1e-12)
         else:
             assert np.max(np.abs(scheduled[node][0, settled:] - after[node][0, settled:])) <= 0.01 * change + 1e-9, node

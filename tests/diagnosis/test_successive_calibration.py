@@ -185,12 +185,13 @@ def test_morris_puts_the_fan_curve_first_at_high_flow_and_the_coil_first_at_low_
     coil = [names.index(n) for n in COIL_CONDUCTANCES]
     assert names[int(np.nanargmax(sensitivity.mu_star[low_flow]))] in COIL_CONDUCTANCES
     assert share[low_flow, coil].sum() > share[high_flow, coil].sum()
-    # Per target: nothing but the fan curve moves the fan power; the fan curve moves no coil sensor.
+    # Per target: nothing but the fan curve moves the fan power; the fan curve moves a coil sensor by
+    # its impeller's heat alone, an order of magnitude less than the coil's conductances do.
     fan_power = calibration_morris_by_regime(problem, labels[train], targets=[EX + "fan_power_meter"], seed=0)
     assert fan_power.mu_star[:, [i for i in range(len(names)) if i not in fan]].max() == 0.0
     water = calibration_morris_by_regime(problem, labels[train], targets=[EX + "coil_outlet_water_temperature_sensor"],
                                          seed=0)
-    assert water.mu_star[:, fan].max() == 0.0 and water.mu_star[:, coil].min() > 1.0
+    assert water.mu_star[:, coil].min() > 1.0 and water.mu_star[:, fan].max() < 0.1 * water.mu_star[:, coil].min()
 
 
 def test_dominant_parameters_by_regime_is_ready_for_the_report(case):

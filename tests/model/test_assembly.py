@@ -11,6 +11,7 @@ from service.graph.store import GraphStore
 from service.model.assembly import assemble
 from service.model.assembly_triples import assembly_triples
 from service.model.effect_splicing import EffectRequest
+from service.model.wiring import measured_outputs
 
 
 def _nodes(model, components):
@@ -26,7 +27,9 @@ def test_case_study_assembles_like_the_paper(case_store):
         "coil_inlet_water_temperature_sensor", "coil_outlet_air_temperature_sensor",
         "coil_outlet_water_temperature_sensor", "fan_power_meter", "valve_position_sensor"]
     mapped = {ref.name: ref.value for ref in model.mapped_parameters}
-    assert mapped == {"nominal_air_flow": 1.5, "nominal_power": pytest.approx(1800.0), "valve_flow_coefficient": 2.5}
+    # the fan's power is metered: its impeller's heat is counted (fixed, not estimated)
+    assert mapped == {"nominal_air_flow": 1.5, "nominal_power": pytest.approx(1800.0), "valve_flow_coefficient": 2.5,
+                      "impeller_heat_share": 0.3}
     assert len(model.estimated_parameters) == 17
     loop = model.component_for_node(EX + "heating_valve")
     assert loop.signature.id == "HotWaterLoop" and EX + "check_valve" in loop.modeled_nodes
@@ -169,6 +172,32 @@ def test_a_nominal_value_without_its_unit_is_estimated_with_a_note(case_store):
             f"for it (add <{EX}supply_fan_nominal_power> <https://saref.etsi.org/core/isMeasuredIn> <a QUDT unit IRI> .)"
             ) in model.notes
     assert not [n for n in assemble(case_store, "case").notes if "no unit" in n]  # with its unit: no note
+
+
+def test_the_fans_impeller_heat_is_counted_where_a_meter_measures_its_power_and_nowhere_else(case_store):
+    def impeller_share(model):
+        return {ref.name: ref.value for ref in model.mapped_parameters}["impeller_heat_share"]
+
+    assert impeller_share(assemble(case_store, "case")) == 0.3
+    text = CASE_STUDY.read_text()
+    meter = ('ex:fan_power_meter a saref:Meter ;\n    rdfs:label "Supply fan power meter" ;\n'
+             '    saref:observes ex:supply_fan_power ;')
+    assert meter in text
+    store = GraphStore.embedded(None)
+    unmetered_text = text.replace(meter, 'ex:fan_power_meter rdfs:label "Supply fan power meter" ;')
+    store.load_model("unmetered", unmetered_text.encode())
+    unmetered = assemble(store, "unmetered")
+    assert "impeller_heat_share" not in {ref.name for ref in unmetered.estimated_parameters}
+    assert impeller_share(unmetered) == 0.0
+    # an effect spliced between an output and its sensor leaves the output measured
+    offset = EffectRequest("SensorOffset", EX + "coil_outlet_air_temperature_sensor")
+    model = assemble(case_store, "case", extra_effects=[offset])
+    coil = model.component_for_node(EX + "heating_coil_air_side").iri
+    assert "outlet_air_temperature" in measured_outputs(model.connections, model.components, model.targets)[coil]
+    spliced = [c for c in model.connections if model.components[c.target].signature.id == "SensorOffset"]
+    cut = [c for c in model.connections if c not in spliced]
+    assert "outlet_air_temperature" not in measured_outputs(cut, model.components, model.targets)[coil]
+    assert impeller_share(model) == 0.3
 
 
 def test_an_effect_splicing_a_port_its_host_lacks_is_refused_by_name(case_store):

@@ -471,3 +471,17 @@ def test_a_candidate_indistinguishable_from_the_answer_says_what_would_separate_
     assert "Indistinguishable from the answer on these data" in effects[1][-1]
     assert effects[1][-1].endswith("a temperature sensor for the inlet air temperature of heating_coil_air_side")
     assert "Indistinguishable" not in effects[0][-1]
+
+
+def test_the_named_query_lists_the_diagnosis_candidates_ranked_with_the_answer_marked(case):
+    rows = case.store.run_named_query("diagnosis-candidates", model=case.report.model_name)
+    runs = {row["diagnosis"].value for row in rows}
+    assert runs == {f"{run_iri(case.report.run_id).value}/diagnosis"}
+    assert [int(row["rank"].value) for row in rows] == list(range(1, len(case.report.effects) + 1))
+    assert [(row["effect"].value, row["node"].value) for row in rows] == [
+        (e.effect_iri, e.node) for e in case.report.effects]
+    assert [row["significant"].value == "true" for row in rows] == [e.significant for e in case.report.effects]
+    answers = [(row["effect"].value, row["node"].value) for row in rows if row["answer"].value == "true"]
+    answer = case.report.answer
+    assert answers == ([] if answer is None else [(answer.effect_iri, answer.node)])
+    assert all(row["ended"] is not None for row in rows)

@@ -2,26 +2,19 @@
 
 from __future__ import annotations
 
-import numpy as np
-
-from service.components.component import (
-    AIR_SPECIFIC_HEAT_J_PER_KG_K,
-    MINIMUM_AIR_MASS_FLOW_KG_PER_S,
-    Parameter,
-    Port,
-    SplicedEffect,
-)
+from service.components.component import Parameter, Port, SplicedEffect
+from service.components.fan import fan_heat_rise_k
 
 __all__ = ["FanMotorHeat"]
 
 
 class FanMotorHeat(SplicedEffect):
-    """T_out = T_in + f_tot · P / (ṁ · c_p)   [°C]
+    """T_out = T_in + f_m · P / (ṁ · c_p)   [°C]  (:func:`~service.components.fan.fan_heat_rise_k`)
 
-    P the fan's electric power (W), ṁ the air mass flow (kg/s, floored at
-    ``MINIMUM_AIR_MASS_FLOW_KG_PER_S``), f_tot the share of the power that heats the air stream
-    (1 for a motor in the air stream, its efficiency losses only for a motor outside; ASHRAE
-    Handbook Fundamentals ch. 18). Null: f_tot = 0.
+    P the fan's electric power (W), ṁ the air mass flow (kg/s), f_m the share of the power heating
+    the air beyond what the base fan puts there: a motor and drive in the air stream lose theirs
+    into it (ASHRAE Handbook Fundamentals ch. 18). The base fan counts its impeller's losses (0.3 of
+    P) where a meter measures P, nothing where none does; f_m is then all of the fan's heat. Null: f_m = 0.
     """
 
     inputs = (
@@ -31,10 +24,10 @@ class FanMotorHeat(SplicedEffect):
     )
     outputs = (Port("value_out", "degC", "air temperature leaving the fan"),)
     parameters = (
-        Parameter("motor_heat_fraction", "1", 0.0, 0.0, 1.0, "share of fan power heating the air, f_tot", null=0.0),
+        Parameter("motor_heat_fraction", "1", 0.0, 0.0, 1.0,
+                  "share of fan power heating the air beyond the base fan's, f_m", null=0.0),
     )
 
     def step(self, params, inputs, state, dt_s):
-        flow = np.maximum(inputs["air_mass_flow"], MINIMUM_AIR_MASS_FLOW_KG_PER_S)
-        rise = params["motor_heat_fraction"] * inputs["electric_power"] / (flow * AIR_SPECIFIC_HEAT_J_PER_KG_K)
+        rise = fan_heat_rise_k(params["motor_heat_fraction"], inputs["electric_power"], inputs["air_mass_flow"])
         return {"value_out": inputs["value_in"] + rise}
