@@ -295,6 +295,7 @@ def calibrate(
     min_test_steps: int = 1,
     gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS,
     start_from: str | None = None,
+    on_prepared: Callable[[], None] | None = None,
 ) -> CalibrationOutcome:
     """Calibrate ``model_name`` against the CSV at ``data_path`` and store the run. A test window
     that overlaps the training window is noted in the run's warnings (its metrics are then partly on
@@ -308,6 +309,8 @@ def calibrate(
     :param start_from: a model in the store whose latest calibrated values start this fit
         (:func:`calibrated_start`); None: the component defaults.
     :param on_progress: hears how far a Bayesian run's sampling is after each convergence check.
+    :param on_prepared: called once the model, the data and the windows passed their checks, before
+        the fit (a caller's "calibrating…" then never precedes a refusal).
 
     :raises InputError: a bad window, a target without measurements, NaN-only series, an unknown
         method, a ``start_from`` with nothing to start from; nothing is written to the store then.
@@ -317,6 +320,8 @@ def calibrate(
     prepared = prepare_calibration(store, model_name, data_path, train=train, test=test, method=method,
                                    substeps=substeps, only_when=only_when, min_test_steps=min_test_steps,
                                    gp_inputs=gp_inputs, start_from=start_from)
+    if on_prepared is not None:
+        on_prepared()
     version, model, data, md = prepared.version, prepared.model, prepared.model_data.data, prepared.model_data
     substeps, train_slice, test_slice = md.substeps, prepared.train, prepared.test
     unscored_s, gp_nodes, window_notes = prepared.unscored_s, prepared.gp_nodes, prepared.window_notes

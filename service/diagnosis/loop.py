@@ -94,9 +94,9 @@ def diagnose(
     store whose latest calibration starts the base fit (:func:`service.calibration.run.calibrated_start`)."""
     say = on_progress or (lambda message: None)
     library = library or SignatureLibrary.load()
-    say("calibrating the base model")
     base = calibrate(store, model_name, data_path, train=train, test=test, seed=seed, substeps=substeps,
-                     only_when=only_when, min_test_steps=MIN_TEST_STEPS, start_from=start_from)
+                     only_when=only_when, min_test_steps=MIN_TEST_STEPS, start_from=start_from,
+                     on_prepared=lambda: say("calibrating the base model"))
     md, model = base.model_data, base.model
     data = md.data
     test_slice = base.test

@@ -101,6 +101,16 @@ def test_bad_windows_and_targets_write_nothing(synthetic, tmp_path):
     assert set(store.backend.graphs()) == graphs_before
 
 
+def test_a_refused_diagnosis_says_nothing_of_calibrating_before_it_refuses(synthetic):
+    from service.diagnosis.loop import diagnose
+
+    store, path, _ = synthetic
+    heard = []
+    with pytest.raises(ValueError, match="outside the data"):
+        diagnose(store, "case", path, train=("2030-01-01", "2030-01-02"), test=TEST, on_progress=heard.append)
+    assert heard == []
+
+
 def test_a_too_short_test_window_is_refused_before_anything_is_written_and_an_overlap_is_noted(synthetic):
     from service.diagnosis.loop import MIN_TEST_STEPS, diagnose
 
