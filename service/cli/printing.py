@@ -10,6 +10,7 @@ from rich.table import Table
 from rich.text import Text
 
 from service.cli.common import console
+from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text, unit_label
 
@@ -131,7 +132,10 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     if not report.effects_tested:
         console.print(f"[bold]{report.summary}[/bold]")
         return
-    table = Table(title="Which effect is missing (best first)")
+    table = Table(title="Which effect is missing (best first)",
+                  caption=f"significant: ΔBIC < {BIC_THRESHOLD:g} and at least {100 * MIN_TEST_IMPROVEMENT:.0f} % "
+                          "of the held-out error removed; score: the score test's χ² at the effect's null, "
+                          "in-sample evidence only")
     for column in ("effect", "at", "score", "ΔBIC", "test error removed", "significant"):
         table.add_column(column, overflow="fold")
     for e in report.effects:

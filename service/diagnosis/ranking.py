@@ -25,9 +25,12 @@ from service.model.assembled_model import AssembledModel
 #: The share of the evaluation half's weighted squared error an effect must remove to be significant
 #: (and that it must remove at a sensor for the failure to be located there).
 MIN_TEST_IMPROVEMENT = 0.2
+#: ΔBIC below which a candidate's in-sample evidence counts ("strong" on Kass & Raftery's scale).
+BIC_THRESHOLD = -10.0
 
 __all__ = [
-    "MIN_TEST_IMPROVEMENT", "ScoreTest", "EffectEvidence", "score_test", "score_ensemble", "effective_sample_fraction", "rank_evidence", "delta_bic",
+    "MIN_TEST_IMPROVEMENT", "BIC_THRESHOLD", "ScoreTest", "EffectEvidence", "score_test", "score_ensemble",
+    "effective_sample_fraction", "rank_evidence", "delta_bic",
     "weighted_test_error", "step_errors", "residual_step_errors",
 ]
 
@@ -213,7 +216,7 @@ def delta_bic(rss_base, rss_effect, n_effective, n_extra: int) -> float:
 
 
 def rank_evidence(
-    evidence: Sequence[EffectEvidence], *, bic_threshold: float = -10.0,
+    evidence: Sequence[EffectEvidence], *, bic_threshold: float = BIC_THRESHOLD,
     min_test_improvement: float = MIN_TEST_IMPROVEMENT,
 ) -> list[EffectEvidence]:
     """Mark significant candidates and order them best first (see the module docstring)."""

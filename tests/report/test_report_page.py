@@ -485,3 +485,24 @@ def test_the_named_query_lists_the_diagnosis_candidates_ranked_with_the_answer_m
     answer = case.report.answer
     assert answers == ([] if answer is None else [(answer.effect_iri, answer.node)])
     assert all(row["ended"] is not None for row in rows)
+
+
+def test_the_cli_table_of_effects_says_what_significant_and_score_mean_and_cuts_no_name(case):
+    from service.cli.common import console
+    from service.cli.printing import print_diagnosis
+
+    width = console.width
+    console.width = 60  # narrower than the names: they fold, not end in "…"
+    try:
+        with console.capture() as captured:
+            print_diagnosis(case.report, stored=False)
+    finally:
+        console.width = width
+    text = captured.get()
+    flat = "".join(text.split())  # folded lines joined again
+    assert "…" not in text
+    assert "significant:ΔBIC<-10andatleast20%oftheheld-outerrorremoved" in flat
+    assert "score:thescoretest'sχ²attheeffect'snull,in-sampleevidenceonly" in flat
+    effects_table = text[text.index("Which effect is missing"):].splitlines()
+    first_column = "".join(line.split("│")[1].strip() for line in effects_table if line.startswith("│"))
+    assert first_column == "".join(e.effect for e in case.report.effects)  # every name whole, in rank order
