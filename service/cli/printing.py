@@ -10,7 +10,6 @@ from rich.table import Table
 from rich.text import Text
 
 from service.cli.common import console
-from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text, unit_label
 
@@ -132,6 +131,8 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     if not report.effects_tested:
         console.print(f"[bold]{report.summary}[/bold]")
         return
+    from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT  # scipy: not at the CLI's start
+
     table = Table(title="Which effect is missing (best first)",
                   caption=f"significant: ΔBIC < {BIC_THRESHOLD:g} and at least {100 * MIN_TEST_IMPROVEMENT:.0f} % "
                           "of the held-out error removed; score: the score test's χ² at the effect's null, "
