@@ -20,19 +20,6 @@ __all__ = ["IMPELLER_HEAT_SHARE", "Fan", "fan_heat_rise_k", "part_load_power_fra
 #: η_motor·η_drive = 0.87 (the fan's useful work is dissipated downstream, in the duct system).
 IMPELLER_HEAT_SHARE = 0.3
 
-#: The fan's parameters, shared by :class:`Fan` and the speed-controlled fan.
-FAN_PARAMETERS = (
-    Parameter("nominal_air_flow", "m3/s", 1.5, 0.1, 20.0, "nominal air volume flow, V̇_nom"),
-    Parameter("nominal_power", "W", 1800.0, 50.0, 50000.0, "electric power at nominal flow, P_nom"),
-    Parameter("c1", "1", 0.0013, 0.0, 0.3, "part-load curve, constant term"),
-    Parameter("c2", "1", 0.1470, -0.5, 1.0, "part-load curve, linear term"),
-    Parameter("c3", "1", 0.9506, -1.0, 2.0, "part-load curve, quadratic term"),
-    Parameter("c4", "1", -0.0998, -1.0, 1.5, "part-load curve, cubic term"),
-    Parameter("impeller_heat_share", "1", IMPELLER_HEAT_SHARE, 0.0, 1.0,
-              "share of the electric power the impeller's losses put into the air, f_imp"),
-)
-
-
 def fan_heat_rise_k(share: np.ndarray, power_w: np.ndarray, air_mass_flow_kg_per_s: np.ndarray) -> np.ndarray:
     """ΔT = share·P/(max(ṁ, ṁ_min)·c_p) [K]: the rise of the air temperature across a fan that puts
     ``share`` of its electric power P [W] into an air stream of ṁ [kg/s] (ṁ_min:
@@ -69,7 +56,16 @@ class Fan(ComponentModel):
         Port("outlet_air_mass_flow", "kg/s", "air mass flow, ṁ"),
         Port("electric_power", "W", "electric power drawn, P"),
     )
-    parameters = FAN_PARAMETERS
+    parameters = (
+        Parameter("nominal_air_flow", "m3/s", 1.5, 0.1, 20.0, "nominal air volume flow, V̇_nom"),
+        Parameter("nominal_power", "W", 1800.0, 50.0, 50000.0, "electric power at nominal flow, P_nom"),
+        Parameter("c1", "1", 0.0013, 0.0, 0.3, "part-load curve, constant term"),
+        Parameter("c2", "1", 0.1470, -0.5, 1.0, "part-load curve, linear term"),
+        Parameter("c3", "1", 0.9506, -1.0, 2.0, "part-load curve, quadratic term"),
+        Parameter("c4", "1", -0.0998, -1.0, 1.5, "part-load curve, cubic term"),
+        Parameter("impeller_heat_share", "1", IMPELLER_HEAT_SHARE, 0.0, 1.0,
+                  "share of the electric power the impeller's losses put into the air, f_imp"),
+    )
 
     @classmethod
     def parameters_fixed_by_measurement(cls, measured_outputs: frozenset[str]) -> dict[str, float]:

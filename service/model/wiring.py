@@ -181,7 +181,7 @@ def wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection], 
 def measured_outputs(connections: Sequence[Connection], instances: Mapping[str, ComponentInstance],
                      targets: Sequence[str]) -> dict[str, frozenset[str]]:
     """Component IRI → the names of its outputs a calibration target reads, directly or through
-    spliced effects (an effect's ``value_in`` → ``value_out``: an offset between a fan and its meter)."""
+    spliced effects (an effect's ``value_in`` → ``value_out``: a sensor offset spliced on a sensor's input)."""
     feeds = defaultdict(list)
     for c in connections:
         feeds[(c.source, c.source_port)].append((c.target, c.target_port))
