@@ -17,8 +17,10 @@ hA_a, four time constants, T_amb and τ_loss. Equations, bounds and why these pa
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from scipy.special import gammaln
+from numba import njit, vectorize
 
 from service.components.component import (
     AIR_SPECIFIC_HEAT_J_PER_KG_K,
@@ -27,66 +29,165 @@ from service.components.component import (
     ComponentModel,
     Parameter,
     Port,
-    first_order_lag_factor,
 )
-from service.components.heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
+from service.components.heat_exchanger import (
+    REFERENCE_AIR_MASS_FLOW,
+    TINY,
+    film_ua_scalar,
+    heat_rate_scalar,
+)
 
-__all__ = ["HotWaterLoop", "REFERENCE_WATER_MASS_FLOW", "SUPPLY_PIPE_TANKS", "advance_tank_chain", "steady_tank_chain",
-           "valve_flow_share"]
+__all__ = ["HotWaterLoop", "REFERENCE_WATER_MASS_FLOW", "SUPPLY_PIPE_TANKS", "advance_tank_chain", "valve_flow_share"]
 
-# 0-d arrays: numpy's ufuncs take them faster than Python floats
-_TINY, _ZERO, _ONE = np.array(1e-9), np.array(0.0), np.array(1.0)
 #: Opening [m³/h] at or below which the valve passes no water.
-_SHUT_OPENING = np.array(1e-6)
+_SHUT_OPENING = 1e-6
 #: Reference water flow of the water-side film conductance hA_w, kg/s (hA_a: REFERENCE_AIR_MASS_FLOW).
 REFERENCE_WATER_MASS_FLOW = 0.5
 #: Mixed tanks in series standing for the supply pipe's plug flow: a front arrives spread over
 #: τ/√N of its transport time τ.
 SUPPLY_PIPE_TANKS = 12
-_TANK_POWERS = np.arange(1.0, SUPPLY_PIPE_TANKS + 1.0)
-# the transport kernel's orders 0 … N−1 and one more whose weight is 0 (log m! = ∞): the Toeplitz
-# matrix's upper triangle indexes it, so no mask is needed
-_KERNEL_ORDER = np.arange(SUPPLY_PIPE_TANKS + 1.0)
-_KERNEL_LOG_FACTORIAL = np.append(gammaln(_TANK_POWERS), np.inf)
-_KERNEL_INDEX = np.subtract.outer(np.arange(SUPPLY_PIPE_TANKS), np.arange(SUPPLY_PIPE_TANKS))
-_KERNEL_INDEX[_KERNEL_INDEX < 0] = SUPPLY_PIPE_TANKS
+#: The parameters in the order the compiled step takes them.
+_PARAMETER_ORDER = ("valve_flow_coefficient", "valve_rangeability", "loop_flow_coefficient", "loop_pressure_difference",
+                    "water_side_conductance", "air_side_conductance", "supply_pipe_time_constant",
+                    "metal_time_constant", "air_side_time_constant", "water_side_time_constant",
+                    "pipe_surroundings_temperature", "standing_water_time_constant")
 
 
-def steady_tank_chain(entering_excess: np.ndarray, transport: np.ndarray, loss: np.ndarray) -> np.ndarray:
-    """The tanks' steady excesses [..., N] of :func:`advance_tank_chain`'s chain, θ_i* = θ_0·(k/(k + λ))^i,
-    for ``entering_excess`` θ_0 [K], ``transport`` k and ``loss`` λ (rates, or both times one dt)."""
-    share = np.asarray(transport)[..., None] / (np.asarray(transport)[..., None] + np.asarray(loss)[..., None])
-    return np.asarray(entering_excess)[..., None] * share ** _TANK_POWERS
-
-
-def advance_tank_chain(excess: np.ndarray, entering_excess: np.ndarray, transport_dt: np.ndarray,
-                       loss_dt: np.ndarray) -> np.ndarray:
-    """Tanks in series, dθ_i/dt = k·(θ_{i−1} − θ_i) − λ·θ_i with θ_0 held over the step, advanced
-    exactly: with a = k·dt and x = (k + λ)·dt, the steady state θ_i* (:func:`steady_tank_chain`) and
-
-        θ_i(t+dt) = θ_i* + Σ_{j≤i} e^{−x}·a^{i−j}/(i−j)!·(θ_j(t) − θ_j*)
-
-    (the chain's matrix exponential). ``excess`` [..., N] the tanks' temperatures above their
-    surroundings [K], ``entering_excess`` [...] the water entering, ``transport_dt`` a, ``loss_dt`` λ·dt."""
-    a = np.asarray(transport_dt)[..., None]
-    x = a + np.asarray(loss_dt)[..., None]
-    steady = steady_tank_chain(entering_excess, transport_dt, loss_dt)
-    kernel = np.exp(_KERNEL_ORDER * np.log(np.maximum(a, 1e-300)) - x - _KERNEL_LOG_FACTORIAL)
-    return steady + np.matmul(kernel[..., _KERNEL_INDEX], (excess - steady)[..., None])[..., 0]
-
-
-def valve_flow_share(position: np.ndarray, rangeability: np.ndarray) -> np.ndarray:
+@njit(cache=True)
+def _valve_share(position: float, rangeability: float) -> float:
     """φ(u) = R^(u−1) − (1−u)/R [1]: the valve's flow coefficient at stem position ``position`` u (0–1)
     as a share of the fully open one, for ``rangeability`` R ≥ 1 (R = 1 linear, φ(0) = 0, φ(1) = 1,
     increasing in u)."""
-    return rangeability ** (position - _ONE) - (_ONE - position) / rangeability
+    return rangeability ** (position - 1.0) - (1.0 - position) / rangeability
 
 
-def _series_flow_m3_per_h(opening: np.ndarray, kv_loop: np.ndarray, pressure_bar: np.ndarray) -> np.ndarray:
-    """V̇ [m³/h] through an opening K_v·φ(u) ≥ 0 [m³/h] in series with ``kv_loop`` [m³/h] under
-    ``pressure_bar`` [bar] (module docstring); 0 at an opening of 10⁻⁶ m³/h or less."""
-    resistance = _ONE / np.maximum(opening, _TINY) ** 2 + _ONE / kv_loop**2
-    return np.sqrt(np.maximum(pressure_bar, _ZERO) / resistance) * (opening > _SHUT_OPENING)
+#: :func:`_valve_share` over arrays (a numpy ufunc: broadcasts).
+valve_flow_share = vectorize(["float64(float64, float64)"], cache=True)(_valve_share)
+
+
+@njit(cache=True)
+def _water_mass_flow(position: float, kv: float, rangeability: float, kv_loop: float, pressure_bar: float) -> float:
+    """ṁ_w [kg/s] at the clipped valve position u (module docstring): V̇ [m³/h] through the opening
+    K_v·φ(u) in series with K_v,loop under Δp_loop [bar]; none at an opening of 10⁻⁶ m³/h or less."""
+    opening = _valve_share(position, rangeability) * kv
+    if opening <= _SHUT_OPENING:
+        return 0.0
+    resistance = 1.0 / opening**2 + 1.0 / kv_loop**2
+    return WATER_DENSITY_KG_PER_M3 * math.sqrt(np.maximum(pressure_bar, 0.0) / resistance) / 3600.0
+
+
+@njit(cache=True)
+def _advance_chain(excess, entering_excess: float, transport_dt: float, loss_dt: float, advanced, scratch) -> None:
+    """One member's tanks in series, dθ_i/dt = k·(θ_{i−1} − θ_i) − λ·θ_i with θ_0 held over the step,
+    advanced exactly into ``advanced``: with a = k·dt and x = (k + λ)·dt, the steady state
+    θ_i* = θ_0·(a/x)^i and
+
+        θ_i(t+dt) = θ_i* + Σ_{j≤i} w_{i−j}·(θ_j(t) − θ_j*),   w_m = e^{−x}·a^m/m!
+
+    (the chain's matrix exponential). ``excess`` [N] the tanks' temperatures above their
+    surroundings [K], ``entering_excess`` θ_0, ``transport_dt`` a, ``loss_dt`` λ·dt; ``scratch``
+    [2, N] working space."""
+    n = excess.shape[0]
+    x = transport_dt + loss_dt
+    share = transport_dt / x
+    weights, departure = scratch[0], scratch[1]
+    weight = math.exp(-x)
+    steady = entering_excess
+    for i in range(n):
+        weights[i] = weight
+        weight *= transport_dt / (i + 1.0)
+        steady *= share
+        departure[i] = excess[i] - steady
+        total = steady
+        for j in range(i + 1):
+            total += weights[i - j] * departure[j]
+        advanced[i] = total
+
+
+@njit(cache=True)
+def advance_tank_chain(excess, entering_excess, transport_dt, loss_dt):
+    """:func:`_advance_chain` for every member: ``excess`` [n, N], the others [n] (or [1])."""
+    advanced, scratch = np.empty_like(excess), np.empty((2, excess.shape[1]))
+    for m in range(excess.shape[0]):
+        _advance_chain(excess[m], _at(entering_excess, m), _at(transport_dt, m), _at(loss_dt, m), advanced[m],
+                       scratch)
+    return advanced
+
+
+def _row(values) -> np.ndarray:
+    """``values`` as a one-dimensional float array (as it is, where it already is one)."""
+    if type(values) is np.ndarray and values.ndim == 1 and values.dtype == np.float64:
+        return values
+    return np.atleast_1d(np.asarray(values, dtype=float))
+
+
+@njit(inline="always")
+def _at(values, member: int) -> float:
+    """Member ``member``'s value of a per-member array, or the one value of an array of one."""
+    return values[member] if values.shape[0] > 1 else values[0]
+
+
+@njit(cache=True)
+def _moved_water(temperature: float, entering: float, transport: float, loss: float, surroundings: float,
+                 dt_s: float) -> float:
+    """Water temperature [°C] after ``dt_s`` of dT/dt = k·(T_entering − T) + (T_amb − T)/τ_loss, with
+    ``transport`` k = (ṁ_w/ṁ_ref)/τ and ``loss`` 1/τ_loss [1/s], exact for inputs held over the step;
+    ``temperature`` NaN: its steady state."""
+    rate = transport + loss
+    steady = (transport * entering + loss * surroundings) / rate
+    return steady if math.isnan(temperature) else steady + (temperature - steady) * math.exp(-rate * dt_s)
+
+
+@njit(cache=True)
+def _loop_step(valve_position, supply_water, inlet_air, air_flow_in, params, pipe_excess, heat_rate, outlet_air,
+               outlet_water, dt_s: float, start: bool):
+    """The loop over one step for every member (module docstring), or its steady start when ``start``
+    (the pipe and the water side in steady state, the lags at their targets). The inputs [n] or [1];
+    ``params`` [12, n] or [12, 1], rows in :data:`_PARAMETER_ORDER`. Returns new arrays: (supply pipe
+    excess [n, N], heat rate, outlet air, outlet water, inlet water, water mass flow, position)."""
+    n = pipe_excess.shape[0]
+    tanks = pipe_excess.shape[1]
+    new_pipe, scratch = np.empty_like(pipe_excess), np.empty((2, tanks))
+    heat_out, air_out, water_out = np.empty(n), np.empty(n), np.empty(n)
+    water_in_out, flow_out, position_out = np.empty(n), np.empty(n), np.empty(n)
+    for m in range(n):
+        position = np.minimum(np.maximum(_at(valve_position, m), 0.0), 1.0)
+        supply, air_in, air_flow = _at(supply_water, m), _at(inlet_air, m), np.maximum(_at(air_flow_in, m), 0.0)
+        kv, rangeability, kv_loop, pressure = _at(params[0], m), _at(params[1], m), _at(params[2], m), _at(params[3], m)
+        surroundings, loss = _at(params[10], m), 1.0 / _at(params[11], m)
+        water_flow = _water_mass_flow(position, kv, rangeability, kv_loop, pressure)
+        ratio = water_flow / REFERENCE_WATER_MASS_FLOW
+        entering = supply - surroundings
+        transport = tanks * ratio / _at(params[6], m)
+        if start:
+            steady = entering
+            for i in range(tanks):
+                steady *= transport / (transport + loss)
+                new_pipe[m, i] = steady
+        else:
+            _advance_chain(pipe_excess[m], entering, transport * dt_s, loss * dt_s, new_pipe[m], scratch)
+        water_in = surroundings + new_pipe[m, tanks - 1]
+        ua = film_ua_scalar(_at(params[4], m), ratio, _at(params[5], m), air_flow / REFERENCE_AIR_MASS_FLOW)
+        c_water = np.maximum(water_flow * WATER_SPECIFIC_HEAT_J_PER_KG_K, TINY)
+        c_air = np.maximum(air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K, TINY)
+        static = heat_rate_scalar(ua, c_water, c_air, water_in, air_in) if water_flow > 0.0 else 0.0
+        low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
+        if start:
+            heat = static
+            air = np.minimum(np.maximum(air_in + heat / c_air, low), high)
+            previous_water = math.nan
+        else:
+            previous = heat_rate[m]
+            heat = previous + (1.0 - math.exp(-dt_s / _at(params[7], m))) * (static - previous)
+            air_target = np.minimum(np.maximum(air_in + heat / c_air, low), high)
+            air = outlet_air[m] + (1.0 - math.exp(-dt_s / _at(params[8], m))) * (air_target - outlet_air[m])
+            previous_water = outlet_water[m]
+        water_target = np.minimum(np.maximum(water_in - heat / c_water, low), high)
+        water_out[m] = _moved_water(previous_water, water_target, ratio / _at(params[9], m), loss, surroundings,
+                                    dt_s)
+        heat_out[m], air_out[m], water_in_out[m] = heat, air, water_in
+        flow_out[m], position_out[m] = water_flow, position
+    return new_pipe, heat_out, air_out, water_out, water_in_out, flow_out, position_out
 
 
 class HotWaterLoop(ComponentModel):
@@ -130,99 +231,51 @@ class HotWaterLoop(ComponentModel):
     #: e⁻² of a wrong start), and the states start in steady state with the first inputs.
     settling_s = 86400.0
 
-    def _water_flow(self, params, position):
-        """ṁ_w [kg/s] at valve position ``position``, already clipped to 0–1."""
-        opening = valve_flow_share(position, params["valve_rangeability"]) * params["valve_flow_coefficient"]
-        flow_m3_per_h = _series_flow_m3_per_h(opening, params["loop_flow_coefficient"],
-                                              params["loop_pressure_difference"])
-        return WATER_DENSITY_KG_PER_M3 * flow_m3_per_h / 3600.0
-
-    def _static_heat(self, params, air_in, air_flow, water_flow, water_flow_ratio, water_in):
-        """Q_static [W], C_w and C_a [W/K], the capacity rates floored at 10⁻⁹ W/K (module docstring);
-        ``water_flow_ratio`` = ṁ_w/ṁ_ref."""
-        ua = series_film_ua_w_per_k(
-            water_conductance_w_per_k=params["water_side_conductance"], water_flow_ratio=water_flow_ratio,
-            air_conductance_w_per_k=params["air_side_conductance"], air_flow_ratio=air_flow / REFERENCE_AIR_MASS_FLOW,
-        )
-        c_water = np.maximum(water_flow * WATER_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
-        c_air = np.maximum(air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K, _TINY)
-        heat = coil_heat_rate_w(ua, water_capacity_w_per_k=c_water, air_capacity_w_per_k=c_air,
-                                water_inlet_temperature=water_in, air_inlet_temperature=air_in) * (water_flow > _ZERO)
-        return heat, c_water, c_air
+    @staticmethod
+    def _inputs(inputs) -> list[np.ndarray]:
+        """The compiled step's inputs, one-dimensional float arrays in the order of :attr:`inputs`."""
+        return [_row(inputs[port.name]) for port in HotWaterLoop.inputs]
 
     @staticmethod
-    def _standing_loss(params):
-        """1/τ_loss [1/s] and T_amb/τ_loss [K/s] of water standing in the pipes."""
-        loss = _ONE / params["standing_water_time_constant"]
-        return loss, loss * params["pipe_surroundings_temperature"]
-
-    @staticmethod
-    def _moved_water(temperature, entering, transport, loss, loss_drive, dt_s):
-        """Water temperature [°C] after ``dt_s`` of dT/dt = k·(T_entering − T) + (T_amb − T)/τ_loss, with
-        ``transport`` k = (ṁ_w/ṁ_ref)/τ [1/s] and ``loss``, ``loss_drive`` from :meth:`_standing_loss`
-        (module docstring), exact for inputs held over the step; ``temperature`` None: its steady state."""
-        rate = transport + loss
-        steady = (transport * entering + loss_drive) / rate
-        return steady if temperature is None else steady + (temperature - steady) * np.exp(rate * -dt_s)
+    def _parameters(params, state) -> np.ndarray:
+        """The parameters as the compiled step takes them, [12, n]: packed once and kept in ``state``;
+        a row is copied again where its parameter comes as another array (one that changes over
+        time comes anew every step)."""
+        given = [params[name] for name in _PARAMETER_ORDER]
+        if "_parameters" not in state:
+            rows = [_row(values) for values in given]
+            width = max(len(row) for row in rows)
+            state["_parameters"] = (given, np.array([np.broadcast_to(row, width) for row in rows]))
+            return state["_parameters"][1]
+        kept, packed = state["_parameters"]
+        for row, (values, before) in enumerate(zip(given, kept)):
+            if values is not before:
+                packed[row] = values
+                kept[row] = values
+        return packed
 
     def initial_state(self, params, inputs, dt_s):
-        shape = np.broadcast(inputs["supply_water_temperature"], params["air_side_conductance"]).shape
-        supply = np.broadcast_to(inputs["supply_water_temperature"], shape).astype(float)
-        air_in = np.broadcast_to(inputs["inlet_air_temperature"], shape).astype(float)
-        water_flow = self._water_flow(params, np.clip(inputs["valve_position"], 0.0, 1.0))
-        water_ratio = water_flow / REFERENCE_WATER_MASS_FLOW
-        loss, loss_drive = self._standing_loss(params)
-        surroundings = params["pipe_surroundings_temperature"]
-        pipe_excess = steady_tank_chain(supply - surroundings,
-                                        SUPPLY_PIPE_TANKS * water_ratio / params["supply_pipe_time_constant"], loss)
-        water_in = surroundings + pipe_excess[..., -1]
-        heat, c_water, c_air = self._static_heat(params, air_in, np.maximum(inputs["air_mass_flow"], 0.0),
-                                                 water_flow, water_ratio, water_in)
-        low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
-        water_target = np.clip(water_in - heat / c_water, low, high)
-        return {
-            # lag factors of the constant time constants, computed once per run
-            "_metal_factor": first_order_lag_factor(dt_s, params["metal_time_constant"]) + 0.0 * supply,
-            "_air_factor": first_order_lag_factor(dt_s, params["air_side_time_constant"]) + 0.0 * supply,
-            "supply_pipe_water_excess": pipe_excess + 0.0 * supply[..., None],
-            "heat_rate": heat + 0.0 * supply,
-            "outlet_air_temperature": np.clip(air_in + heat / c_air, low, high),
-            "outlet_water_temperature": self._moved_water(
-                None, water_target, water_ratio / params["water_side_time_constant"], loss, loss_drive, dt_s,
-            ) + 0.0 * supply,
-        }
+        state = {}
+        signals, values = self._inputs(inputs), self._parameters(params, state)
+        n = max(max(len(a) for a in signals), values.shape[1])
+        empty = np.full(n, np.nan)
+        pipe, heat, air, water, *_ = _loop_step(*signals, values, np.empty((n, SUPPLY_PIPE_TANKS)), empty, empty,
+                                                empty, float(dt_s), True)
+        return state | {"supply_pipe_water_excess": pipe, "heat_rate": heat, "outlet_air_temperature": air,
+                        "outlet_water_temperature": water}
 
     def step(self, params, inputs, state, dt_s):
         # each state is replaced by a new array, never changed in place: the outputs share them
-        air_in = inputs["inlet_air_temperature"]
-        air_flow = np.maximum(inputs["air_mass_flow"], _ZERO)
-        position = np.minimum(np.maximum(inputs["valve_position"], _ZERO), _ONE)
-        water_flow = self._water_flow(params, position)
-        water_ratio = water_flow / REFERENCE_WATER_MASS_FLOW
-        loss, loss_drive = self._standing_loss(params)
-        surroundings = params["pipe_surroundings_temperature"]
-        pipe_excess = state["supply_pipe_water_excess"] = advance_tank_chain(
-            state["supply_pipe_water_excess"], inputs["supply_water_temperature"] - surroundings,
-            SUPPLY_PIPE_TANKS * dt_s * water_ratio / params["supply_pipe_time_constant"], loss * dt_s)
-        water_in = surroundings + pipe_excess[..., -1]
-        heat_static, c_water, c_air = self._static_heat(params, air_in, air_flow, water_flow, water_ratio, water_in)
-        heat = state["heat_rate"]
-        heat = state["heat_rate"] = heat + state["_metal_factor"] * (heat_static - heat)
-        low, high = np.minimum(air_in, water_in), np.maximum(air_in, water_in)
-        # T_a,out = T_a,in + Q/(ṁ_a·c_p), the same C_a as the heat rate's (energy balance); clipped to
-        # [T_a,in, T_w,in]: stagnant air (fan off) in a warm coil approaches the water temperature
-        air_target = np.minimum(np.maximum(air_in + heat / c_air, low), high)
-        water_target = np.minimum(np.maximum(water_in - heat / c_water, low), high)
-        air_out = state["outlet_air_temperature"]
-        air_out = state["outlet_air_temperature"] = air_out + state["_air_factor"] * (air_target - air_out)
-        water_out = state["outlet_water_temperature"] = self._moved_water(
-            state["outlet_water_temperature"], water_target, water_ratio / params["water_side_time_constant"],
-            loss, loss_drive, dt_s)
+        pipe, heat, air, water, water_in, flow, position = _loop_step(
+            *self._inputs(inputs), self._parameters(params, state), state["supply_pipe_water_excess"],
+            state["heat_rate"], state["outlet_air_temperature"], state["outlet_water_temperature"], float(dt_s), False)
+        state.update(supply_pipe_water_excess=pipe, heat_rate=heat, outlet_air_temperature=air,
+                     outlet_water_temperature=water)
         return {
-            "outlet_air_temperature": air_out,
+            "outlet_air_temperature": air,
             "inlet_water_temperature": water_in,
-            "outlet_water_temperature": water_out,
-            "water_mass_flow": water_flow,
+            "outlet_water_temperature": water,
+            "water_mass_flow": flow,
             "heat_rate": heat,
             "valve_position": position,
         }

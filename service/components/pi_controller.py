@@ -4,13 +4,27 @@ valve) or direct acting (a cooling valve)."""
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from service.components.component import ComponentModel, Parameter, Port
 
 __all__ = ["PIController", "DirectActingPIController"]
 
-# 0-d arrays: numpy's ufuncs take them faster than Python floats
-_ZERO, _ONE = np.array(0.0), np.array(1.0)
+
+@njit(cache=True)
+def _pi_step(setpoint, measured, gain, integral_time, integral, action: float, dt_s: float):
+    """One step of every member (:class:`PIController`'s equations), its integral [n] updated in
+    place; the inputs and parameters [n] or [1]. Returns the control signal u [n]."""
+    signal = np.empty(integral.shape[0])
+    for m in range(integral.shape[0]):
+        w, y = setpoint[m if setpoint.shape[0] > 1 else 0], measured[m if measured.shape[0] > 1 else 0]
+        k_p, t_i = gain[m if gain.shape[0] > 1 else 0], integral_time[m if integral_time.shape[0] > 1 else 0]
+        error = w - y if action > 0.0 else y - w  # a·(w − y), a = ±1
+        unlimited = k_p * (error + integral[m] / t_i)
+        u = np.minimum(np.maximum(unlimited, 0.0), 1.0)
+        integral[m] += dt_s * (error + (u - unlimited) * t_i / (k_p * np.maximum(t_i, dt_s)))
+        signal[m] = u
+    return signal
 
 
 class PIController(ComponentModel):
@@ -45,17 +59,13 @@ class PIController(ComponentModel):
     action = 1.0
 
     def initial_state(self, params, inputs, dt_s):
-        return {"integral": np.zeros_like(np.asarray(inputs["setpoint"], dtype=float) + params["proportional_gain"])}
+        return {"integral": np.zeros(np.broadcast(inputs["setpoint"], inputs["measured_value"],
+                                                  params["proportional_gain"], params["integral_time"]).shape)}
 
     def step(self, params, inputs, state, dt_s):
-        setpoint, measured = inputs["setpoint"], inputs["measured_value"]
-        error = setpoint - measured if self.action > 0.0 else measured - setpoint  # a·(w − y), a = ±1
-        gain, integral_time, integral = params["proportional_gain"], params["integral_time"], state["integral"]
-        unlimited = gain * (error + integral / integral_time)
-        signal = np.minimum(np.maximum(unlimited, _ZERO), _ONE)
-        tracking_s = np.maximum(integral_time, dt_s)
-        integral += dt_s * (error + (signal - unlimited) * integral_time / (gain * tracking_s))
-        return {"control_signal": signal}
+        rows = [np.atleast_1d(np.asarray(values, dtype=float)) for values in (
+            inputs["setpoint"], inputs["measured_value"], params["proportional_gain"], params["integral_time"])]
+        return {"control_signal": _pi_step(*rows, state["integral"], self.action, float(dt_s))}
 
 
 class DirectActingPIController(PIController):

@@ -306,8 +306,8 @@ def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():
 def test_the_command_line_starts_without_the_calibration_libraries():
     """`graphtwin --help`, `assemble` and `query` do not import SciPy's optimisers or scikit-learn (a
     second of start-up); the commands that calibrate import them when they run."""
-    probe = ("import sys, service.cli; print(sorted(m for m in ('scipy.optimize', 'sklearn', 'service.diagnosis.loop', "
-             "'service.calibration.run') if m in sys.modules))")
+    probe = ("import sys, service.cli; print(sorted(m for m in ('scipy.optimize', 'sklearn', 'numba', "
+             "'service.diagnosis.loop', 'service.calibration.run') if m in sys.modules))")
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
     assert loaded == "[]"
 

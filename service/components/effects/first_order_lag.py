@@ -24,6 +24,9 @@ class FirstOrderLag(SplicedEffect):
         return {"lagged": inputs["value_in"].copy()}
 
     def step(self, params, inputs, state, dt_s):
+        tau = params["time_constant"]
+        if state.get("_time_constant") is not tau:  # the factor kept while the same τ comes
+            state["_time_constant"], state["_factor"] = tau, first_order_lag_factor(dt_s, tau)
         lagged = state["lagged"]
-        lagged += first_order_lag_factor(dt_s, params["time_constant"]) * (inputs["value_in"] - lagged)
+        lagged += state["_factor"] * (inputs["value_in"] - lagged)
         return {"value_out": lagged.copy()}
