@@ -7,6 +7,9 @@ HVAC Systems and Equipment, Ch. 23) whose UA is the series of the two film condu
 ∝ ṁ^0.8 (Dittus–Boelter; the tube wall's resistance neglected)::
 
     1/UA = 1/(hA_w · (ṁ_w/ṁ_w,ref)^0.8) + 1/(hA_a · (ṁ_a/ṁ_a,ref)^0.8)            [K/W]
+
+Each relation is a compiled scalar function (``*_scalar``, called by the compiled steps of
+:mod:`service.components.hot_water_loop`) and, over arrays, a numpy ufunc made from it.
 """
 
 from __future__ import annotations
@@ -28,7 +31,6 @@ REFERENCE_AIR_MASS_FLOW = 2.0
 TINY = 1e-9
 #: Cap of the capacity ratio C_r (:func:`counterflow_effectiveness`).
 _RATIO_CAP = 1.0 - 1e-7
-_FLOAT2 = ["float64(float64, float64)"]
 
 
 @njit(cache=True)
@@ -69,7 +71,7 @@ def heat_rate_scalar(ua_w_per_k: float, water_capacity_w_per_k: float, air_capac
 
 
 #: :func:`effectiveness_scalar` over arrays (a numpy ufunc: broadcasts).
-counterflow_effectiveness = vectorize(_FLOAT2, cache=True)(effectiveness_scalar)
+counterflow_effectiveness = vectorize(["float64(float64, float64)"], cache=True)(effectiveness_scalar)
 _film_ua = vectorize(["float64(float64, float64, float64, float64)"], cache=True)(film_ua_scalar)
 _heat_rate = vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)(heat_rate_scalar)
 
