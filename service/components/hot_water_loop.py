@@ -22,6 +22,7 @@ import math
 import numpy as np
 from numba import njit, vectorize
 
+from service.components.compiled import as_row, member_value
 from service.components.component import (
     AIR_SPECIFIC_HEAT_J_PER_KG_K,
     WATER_DENSITY_KG_PER_M3,
@@ -109,22 +110,9 @@ def advance_tank_chain(excess, entering_excess, transport_dt, loss_dt):
     """:func:`_advance_chain` for every member: ``excess`` [n, N], the others [n] (or [1])."""
     advanced, scratch = np.empty_like(excess), np.empty((2, excess.shape[1]))
     for m in range(excess.shape[0]):
-        _advance_chain(excess[m], _at(entering_excess, m), _at(transport_dt, m), _at(loss_dt, m), advanced[m],
-                       scratch)
+        _advance_chain(excess[m], member_value(entering_excess, m), member_value(transport_dt, m),
+                       member_value(loss_dt, m), advanced[m], scratch)
     return advanced
-
-
-def _row(values) -> np.ndarray:
-    """``values`` as a one-dimensional float array (as it is, where it already is one)."""
-    if type(values) is np.ndarray and values.ndim == 1 and values.dtype == np.float64:
-        return values
-    return np.atleast_1d(np.asarray(values, dtype=float))
-
-
-@njit(inline="always")
-def _at(values, member: int) -> float:
-    """Member ``member``'s value of a per-member array, or the one value of an array of one."""
-    return values[member] if values.shape[0] > 1 else values[0]
 
 
 @njit(cache=True)
@@ -151,14 +139,16 @@ def _loop_step(valve_position, supply_water, inlet_air, air_flow_in, params, pip
     heat_out, air_out, water_out = np.empty(n), np.empty(n), np.empty(n)
     water_in_out, flow_out, position_out = np.empty(n), np.empty(n), np.empty(n)
     for m in range(n):
-        position = np.minimum(np.maximum(_at(valve_position, m), 0.0), 1.0)
-        supply, air_in, air_flow = _at(supply_water, m), _at(inlet_air, m), np.maximum(_at(air_flow_in, m), 0.0)
-        kv, rangeability, kv_loop, pressure = _at(params[0], m), _at(params[1], m), _at(params[2], m), _at(params[3], m)
-        surroundings, loss = _at(params[10], m), 1.0 / _at(params[11], m)
+        position = np.minimum(np.maximum(member_value(valve_position, m), 0.0), 1.0)
+        supply, air_in = member_value(supply_water, m), member_value(inlet_air, m)
+        air_flow = np.maximum(member_value(air_flow_in, m), 0.0)
+        kv, rangeability = member_value(params[0], m), member_value(params[1], m)
+        kv_loop, pressure = member_value(params[2], m), member_value(params[3], m)
+        surroundings, loss = member_value(params[10], m), 1.0 / member_value(params[11], m)
         water_flow = _water_mass_flow(position, kv, rangeability, kv_loop, pressure)
         ratio = water_flow / REFERENCE_WATER_MASS_FLOW
         entering = supply - surroundings
-        transport = tanks * ratio / _at(params[6], m)
+        transport = tanks * ratio / member_value(params[6], m)
         if start:
             steady = entering
             for i in range(tanks):
@@ -167,7 +157,8 @@ def _loop_step(valve_position, supply_water, inlet_air, air_flow_in, params, pip
         else:
             _advance_chain(pipe_excess[m], entering, transport * dt_s, loss * dt_s, new_pipe[m], scratch)
         water_in = surroundings + new_pipe[m, tanks - 1]
-        ua = film_ua_scalar(_at(params[4], m), ratio, _at(params[5], m), air_flow / REFERENCE_AIR_MASS_FLOW)
+        ua = film_ua_scalar(member_value(params[4], m), ratio, member_value(params[5], m),
+                            air_flow / REFERENCE_AIR_MASS_FLOW)
         c_water = np.maximum(water_flow * WATER_SPECIFIC_HEAT_J_PER_KG_K, TINY)
         c_air = np.maximum(air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K, TINY)
         static = heat_rate_scalar(ua, c_water, c_air, water_in, air_in) if water_flow > 0.0 else 0.0
@@ -178,13 +169,13 @@ def _loop_step(valve_position, supply_water, inlet_air, air_flow_in, params, pip
             previous_water = math.nan
         else:
             previous = heat_rate[m]
-            heat = previous + (1.0 - math.exp(-dt_s / _at(params[7], m))) * (static - previous)
+            heat = previous + (1.0 - math.exp(-dt_s / member_value(params[7], m))) * (static - previous)
             air_target = np.minimum(np.maximum(air_in + heat / c_air, low), high)
-            air = outlet_air[m] + (1.0 - math.exp(-dt_s / _at(params[8], m))) * (air_target - outlet_air[m])
+            air = outlet_air[m] + (1.0 - math.exp(-dt_s / member_value(params[8], m))) * (air_target - outlet_air[m])
             previous_water = outlet_water[m]
         water_target = np.minimum(np.maximum(water_in - heat / c_water, low), high)
-        water_out[m] = _moved_water(previous_water, water_target, ratio / _at(params[9], m), loss, surroundings,
-                                    dt_s)
+        water_out[m] = _moved_water(previous_water, water_target, ratio / member_value(params[9], m), loss,
+                                    surroundings, dt_s)
         heat_out[m], air_out[m], water_in_out[m] = heat, air, water_in
         flow_out[m], position_out[m] = water_flow, position
     return new_pipe, heat_out, air_out, water_out, water_in_out, flow_out, position_out
@@ -234,7 +225,7 @@ class HotWaterLoop(ComponentModel):
     @staticmethod
     def _inputs(inputs) -> list[np.ndarray]:
         """The compiled step's inputs, one-dimensional float arrays in the order of :attr:`inputs`."""
-        return [_row(inputs[port.name]) for port in HotWaterLoop.inputs]
+        return [as_row(inputs[port.name]) for port in HotWaterLoop.inputs]
 
     @staticmethod
     def _parameters(params, state) -> np.ndarray:
@@ -243,7 +234,7 @@ class HotWaterLoop(ComponentModel):
         time comes anew every step)."""
         given = [params[name] for name in _PARAMETER_ORDER]
         if "_parameters" not in state:
-            rows = [_row(values) for values in given]
+            rows = [as_row(values) for values in given]
             width = max(len(row) for row in rows)
             state["_parameters"] = (given, np.array([np.broadcast_to(row, width) for row in rows]))
             return state["_parameters"][1]

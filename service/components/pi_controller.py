@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from service.components.compiled import as_row, member_value
 from service.components.component import ComponentModel, Parameter, Port
 
 __all__ = ["PIController", "DirectActingPIController"]
@@ -17,8 +18,8 @@ def _pi_step(setpoint, measured, gain, integral_time, integral, action: float, d
     place; the inputs and parameters [n] or [1]. Returns the control signal u [n]."""
     signal = np.empty(integral.shape[0])
     for m in range(integral.shape[0]):
-        w, y = setpoint[m if setpoint.shape[0] > 1 else 0], measured[m if measured.shape[0] > 1 else 0]
-        k_p, t_i = gain[m if gain.shape[0] > 1 else 0], integral_time[m if integral_time.shape[0] > 1 else 0]
+        w, y = member_value(setpoint, m), member_value(measured, m)
+        k_p, t_i = member_value(gain, m), member_value(integral_time, m)
         error = w - y if action > 0.0 else y - w  # a·(w − y), a = ±1
         unlimited = k_p * (error + integral[m] / t_i)
         u = np.minimum(np.maximum(unlimited, 0.0), 1.0)
@@ -63,7 +64,7 @@ class PIController(ComponentModel):
                                                   params["proportional_gain"], params["integral_time"]).shape)}
 
     def step(self, params, inputs, state, dt_s):
-        rows = [np.atleast_1d(np.asarray(values, dtype=float)) for values in (
+        rows = [as_row(values) for values in (
             inputs["setpoint"], inputs["measured_value"], params["proportional_gain"], params["integral_time"])]
         return {"control_signal": _pi_step(*rows, state["integral"], self.action, float(dt_s))}
 
