@@ -20,6 +20,7 @@ __all__ = ["IMPELLER_HEAT_SHARE", "Fan", "fan_heat_rise_k", "part_load_power_fra
 #: η_motor·η_drive = 0.87 (the fan's useful work is dissipated downstream, in the duct system).
 IMPELLER_HEAT_SHARE = 0.3
 
+
 def fan_heat_rise_k(share: np.ndarray, power_w: np.ndarray, air_mass_flow_kg_per_s: np.ndarray) -> np.ndarray:
     """ΔT = share·P/(max(ṁ, ṁ_min)·c_p) [K]: the rise of the air temperature across a fan that puts
     ``share`` of its electric power P [W] into an air stream of ṁ [kg/s] (ṁ_min:

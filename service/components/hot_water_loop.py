@@ -47,11 +47,6 @@ REFERENCE_WATER_MASS_FLOW = 0.5
 #: Mixed tanks in series standing for the supply pipe's plug flow: a front arrives spread over
 #: τ/√N of its transport time τ.
 SUPPLY_PIPE_TANKS = 12
-#: The parameters in the order the compiled step takes them.
-_PARAMETER_ORDER = ("valve_flow_coefficient", "valve_rangeability", "loop_flow_coefficient", "loop_pressure_difference",
-                    "water_side_conductance", "air_side_conductance", "supply_pipe_time_constant",
-                    "metal_time_constant", "air_side_time_constant", "water_side_time_constant",
-                    "pipe_surroundings_temperature", "standing_water_time_constant")
 
 
 @njit(cache=True)
@@ -78,28 +73,35 @@ def _water_mass_flow(position: float, kv: float, rangeability: float, kv_loop: f
 
 
 @njit(cache=True)
+def _steady_chain(entering_excess: float, transport: float, loss: float, steady) -> None:
+    """The steady excesses of :func:`_advance_chain`'s tanks into ``steady`` [N]: θ_i* = θ_0·(k/(k + λ))^i,
+    i = 1 … N, for θ_0 ``entering_excess`` [K], ``transport`` k and ``loss`` λ (rates, or both times dt)."""
+    share = transport / (transport + loss)
+    value = entering_excess
+    for i in range(steady.shape[0]):
+        value *= share
+        steady[i] = value
+
+
+@njit(cache=True)
 def _advance_chain(excess, entering_excess: float, transport_dt: float, loss_dt: float, advanced, scratch) -> None:
     """One member's tanks in series, dθ_i/dt = k·(θ_{i−1} − θ_i) − λ·θ_i with θ_0 held over the step,
     advanced exactly into ``advanced``: with a = k·dt and x = (k + λ)·dt, the steady state
-    θ_i* = θ_0·(a/x)^i and
+    θ_i* (:func:`_steady_chain`) and
 
         θ_i(t+dt) = θ_i* + Σ_{j≤i} w_{i−j}·(θ_j(t) − θ_j*),   w_m = e^{−x}·a^m/m!
 
     (the chain's matrix exponential). ``excess`` [N] the tanks' temperatures above their
     surroundings [K], ``entering_excess`` θ_0, ``transport_dt`` a, ``loss_dt`` λ·dt; ``scratch``
-    [2, N] working space."""
-    n = excess.shape[0]
-    x = transport_dt + loss_dt
-    share = transport_dt / x
-    weights, departure = scratch[0], scratch[1]
-    weight = math.exp(-x)
-    steady = entering_excess
-    for i in range(n):
+    [3, N] working space."""
+    weights, departure, steady = scratch[0], scratch[1], scratch[2]
+    _steady_chain(entering_excess, transport_dt, loss_dt, steady)
+    weight = math.exp(-(transport_dt + loss_dt))
+    for i in range(excess.shape[0]):
         weights[i] = weight
         weight *= transport_dt / (i + 1.0)
-        steady *= share
-        departure[i] = excess[i] - steady
-        total = steady
+        departure[i] = excess[i] - steady[i]
+        total = steady[i]
         for j in range(i + 1):
             total += weights[i - j] * departure[j]
         advanced[i] = total
@@ -108,7 +110,7 @@ def _advance_chain(excess, entering_excess: float, transport_dt: float, loss_dt:
 @njit(cache=True)
 def advance_tank_chain(excess, entering_excess, transport_dt, loss_dt):
     """:func:`_advance_chain` for every member: ``excess`` [n, N], the others [n] (or [1])."""
-    advanced, scratch = np.empty_like(excess), np.empty((2, excess.shape[1]))
+    advanced, scratch = np.empty_like(excess), np.empty((3, excess.shape[1]))
     for m in range(excess.shape[0]):
         _advance_chain(excess[m], member_value(entering_excess, m), member_value(transport_dt, m),
                        member_value(loss_dt, m), advanced[m], scratch)
@@ -131,11 +133,12 @@ def _loop_step(valve_position, supply_water, inlet_air, air_flow_in, params, pip
                outlet_water, dt_s: float, start: bool):
     """The loop over one step for every member (module docstring), or its steady start when ``start``
     (the pipe and the water side in steady state, the lags at their targets). The inputs [n] or [1];
-    ``params`` [12, n] or [12, 1], rows in :data:`_PARAMETER_ORDER`. Returns new arrays: (supply pipe
-    excess [n, N], heat rate, outlet air, outlet water, inlet water, water mass flow, position)."""
+    ``params`` [12, n] or [12, 1], rows in the order of :attr:`HotWaterLoop.parameters`. Returns new
+    arrays: (supply pipe excess [n, N], heat rate, outlet air, outlet water, inlet water, water mass
+    flow, position)."""
     n = pipe_excess.shape[0]
     tanks = pipe_excess.shape[1]
-    new_pipe, scratch = np.empty_like(pipe_excess), np.empty((2, tanks))
+    new_pipe, scratch = np.empty_like(pipe_excess), np.empty((3, tanks))
     heat_out, air_out, water_out = np.empty(n), np.empty(n), np.empty(n)
     water_in_out, flow_out, position_out = np.empty(n), np.empty(n), np.empty(n)
     for m in range(n):
@@ -150,10 +153,7 @@ def _loop_step(valve_position, supply_water, inlet_air, air_flow_in, params, pip
         entering = supply - surroundings
         transport = tanks * ratio / member_value(params[6], m)
         if start:
-            steady = entering
-            for i in range(tanks):
-                steady *= transport / (transport + loss)
-                new_pipe[m, i] = steady
+            _steady_chain(entering, transport, loss, new_pipe[m])
         else:
             _advance_chain(pipe_excess[m], entering, transport * dt_s, loss * dt_s, new_pipe[m], scratch)
         water_in = surroundings + new_pipe[m, tanks - 1]
@@ -232,7 +232,7 @@ class HotWaterLoop(ComponentModel):
         """The parameters as the compiled step takes them, [12, n]: packed once and kept in ``state``;
         a row is copied again where its parameter comes as another array (one that changes over
         time comes anew every step)."""
-        given = [params[name] for name in _PARAMETER_ORDER]
+        given = [params[spec.name] for spec in HotWaterLoop.parameters]
         if "_parameters" not in state:
             rows = [as_row(values) for values in given]
             width = max(len(row) for row in rows)

@@ -21,11 +21,14 @@ from service.components.component import (
     Parameter,
     Port,
 )
-from service.components.heat_exchanger import REFERENCE_AIR_MASS_FLOW, coil_heat_rate_w, series_film_ua_w_per_k
+from service.components.heat_exchanger import (
+    REFERENCE_AIR_MASS_FLOW,
+    TINY,
+    coil_heat_rate_w,
+    series_film_ua_w_per_k,
+)
 
 __all__ = ["WaterCoil", "HeatingWaterCoil", "CoolingWaterCoil"]
-
-_TINY = 1e-9
 
 _FLOW_AND_CONDUCTANCES = (
     Parameter("maximum_water_mass_flow", "kg/s", 0.4, 0.02, 3.0, "water flow with the valve fully open, ṁ_w,max"),
@@ -65,7 +68,7 @@ class WaterCoil(ComponentModel):
         heat = coil_heat_rate_w(ua, water_capacity_w_per_k=c_water, air_capacity_w_per_k=c_air,
                                 water_inlet_temperature=params["supply_water_temperature"],
                                 air_inlet_temperature=air_in) * (opening > 0.0)
-        return {"outlet_air_temperature": air_in + heat / np.maximum(c_air, _TINY), "heat_rate": heat}
+        return {"outlet_air_temperature": air_in + heat / np.maximum(c_air, TINY), "heat_rate": heat}
 
 
 class HeatingWaterCoil(WaterCoil):
