@@ -3,11 +3,11 @@
 A drift candidate is (component, parameter, shape): ``linear``, p(t) = p₀·(1 + r·(t − t₀)/day) from
 the test window's start t₀ (the model matched the training data; from then on the parameter drifts),
 or ``step``, p(t) = p₀·(1 + j) from t_s, picked by the fit (on a 6-hour grid of the data's clock over
-the fit windows, then among the data steps around the best) and counted as a freed parameter. Candidates only for the components the
-localization suspects for the most-failing sensor, at most :data:`MAX_PARAMETERS_PER_COMPONENT` each:
-those a :data:`PROBE_CHANGE` change from the test window's start moves the failing sensors most. They
-are refitted and ranked like any effect (:mod:`service.diagnosis.candidates`). The method:
-``docs/diagnosis.md``, "Drift".
+the fit windows, then among the data steps around the best) and counted as a freed parameter.
+Candidates only for the components the localization suspects for the most-failing sensor, at most
+:data:`MAX_PARAMETERS_PER_COMPONENT` each per failing sensor: those a :data:`PROBE_CHANGE` change from
+the test window's start moves that sensor most. They are refitted and ranked like any effect
+(:mod:`service.diagnosis.candidates`). The method: ``docs/diagnosis.md``, "Drift".
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from service.model.assembled_model import DAY_S, AssembledModel, ParameterDrift,
 __all__ = ["DriftCandidate", "DriftEvidence", "drift_candidates", "drifting_components", "step_onset",
            "drift_identity", "drift_fields", "drift_sentence", "MAX_PARAMETERS_PER_COMPONENT"]
 
-#: Parameters per suspect component that get drift candidates (both shapes each).
+#: Parameters per suspect component and failing sensor that get drift candidates (both shapes each).
 MAX_PARAMETERS_PER_COMPONENT = 2
 #: The relative change from the test window's start by which the parameters are screened.
 PROBE_CHANGE = 0.1
@@ -101,9 +101,10 @@ def drifting_components(model: AssembledModel, locations: Sequence[FailureLocati
 
 def _sensitive_parameters(md: ModelData, theta: np.ndarray, components: Sequence[str], test: slice,
                           noise: Mapping[str, float]) -> list[str]:
-    """Per component, the keys of at most :data:`MAX_PARAMETERS_PER_COMPONENT` estimated parameters
-    whose :data:`PROBE_CHANGE` from ``test``'s start moves a sensor of ``noise`` (node → σ) most, by
-    at least :data:`MIN_SENSITIVITY` σ RMS (one simulate call)."""
+    """Per component and per failing sensor of ``noise`` (node → σ), the keys of the at most
+    :data:`MAX_PARAMETERS_PER_COMPONENT` estimated parameters whose :data:`PROBE_CHANGE` from
+    ``test``'s start moves that sensor most, by at least :data:`MIN_SENSITIVITY` σ RMS (one simulate
+    call). Per sensor, so that a sensor failing less than another still gets the drifts it would show."""
     keys = [ref.key for ref in md.model.estimated_parameters if ref.component in components]
     if not keys:
         return []
@@ -115,15 +116,15 @@ def _sensitive_parameters(md: ModelData, theta: np.ndarray, components: Sequence
         factor[member] += PROBE_CHANGE * after
         factors[key] = factor
     predicted = md.simulate_targets(test, ensemble, factors=factors)
-    moved = np.zeros(len(keys))
-    for node, sigma in noise.items():
-        change = predicted[node][1:] - predicted[node][0]
-        moved = np.maximum(moved, np.sqrt(np.nanmean(change ** 2, axis=1)) / sigma)
     component_of = {ref.key: ref.component for ref in md.model.estimated_parameters}
     chosen = []
-    for component in components:
-        ranked = sorted((k for k in range(len(keys)) if component_of[keys[k]] == component), key=lambda k: -moved[k])
-        chosen += [keys[k] for k in ranked[:MAX_PARAMETERS_PER_COMPONENT] if moved[k] >= MIN_SENSITIVITY]
+    for node, sigma in noise.items():
+        moved = np.sqrt(np.nanmean((predicted[node][1:] - predicted[node][0]) ** 2, axis=1)) / sigma
+        for component in components:
+            own = (k for k in range(len(keys)) if component_of[keys[k]] == component)
+            ranked = sorted(own, key=lambda k: -moved[k])
+            chosen += [keys[k] for k in ranked[:MAX_PARAMETERS_PER_COMPONENT]
+                       if moved[k] >= MIN_SENSITIVITY and keys[k] not in chosen]
     return chosen
 
 

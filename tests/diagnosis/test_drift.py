@@ -18,7 +18,7 @@ from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
 from service.data.synthetic import generate_synthetic_data
 from service.diagnosis.candidates import rank_catalog
-from service.diagnosis.drift import DriftEvidence
+from service.diagnosis.drift import MAX_PARAMETERS_PER_COMPONENT, MIN_SENSITIVITY, DriftEvidence, drift_candidates
 from service.diagnosis.loop import diagnose, noise_level
 from service.graph.store import GraphStore
 from service.model.assembled_model import ParameterDrift
@@ -143,6 +143,31 @@ def test_a_factor_of_the_wrong_shape_or_for_no_parameter_is_refused(case_data):
         md.simulate_targets(window, md.default_theta(), factors={key: np.ones((1, 3))})
     with pytest.raises(ValueError, match="no parameter"):
         md.simulate_targets(window, md.default_theta(), factors={"urn:nothing#p": np.ones((1, md.time_s(window).size))})
+
+
+def test_each_failing_sensor_gets_the_drifts_that_would_show_at_it(case_data):
+    """The coil's parameters screened against two failing sensors, the coil's inlet and outlet water:
+    each sensor's own most telling parameters (each parameter changed by 10 % from the test start in
+    a run of its own here) get candidates, so a parameter that moves only the less-failing sensor is
+    tried too (the coil's conductance, where the pipe's parameters move the inlet water most)."""
+    md = case_data
+    test, fit = slice(150, 288), slice(36, 150)
+    theta = md.default_theta()
+    coil = md.model.component_for_node(COIL).iri
+    keys = [ref.key for ref in md.model.estimated_parameters if ref.component == coil]
+    noise = {EX + "coil_inlet_water_temperature_sensor": 0.1, EX + "coil_outlet_water_temperature_sensor": 0.1}
+    base = md.simulate_targets(test, theta)
+    after = (md.time_s(test) >= test.start * md.data.step_s).astype(float)[None, :]
+    moved = {node: {} for node in noise}
+    for key in keys:
+        changed = md.simulate_targets(test, theta, factors={key: 1.0 + 0.1 * after})
+        for node, sigma in noise.items():
+            moved[node][key] = float(np.sqrt(np.nanmean((changed[node] - base[node]) ** 2))) / sigma
+    most = {node: sorted(keys, key=lambda k: -moved[node][k])[:MAX_PARAMETERS_PER_COMPONENT] for node in noise}
+    expected = {key for node in noise for key in most[node] if moved[node][key] >= MIN_SENSITIVITY}
+    tried = {c.model.drifts[0].parameter_key for c in drift_candidates(md, theta, [coil], test=test, fit_windows=[fit],
+                                                                        noise=noise)}
+    assert tried == expected and len(expected) > MAX_PARAMETERS_PER_COMPONENT, (sorted(tried), moved)
 
 
 # --- drift found where it is, and not where it is not ----------------------------------------------
