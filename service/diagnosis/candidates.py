@@ -61,6 +61,7 @@ from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
 from service.matching.matcher import match_signature
+from service.matching.nearest_miss import nearest_miss
 from service.matching.signature import Signature
 from service.model.assembled_model import AssembledModel
 from service.model.assembly import assemble
@@ -89,7 +90,8 @@ def effect_candidates(store: GraphStore, model_name: str,
         nodes = sorted({m[signature.splice.node] for m in match_signature(store, signature, default_graph=dataset)
                         if m.get(signature.splice.node)})
         if not nodes:
-            skipped.append(f"{signature.id}: its pattern ({signature.source_file.name}) matches nowhere")
+            why = nearest_miss(store, signature, default_graph=dataset)
+            skipped.append(f"{signature.id}: its pattern ({signature.source_file.name}) matches nowhere: {why}")
         for node in nodes:
             if EffectRequest(signature.id, node) in applied:
                 skipped.append(f"{signature.id} at {local_name(node)}: already in the model (gt:hasEffect)")

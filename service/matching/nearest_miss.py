@@ -1,0 +1,117 @@
+"""Why a signature matches nowhere: the first of its required triples the graph cannot satisfy.
+
+The pattern is grown from its modeled node, one required triple at a time (the first in file order
+that touches the nodes already in), and matched at each size; the first triple after which nothing
+matches is what the graph lacks. The sentence names it with the nodes that matched up to there, and
+the triple a user would add. Details: ``docs/matching.md``, "Why a pattern matches nowhere".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from service.graph.namespaces import PREFIXES, local_name
+from service.matching.matcher import Match, MatchSession, match_signature
+from service.matching.signature import PatternTriple, Rule, Signature
+
+if TYPE_CHECKING:
+    import pyoxigraph as ox
+
+    from service.matching.matcher import MatchStore
+
+__all__ = ["nearest_miss"]
+
+#: Nodes named in a sentence before "…".
+_NAMED = 3
+
+
+def _curie(iri: str) -> str:
+    for prefix, namespace in PREFIXES.items():
+        if iri.startswith(namespace):
+            return f"{prefix}:{iri[len(namespace):]}"
+    return f"<{iri}>"
+
+
+def _kind(signature: Signature, node_id: str) -> str:
+    """The node as a reader knows it: its fixed IRI, its classes (" or "), or "a term"."""
+    node = signature.nodes[node_id]
+    if node.iri:
+        return _curie(node.iri)
+    return " or ".join(_curie(c) for c in node.classes) or ("a literal" if node.literal else "a term")
+
+
+def _grown(signature: Signature) -> list[PatternTriple]:
+    """The required triples in the order they join the modeled node's part of the pattern."""
+    remaining = [t for t in signature.triples if not t.is_optional]
+    inside, order = {signature.modeled_nodes[0]}, []
+    while remaining:
+        touching = next((t for t in remaining if t.subject in inside or t.object in inside), remaining[0])
+        remaining.remove(touching)
+        order.append(touching)
+        inside |= {touching.subject, touching.object}
+    return order
+
+
+def _partial(signature: Signature, triples: Sequence[PatternTriple]) -> Signature:
+    """``signature`` reduced to ``triples`` and the nodes they (and its modeled node) name."""
+    used = {signature.modeled_nodes[0]} | {n for t in triples for n in (t.subject, t.object)}
+    return replace(signature, nodes={n: v for n, v in signature.nodes.items() if n in used}, triples=tuple(triples),
+                   modeled_nodes=signature.modeled_nodes[:1], inputs=(), outputs=(), parameters=(), splice=None)
+
+
+def _names(matches: Sequence[Match], node_id: str) -> list[str]:
+    return sorted({local_name(m[node_id]) for m in matches if m.get(node_id)})
+
+
+def _text(triple: PatternTriple) -> str:
+    return f"`{triple.subject} {_curie(triple.predicate)} {triple.object}`"
+
+
+def _missing(signature: Signature, triple: PatternTriple, matched: Sequence[Match], reached: set[str]) -> str:
+    """The missing ``triple`` in words, with what its ends are (the nodes ``matched`` for those
+    ``reached``), and the triple to add."""
+    ends, terms = [], []
+    for node_id in (triple.subject, triple.object):
+        names = _names(matched, node_id) if node_id in reached and not signature.nodes[node_id].iri else []
+        if names:
+            shown = " or ".join(names[:_NAMED]) + (f" (or {len(names) - _NAMED} more)" if len(names) > _NAMED else "")
+            ends.append(f"{node_id} {shown}")
+            terms.append(names[0])
+        else:
+            ends.append(f"{node_id} a {_kind(signature, node_id)}")
+            terms.append(_curie(signature.nodes[node_id].iri) if signature.nodes[node_id].iri else f"<{node_id}>")
+    either = " either way" if triple.or_reverse else ""
+    nearest = f", the nearest along it{either}" if triple.rule is Rule.TRAVERSE else ""
+    return (f"no {_text(triple)} with {ends[0]} and {ends[1]}{nearest} "
+            f"(add `{terms[0]} {_curie(triple.predicate)} {terms[1]}`)")
+
+
+def nearest_miss(store: MatchStore, signature: Signature, *,
+                 default_graph: Sequence[ox.NamedNode] | None = None) -> str:
+    """A sentence saying what the graph lacks for ``signature`` to match ("" when it matches): every
+    required triple no match of those before it satisfies, and those that hang on them (unchecked)."""
+    session = MatchSession(store, default_graph)
+    anchor = signature.modeled_nodes[0]
+    matched = match_signature(store, _partial(signature, ()), session=session)
+    if not matched:
+        return f"nothing in the graph is a {_kind(signature, anchor)} (its {anchor})"
+    kept, reached, missing, hanging, unreached = [], {anchor}, [], [], set()
+    for triple in _grown(signature):
+        if {triple.subject, triple.object} & unreached:
+            hanging.append(_text(triple))
+            unreached |= {triple.subject, triple.object} - reached
+            continue
+        found = match_signature(store, _partial(signature, [*kept, triple]), session=session)
+        if found:
+            kept.append(triple)
+            matched = found
+            reached |= {triple.subject, triple.object}
+        else:
+            missing.append(_missing(signature, triple, matched, reached))
+            unreached |= {triple.subject, triple.object} - reached
+    if not missing:
+        return ""
+    then = f"; then the triples that hang on it: {', '.join(hanging)}" if hanging else ""
+    return "; ".join(missing) + then
