@@ -152,6 +152,8 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         console.print(f"  {lookalike.effect.effect} at {local_name(lookalike.effect.node)} would be told apart by:")
         for text in lookalike.would_separate:
             console.print(f"    – {text}")
+    for reason in report.not_applicable:
+        console.print(f"  not tried: {reason}", style="dim", markup=False)
     if stored:
         named = f" --data {data}" if data is not None and data.resolve().parent != Path.cwd().resolve() else ""
         console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis{named} -o report.html")

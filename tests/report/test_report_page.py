@@ -506,3 +506,20 @@ def test_the_cli_table_of_effects_says_what_significant_and_score_mean_and_cuts_
     effects_table = text[text.index("Which effect is missing"):].splitlines()
     first_column = "".join(line.split("│")[1].strip() for line in effects_table if line.startswith("│"))
     assert first_column == "".join(e.effect for e in case.report.effects)  # every name whole, in rank order
+
+
+
+def test_the_cli_says_why_a_catalog_effect_was_not_tried(case):
+    from dataclasses import replace
+
+    from service.cli.common import console
+    from service.cli.printing import print_diagnosis
+    from service.components.library import SignatureLibrary
+    from service.diagnosis.candidates import effect_candidates
+
+    _, reasons = effect_candidates(case.store, "case", SignatureLibrary.load())
+    with console.capture() as captured:
+        print_diagnosis(replace(case.report, not_applicable=reasons), stored=False)
+    flat = "".join(captured.get().split())
+    assert any(reason.startswith("DuctHeatExchange") for reason in reasons)
+    assert all(f"nottried:{''.join(reason.split())}" in flat for reason in reasons)
