@@ -1,9 +1,10 @@
-"""Why a signature matches nowhere: the first of its required triples the graph cannot satisfy.
+"""Why a signature matches nowhere: the required triples the graph cannot satisfy.
 
 The pattern is grown from its modeled node, one required triple at a time (the first in file order
-that touches the nodes already in), and matched at each size; the first triple after which nothing
-matches is what the graph lacks. The sentence names it with the nodes that matched up to there, and
-the triple a user would add. Details: ``docs/matching.md``, "Why a pattern matches nowhere".
+that touches the nodes already in), and matched at each size; a triple after which nothing matches
+is what the graph lacks, set aside while the growing goes on. The sentence names each with the
+nodes matched up to there and the triple a user would add, and lists the triples that hang on them.
+Details: ``docs/matching.md``, "Why a pattern matches nowhere".
 """
 
 from __future__ import annotations
@@ -35,11 +36,11 @@ def _curie(iri: str) -> str:
 
 
 def _kind(signature: Signature, node_id: str) -> str:
-    """The node as a reader knows it: its fixed IRI, its classes (" or "), or "a term"."""
+    """The node as a reader knows it: its fixed IRI, its classes (" or "), or "literal" / "term"."""
     node = signature.nodes[node_id]
     if node.iri:
         return _curie(node.iri)
-    return " or ".join(_curie(c) for c in node.classes) or ("a literal" if node.literal else "a term")
+    return " or ".join(_curie(c) for c in node.classes) or ("literal" if node.literal else "term")
 
 
 def _grown(signature: Signature) -> list[PatternTriple]:
