@@ -182,6 +182,7 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
     t = [ox.Triple(run, RDF.type, GT.DiagnosisRun), ox.Triple(run, RDF.type, PROV.Activity),
          ox.Triple(run, GT.basedOnCalibration, calibration), ox.Triple(run, GT.forModel, ox.Literal(report.model_name)),
          ox.Triple(run, RDFS.comment, ox.Literal(report.summary))]
+    t += [ox.Triple(run, GT.notApplicable, ox.Literal(reason)) for reason in report.not_applicable]
     node_name = distinct_local_names(item.node for item in report.effects)
     for rank, item in enumerate(report.effects, start=1):
         node = ox.NamedNode(f"{run.value}/candidate/{item.effect}/{node_name[item.node]}")

@@ -237,10 +237,12 @@ def _diagnosis_sections(diagnosis: StoredDiagnosis | None) -> str:
           f"{100 * e.test_improvement:.0f} %" if np.isfinite(e.test_improvement) else "–", _numbers(e),
           html.escape(e.explanation) + _lookalike_note(e)]
          for e in diagnosis.effects], "effects")
+    reasons = "".join(f"<li>{html.escape(reason)}</li>" for reason in diagnosis.not_applicable)
+    not_tried = f'<h3>Not tried</h3><ul class="not-tried">{reasons}</ul>' if reasons else ""
     return ("<h2>Which effect is missing (best first)</h2><p>Clear evidence: the diagnosis calls the effect "
             "significant (ΔBIC &lt; −10 and at least 20 % of the test-window error removed); some evidence: ΔBIC "
             f"&lt; {SOME_EVIDENCE_DELTA_BIC:g} and some of that error removed; else no evidence. The numbers are "
-            f"under <i>numbers</i>.</p>{effects}")
+            f"under <i>numbers</i>.</p>{effects}{not_tried}")
 
 
 def _history_section(store: GraphStore, run: StoredRun) -> str:

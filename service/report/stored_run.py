@@ -45,6 +45,7 @@ WHERE { GRAPH ?g {
 _DIAGNOSIS_QUERY = _PREFIXES + """SELECT ?diagnosis ?summary WHERE { GRAPH ?g {
   ?diagnosis a gt:DiagnosisRun ; gt:basedOnCalibration ?run . OPTIONAL { ?diagnosis rdfs:comment ?summary }
 } }"""
+_NOT_APPLICABLE_QUERY = _PREFIXES + "SELECT ?reason WHERE { GRAPH ?g { ?diagnosis gt:notApplicable ?reason } }"
 _CANDIDATES_QUERY = _PREFIXES + """
 SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value ?delta_bic ?improvement WHERE {
   GRAPH ?g { ?candidate prov:wasGeneratedBy ?diagnosis ; gt:candidateEffect ?effect ; gt:onNode ?node ;
@@ -233,6 +234,7 @@ class StoredDiagnosis:
     summary: str
     effects: list[StoredCandidate]
     locations: list[StoredLocation]
+    not_applicable: tuple[str, ...] = ()  # why catalog effects were not tried
 
     @property
     def failing_sensors(self) -> set[str]:
@@ -277,5 +279,6 @@ def read_diagnosis(store: GraphStore, run_id: str) -> StoredDiagnosis | None:
     locations = [StoredLocation(failing=r["failing"].value, matching=r["matching"].value if "matching" in r else None,
                                 text=r["text"].value, components=tuple(components))
                  for r, components in suspects.values()]
+    not_applicable = tuple(sorted(r["reason"].value for r in store.query(_NOT_APPLICABLE_QUERY, substitutions=bound)))
     return StoredDiagnosis(diagnosis.value, rows[0]["summary"].value if "summary" in rows[0] else "",
-                           effects, locations)
+                           effects, locations, not_applicable)

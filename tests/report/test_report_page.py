@@ -473,6 +473,30 @@ def test_a_candidate_indistinguishable_from_the_answer_says_what_would_separate_
     assert "Indistinguishable" not in effects[0][-1]
 
 
+def test_why_a_catalog_effect_was_not_tried_is_stored_and_shown(case):
+    """The diagnosis writes each not-applicable reason as gt:notApplicable on its run; the page lists
+    them under "Not tried" (the stored triple added here, then taken away)."""
+    from service.diagnosis.candidates import effect_candidates
+    from service.diagnosis.report import diagnosis_triples
+    from service.graph.namespaces import GT
+
+    _, reasons = effect_candidates(case.store, "case", SignatureLibrary.load())
+    duct = next(reason for reason in reasons if reason.startswith("DuctHeatExchange"))
+    written = {(t.predicate, t.object.value) for t in diagnosis_triples(replace(case.report, not_applicable=reasons))}
+    assert {(GT.notApplicable, reason) for reason in reasons} <= written
+    marked = (' { GRAPH ?g { ?d gt:notApplicable "%s" } } WHERE { GRAPH ?g { ?d a gt:DiagnosisRun } }'
+              % duct.replace("\\", "\\\\").replace('"', '\\"'))
+    prefix = "PREFIX gt: <https://w3id.org/graphtwin/ontology#> "
+    case.store.backend.update(prefix + "INSERT" + marked)
+    try:
+        page = report_html(case.store, case.report.run_id, locate_data=data_file_locator(case.data))
+        stored = read_diagnosis(case.store, case.report.run_id).not_applicable
+    finally:
+        case.store.backend.update(prefix + "DELETE" + marked)
+    assert stored == (duct,)
+    assert "<h3>Not tried</h3>" in page and html.escape(duct) in page
+
+
 def test_the_named_query_lists_the_diagnosis_candidates_ranked_with_the_answer_marked(case):
     rows = case.store.run_named_query("diagnosis-candidates", model=case.report.model_name)
     runs = {row["diagnosis"].value for row in rows}
@@ -510,8 +534,6 @@ def test_the_cli_table_of_effects_says_what_significant_and_score_mean_and_cuts_
 
 
 def test_the_cli_says_why_a_catalog_effect_was_not_tried(case):
-    from dataclasses import replace
-
     from service.cli.common import console
     from service.cli.printing import print_diagnosis
     from service.components.library import SignatureLibrary
