@@ -253,8 +253,9 @@ def prepare_calibration(
                                    f"steps of data: at least {min_test_steps} are needed")
         overlap = min(train_slice.stop, test_slice.stop) - max(train_slice.start, test_slice.start)
         if overlap > 0:
-            window_notes.append(f"the test window overlaps the training window by {overlap} steps: its metrics are "
-                                "partly on data the calibration fitted")
+            steps = "step" if overlap == 1 else "steps"
+            window_notes.append(f"the test window overlaps the training window by {overlap} {steps} (a window's end is "
+                                "inclusive): its metrics are partly on data the calibration fitted")
         window_notes += inputs_beyond_training(md, train_slice, test_slice)
     unscored_s = md.unscored_start_s(train_slice)
     train_s = (train_slice.stop - train_slice.start) * data.step_s

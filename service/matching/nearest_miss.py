@@ -66,8 +66,14 @@ def _names(matches: Sequence[Match], node_id: str) -> list[str]:
     return sorted({local_name(m[node_id]) for m in matches if m.get(node_id)})
 
 
-def _text(triple: PatternTriple) -> str:
-    return f"`{triple.subject} {_curie(triple.predicate)} {triple.object}`"
+def _term(signature: Signature, node_id: str) -> str:
+    """A pattern node as SPARQL writes it: ``?id``, or its fixed IRI."""
+    iri = signature.nodes[node_id].iri
+    return _curie(iri) if iri else f"?{node_id}"
+
+
+def _text(signature: Signature, triple: PatternTriple) -> str:
+    return f"`{_term(signature, triple.subject)} {_curie(triple.predicate)} {_term(signature, triple.object)}`"
 
 
 def _missing(signature: Signature, triple: PatternTriple, matched: Sequence[Match], reached: set[str]) -> str:
@@ -78,14 +84,17 @@ def _missing(signature: Signature, triple: PatternTriple, matched: Sequence[Matc
         names = _names(matched, node_id) if node_id in reached and not signature.nodes[node_id].iri else []
         if names:
             shown = " or ".join(names[:_NAMED]) + (f" (or {len(names) - _NAMED} more)" if len(names) > _NAMED else "")
-            ends.append(f"{node_id} {shown}")
+            ends.append(f"?{node_id} {shown}")
             terms.append(names[0])
+        elif signature.nodes[node_id].iri:
+            ends.append(_term(signature, node_id))
+            terms.append(_term(signature, node_id))
         else:
-            ends.append(f"{node_id} a {_kind(signature, node_id)}")
-            terms.append(_curie(signature.nodes[node_id].iri) if signature.nodes[node_id].iri else f"<{node_id}>")
+            ends.append(f"?{node_id} a {_kind(signature, node_id)}")
+            terms.append(f"<{node_id}>")
     either = " either way" if triple.or_reverse else ""
     nearest = f", the nearest along it{either}" if triple.rule is Rule.TRAVERSE else ""
-    return (f"no {_text(triple)} with {ends[0]} and {ends[1]}{nearest} "
+    return (f"no {_text(signature, triple)} with {ends[0]} and {ends[1]}{nearest} "
             f"(add `{terms[0]} {_curie(triple.predicate)} {terms[1]}`)")
 
 
@@ -98,10 +107,10 @@ def nearest_miss(store: MatchStore, signature: Signature, *,
     matched = match_signature(store, _partial(signature, ()), session=session)
     if not matched:
         return f"nothing in the graph is a {_kind(signature, anchor)} (its {anchor})"
-    kept, reached, missing, hanging, unreached = [], {anchor}, [], [], set()
+    kept, reached, missing, hanging, unreached, introduced = [], {anchor}, [], [], set(), set()
     for triple in _grown(signature):
         if {triple.subject, triple.object} & unreached:
-            hanging.append(_text(triple))
+            hanging.append(triple)
             unreached |= {triple.subject, triple.object} - reached
             continue
         found = match_signature(store, _partial(signature, [*kept, triple]), session=session)
@@ -111,8 +120,13 @@ def nearest_miss(store: MatchStore, signature: Signature, *,
             reached |= {triple.subject, triple.object}
         else:
             missing.append(_missing(signature, triple, matched, reached))
+            introduced |= {triple.subject, triple.object} - reached
             unreached |= {triple.subject, triple.object} - reached
     if not missing:
         return ""
-    then = f"; then the triples that hang on it: {', '.join(hanging)}" if hanging else ""
+    described = {n for t in hanging for n in (t.subject, t.object)
+                 if n in unreached - introduced and not signature.nodes[n].iri}
+    kinds = ", ".join(f"?{n} a {_kind(signature, n)}" for n in sorted(described))
+    then = (f"; then the triples that hang on it: {', '.join(_text(signature, t) for t in hanging)}"
+            + (f" ({kinds})" if kinds else "")) if hanging else ""
     return "; ".join(missing) + then

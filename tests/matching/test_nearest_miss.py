@@ -38,16 +38,17 @@ def test_a_graph_without_the_modeled_class_is_told_so():
 
 def test_the_first_missing_triple_is_named_with_the_nodes_matched_so_far_and_what_hangs_on_it():
     why = nearest_miss(_store(PLANT), CASING_EXCHANGE)
-    assert why.startswith(f"no `space <{X}contains> component` with space a <{X}Room> and component coil")
+    assert why.startswith(f"no `?space <{X}contains> ?component` with ?space a <{X}Room> and ?component coil")
     assert f"(add `<space> <{X}contains> coil`)" in why
-    assert why.endswith(f"then the triples that hang on it: `space <{X}hasProperty> air`, `sensor <{X}observes> air`")
+    assert why.endswith(f"then the triples that hang on it: `?space <{X}hasProperty> ?air`, `?sensor <{X}observes> ?air` "
+                        f"(?air a <{X}Temperature>, ?sensor a <{X}Sensor>)")
     assert "feeds" not in why  # the fan is there, upstream through the duct
 
 
 def test_a_later_missing_triple_is_named_alone_once_the_earlier_ones_hold():
     why = nearest_miss(_store(PLANT + "x:room a x:Room ; x:contains x:coil ; x:hasProperty x:room_air . "
                                       "x:room_air a x:Temperature ."), CASING_EXCHANGE)
-    assert why == (f"no `sensor <{X}observes> air` with sensor a <{X}Sensor> and air room_air "
+    assert why == (f"no `?sensor <{X}observes> ?air` with ?sensor a <{X}Sensor> and ?air room_air "
                    f"(add `<sensor> <{X}observes> room_air`)")
 
 
@@ -62,5 +63,5 @@ def test_the_diagnosis_says_which_triple_would_let_a_catalog_effect_apply():
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
     _, skipped = effect_candidates(store, "case", SignatureLibrary.load())
     duct = next(reason for reason in skipped if reason.startswith("DuctHeatExchange"))
-    assert "matches nowhere: no `space s4bldg:contains component`" in duct
+    assert "matches nowhere: no `?space s4bldg:contains ?component`" in duct
     assert "(add `<space> s4bldg:contains heating_coil_air_side`)" in duct
