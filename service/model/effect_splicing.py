@@ -91,8 +91,8 @@ def splice_effect(
     if signature.splice.host_models and host.signature.model not in signature.splice.host_models:
         raise AssemblyError(
             f"effect {signature.id} at {request.node}: it extends the component models "
-            f"{', '.join(m.rsplit(':', 1)[-1] for m in signature.splice.host_models)}, but {request.node} is modelled by "
-            f"{host.signature.model.rsplit(':', 1)[-1]}"
+            f"{', '.join(m.rsplit(':', 1)[-1] for m in signature.splice.host_models)}, "
+            f"but {request.node} is modelled by {host.signature.model.rsplit(':', 1)[-1]}"
         )
     ports = host_ports(signature, host.model_class)
     if signature.splice.port not in ports:
