@@ -62,7 +62,8 @@ class Parameter:
     ``null`` is, for an effect, the value at which the effect vanishes (the base model);
     ``attainable`` the bounds that are states the physics reaches (a weight of 1: a valve entirely
     stuck; a position of 0 or 1: stuck shut or wide open), so that a fit there is the effect itself,
-    not a size the prior cut short.
+    not a size the prior cut short. ``drifts`` False for what construction fixes (a pipe's water
+    content, a coil's heat capacity): the diagnosis tries no drift of it.
     """
 
     name: str
@@ -73,6 +74,7 @@ class Parameter:
     description: str = ""
     null: float | None = None
     attainable: tuple[float, ...] = ()
+    drifts: bool = True
 
     def __post_init__(self) -> None:
         if not self.lower <= self.default <= self.upper:

@@ -102,10 +102,11 @@ def drifting_components(model: AssembledModel, locations: Sequence[FailureLocati
 def _sensitive_parameters(md: ModelData, theta: np.ndarray, components: Sequence[str], test: slice,
                           noise: Mapping[str, float]) -> list[str]:
     """Per component and per failing sensor of ``noise`` (node → σ), the keys of the at most
-    :data:`MAX_PARAMETERS_PER_COMPONENT` estimated parameters whose :data:`PROBE_CHANGE` from
-    ``test``'s start moves that sensor most, by at least :data:`MIN_SENSITIVITY` σ RMS (one simulate
-    call). Per sensor, so that a sensor failing less than another still gets the drifts it would show."""
-    keys = [ref.key for ref in md.model.estimated_parameters if ref.component in components]
+    :data:`MAX_PARAMETERS_PER_COMPONENT` estimated parameters that can drift (``Parameter.drifts``)
+    whose :data:`PROBE_CHANGE` from ``test``'s start moves that sensor most, by at least
+    :data:`MIN_SENSITIVITY` σ RMS (one simulate call). Per sensor, so that a sensor failing less than
+    another still gets the drifts it would show."""
+    keys = [ref.key for ref in md.model.estimated_parameters if ref.component in components and ref.spec.drifts]
     if not keys:
         return []
     ensemble = np.repeat(np.asarray(theta, dtype=float)[None, :], len(keys) + 1, axis=0)
