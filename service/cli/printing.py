@@ -135,8 +135,8 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
 
     table = Table(title="Which effect is missing (best first)",
                   caption=f"significant: ΔBIC < {BIC_THRESHOLD:g} and at least {100 * MIN_TEST_IMPROVEMENT:.0f} % "
-                          "of the held-out error removed; score: the score test's χ² at the effect's null, "
-                          "in-sample evidence only")
+                          "of the held-out error removed (negative: the effect, fitted, predicts the held-out data "
+                          "worse); score: the score test's χ² at the effect's null, in-sample evidence only")
     for column in ("effect", "at", "score", "ΔBIC", "test error removed", "significant"):
         table.add_column(column, overflow="fold")
     for e in report.effects:
