@@ -99,7 +99,8 @@ def effect_candidates(store: GraphStore, model_name: str,
             try:
                 model = assemble(store, model_name, library=library, extra_effects=[EffectRequest(signature.id, node)])
             except ValueError as exc:
-                skipped.append(f"{signature.id} at {local_name(node)}: {str(exc).splitlines()[0]}")
+                reason = str(exc).splitlines()[0].removeprefix(f"effect {signature.id} at {node}: ")
+                skipped.append(f"{signature.id} at {local_name(node)}: {reason}")
                 continue
             candidates.append(Candidate(signature, node, model))
     return candidates, skipped

@@ -61,7 +61,10 @@ def test_a_pattern_that_matches_has_no_miss():
 def test_the_diagnosis_says_which_triple_would_let_a_catalog_effect_apply():
     store = GraphStore.embedded(None)
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
-    _, skipped = effect_candidates(store, "case", SignatureLibrary.load())
-    duct = next(reason for reason in skipped if reason.startswith("DuctHeatExchange"))
+    _, reasons = effect_candidates(store, "case", SignatureLibrary.load())
+    duct = next(reason for reason in reasons if reason.startswith("DuctHeatExchange"))
     assert "matches nowhere: no `?space s4bldg:contains ?component`" in duct
     assert "(add `<space> s4bldg:contains heating_coil_air_side`)" in duct
+    assert ("CoilThermalMass at heating_coil_air_side: it extends the component models WaterCoil, HeatingWaterCoil, "
+            "CoolingWaterCoil, but https://example.org/ventilation-case-study#heating_coil_air_side is modelled by "
+            "HotWaterLoop") in reasons
