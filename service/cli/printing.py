@@ -106,13 +106,16 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     """The diagnosis as tables and sentences; ``stored``: the run is in a store that outlives this
     command (not ``--memory``), so its report can be made later; ``data``: the measurement file the
     run read (the report command then names it)."""
+    from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT  # scipy: not at the CLI's start
+
     print_data_warnings(report.data_warnings)
     table = Table(title="Test window: model vs measurements")
     for column in ("sensor", "RMSE", "RMSE / noise", "NMBE %", "verdict"):
         table.add_column(column, overflow="fold")
     for node, s in report.sensors.items():
         verdict = ("[red]fails[/red]" if s.fails else
-                   "[yellow]the missing effect shows[/yellow]" if s.shows_missing_effect else "matches")
+                   f"[yellow]within {report.failure_ratio:g}× its noise, but the answer removes ≥ "
+                   f"{100 * MIN_TEST_IMPROVEMENT:.0f} % of its error[/yellow]" if s.shows_missing_effect else "matches")
         table.add_row(local_name(node), quantity_text(s.rmse, s.unit), f"{s.rmse_over_noise:.1f}",
                       f"{s.nmbe_percent:+.1f}", verdict)
     console.print(table)
@@ -131,8 +134,6 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     if not report.effects_tested:
         console.print(f"[bold]{report.summary}[/bold]")
         return
-    from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT  # scipy: not at the CLI's start
-
     table = Table(title="Which effect is missing (best first)",
                   caption=f"significant: ΔBIC < {BIC_THRESHOLD:g} and at least {100 * MIN_TEST_IMPROVEMENT:.0f} % "
                           "of the held-out error removed (negative: the effect, fitted, predicts the held-out data "

@@ -511,17 +511,16 @@ def test_the_named_query_lists_the_diagnosis_candidates_ranked_with_the_answer_m
     assert all(row["ended"] is not None for row in rows)
 
 
-def test_the_cli_table_of_effects_says_what_significant_and_score_mean_and_cuts_no_name(case):
+def test_the_cli_table_of_effects_says_what_significant_and_score_mean_and_cuts_no_name(case, monkeypatch):
     from service.cli.common import console
     from service.cli.printing import print_diagnosis
 
-    width = console.width
-    console.width = 60  # narrower than the names: they fold, not end in "…"
-    try:
-        with console.capture() as captured:
-            print_diagnosis(case.report, stored=False)
-    finally:
-        console.width = width
+    # narrower than the names: they fold, not end in "…" (monkeypatch puts back the console's own
+    # setting, None when it follows the terminal: setting .width back would pin it for later tests)
+    monkeypatch.setattr(console, "_width", 60)
+    with console.capture() as captured:
+        print_diagnosis(case.report, stored=False)
+    monkeypatch.undo()
     text = captured.get()
     flat = "".join(text.split())  # folded lines joined again
     assert "…" not in text
