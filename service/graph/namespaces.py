@@ -11,7 +11,7 @@ import pyoxigraph as ox
 __all__ = [
     "SAREF", "S4BLDG", "S4SYST", "FSO", "BRICK", "REF", "GT", "GTR", "QUDT", "UNIT", "QK",
     "RDF", "RDFS", "OWL", "XSD", "PROV", "DCTERMS", "PREFIXES", "Namespace", "expand_curie",
-    "graph_iri", "local_name", "namespace_of", "distinct_local_names",
+    "compact_iri", "graph_iri", "local_name", "namespace_of", "distinct_local_names",
 ]
 
 
@@ -75,6 +75,15 @@ def expand_curie(curie: str) -> str:
     if prefix not in PREFIXES:
         raise ValueError(f"unknown prefix {prefix!r} in {curie!r}; known: {', '.join(sorted(PREFIXES))}")
     return PREFIXES[prefix] + local
+
+
+def compact_iri(iri: str) -> str:
+    """The inverse of :func:`expand_curie`: ``prefix:name`` where a known prefix covers ``iri`` and the
+    rest is a plain name (letters, digits, ``_``, ``-``), else ``<iri>``."""
+    for prefix, namespace in PREFIXES.items():
+        if iri.startswith(namespace) and iri[len(namespace):].replace("_", "a").replace("-", "a").isalnum():
+            return f"{prefix}:{iri[len(namespace):]}"
+    return f"<{iri}>"
 
 
 def graph_iri(kind: str, name: str = "") -> ox.NamedNode:

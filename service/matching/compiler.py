@@ -16,7 +16,7 @@ from dataclasses import KW_ONLY, dataclass
 
 import pyoxigraph as ox
 
-from service.graph.namespaces import PREFIXES, RDF, RDFS, S4BLDG
+from service.graph.namespaces import PREFIXES, RDF, RDFS, S4BLDG, compact_iri
 from service.matching.signature import PatternTriple, Rule, Signature
 
 __all__ = ["CompiledQuery", "QueryPart", "Reads", "Traversal", "compile_signature"]
@@ -99,11 +99,8 @@ def _iri(value: str, where: str) -> str:
 
 
 def _short(iri_text: str) -> str:
-    bare = iri_text.strip("<>")
-    for prefix, namespace in PREFIXES.items():
-        if bare.startswith(namespace) and bare[len(namespace):].replace("_", "a").replace("-", "a").isalnum():
-            return f"{prefix}:{bare[len(namespace):]}"
-    return iri_text
+    """``<iri>`` (N-Triples) as the query writes it: :func:`compact_iri`."""
+    return compact_iri(iri_text.strip("<>"))
 
 
 class _Writer:

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from service.graph.namespaces import PREFIXES, local_name
+from service.graph.namespaces import compact_iri, local_name
 from service.matching.matcher import Match, MatchSession, match_signature
 from service.matching.signature import PatternTriple, Rule, Signature
 
@@ -28,19 +28,12 @@ __all__ = ["nearest_miss"]
 _NAMED = 3
 
 
-def _curie(iri: str) -> str:
-    for prefix, namespace in PREFIXES.items():
-        if iri.startswith(namespace):
-            return f"{prefix}:{iri[len(namespace):]}"
-    return f"<{iri}>"
-
-
 def _kind(signature: Signature, node_id: str) -> str:
     """The node as a reader knows it: its fixed IRI, its classes (" or "), or "literal" / "term"."""
     node = signature.nodes[node_id]
     if node.iri:
-        return _curie(node.iri)
-    return " or ".join(_curie(c) for c in node.classes) or ("literal" if node.literal else "term")
+        return compact_iri(node.iri)
+    return " or ".join(compact_iri(c) for c in node.classes) or ("literal" if node.literal else "term")
 
 
 def _grown(signature: Signature) -> list[PatternTriple]:
@@ -69,11 +62,11 @@ def _names(matches: Sequence[Match], node_id: str) -> list[str]:
 def _term(signature: Signature, node_id: str) -> str:
     """A pattern node as SPARQL writes it: ``?id``, or its fixed IRI."""
     iri = signature.nodes[node_id].iri
-    return _curie(iri) if iri else f"?{node_id}"
+    return compact_iri(iri) if iri else f"?{node_id}"
 
 
 def _text(signature: Signature, triple: PatternTriple) -> str:
-    return f"`{_term(signature, triple.subject)} {_curie(triple.predicate)} {_term(signature, triple.object)}`"
+    return f"`{_term(signature, triple.subject)} {compact_iri(triple.predicate)} {_term(signature, triple.object)}`"
 
 
 def _missing(signature: Signature, triple: PatternTriple, matched: Sequence[Match], reached: set[str]) -> str:
@@ -95,7 +88,7 @@ def _missing(signature: Signature, triple: PatternTriple, matched: Sequence[Matc
     either = " either way" if triple.or_reverse else ""
     nearest = f", the nearest along it{either}" if triple.rule is Rule.TRAVERSE else ""
     return (f"no {_text(signature, triple)} with {ends[0]} and {ends[1]}{nearest} "
-            f"(add `{terms[0]} {_curie(triple.predicate)} {terms[1]}`)")
+            f"(add `{terms[0]} {compact_iri(triple.predicate)} {terms[1]}`)")
 
 
 def nearest_miss(store: MatchStore, signature: Signature, *,
