@@ -118,11 +118,11 @@ def _sensitive_parameters(md: ModelData, theta: np.ndarray, components: Sequence
         factors[key] = factor
     predicted = md.simulate_targets(test, ensemble, factors=factors)
     component_of = {ref.key: ref.component for ref in md.model.estimated_parameters}
+    members = [[k for k in range(len(keys)) if component_of[keys[k]] == component] for component in components]
     chosen = []
     for node, sigma in noise.items():
         moved = np.sqrt(np.nanmean((predicted[node][1:] - predicted[node][0]) ** 2, axis=1)) / sigma
-        for component in components:
-            own = (k for k in range(len(keys)) if component_of[keys[k]] == component)
+        for own in members:
             ranked = sorted(own, key=lambda k: -moved[k])
             chosen += [keys[k] for k in ranked[:MAX_PARAMETERS_PER_COMPONENT]
                        if moved[k] >= MIN_SENSITIVITY and keys[k] not in chosen]
