@@ -8,9 +8,11 @@ Monday–Wednesday; a fault that can appear starts on Monday 00:00, an equipment
 from the start. Per run: the right effect at the right node ranked first and significant; anything
 significant (a false alarm on fault-free data; for a fault outside the catalog, a catalog effect
 claimed with confidence); the share of the most-failing sensor's held-out squared error the top
-candidate removes. Runs on a process pool of 2 (each diagnosis on one core).
+candidate removes; and how clear the fault is: the signal it leaves at that sensor over the sensor's
+noise, from the plant alone. Runs on a process pool of 2 (each diagnosis on one core).
 
     python -m tests.bench.bench_validation_matrix --quick [--json rows.json] [--only valve]
+    python -m tests.bench.bench_validation_matrix --only sensor_lag --size 3600 --seeds 5  # a detection curve
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import tempfile
 import time
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -112,11 +114,13 @@ def plan(seeds: int, free_seeds: int, outside_seeds: int, first_seed: int = 0) -
     return runs
 
 
-def affected_sensor(run: Run, readings: dict[str, np.ndarray], timestamps: np.ndarray) -> str | None:
-    """The device whose test-window readings the fault moves most against its noise: the plant run
-    again without the fault (same seed), RMS(faulty − fault-free)/σ per series."""
+def affected_sensor(run: Run, readings: dict[str, np.ndarray],
+                    timestamps: np.ndarray) -> tuple[str | None, float | None]:
+    """The device whose test-window readings the fault moves most against its noise, and by how much:
+    the plant run again without the fault (same seed), RMS(faulty − fault-free)/σ per series (σ the
+    plant's own sensor noise; no graphtwin code). How clear a cell's fault is, measured."""
     if run.fault is None:
-        return None
+        return None, None
     twin = simulate_plant(days=DAYS, start=START, seed=1000 + run.seed).readings
     test = timestamps >= np.datetime64(TEST[0])
 
@@ -125,7 +129,8 @@ def affected_sensor(run: Run, readings: dict[str, np.ndarray], timestamps: np.nd
         sigma = max(spec.sigma, spec.relative_sigma * float(np.mean(np.abs(twin[series][test]))), 1e-9)
         return float(np.sqrt(np.mean((readings[series][test] - twin[series][test]) ** 2))) / sigma
 
-    return EX + DEVICE_OF_SERIES[max(DEVICE_OF_SERIES, key=moved)]
+    moved_most = max(DEVICE_OF_SERIES, key=moved)
+    return EX + DEVICE_OF_SERIES[moved_most], moved(moved_most)
 
 
 def _share_removed(evidence, device: str) -> float | None:
@@ -156,7 +161,7 @@ def diagnose_run(run: Run) -> dict:
     significant = report.significant
     failing = sorted(report.failing_sensors, key=lambda n: -report.sensors[n].rmse_over_noise)
     worst = failing[0] if failing else max(report.sensors, key=lambda n: report.sensors[n].rmse_over_noise)
-    affected = affected_sensor(run, plant.readings, plant.timestamps)
+    affected, signal_to_noise = affected_sensor(run, plant.readings, plant.timestamps)
     if affected not in report.sensors:  # a boundary input: judged at the most-failing target instead
         affected = worst
     return {
@@ -171,7 +176,8 @@ def diagnose_run(run: Run) -> dict:
         "true_lookalike": any((e.effect.effect, e.effect.node) == expected for e in report.indistinguishable),
         "failing": [n.removeprefix(EX) for n in failing], "worst_sensor": worst.removeprefix(EX),
         "rmse_over_noise": {n.removeprefix(EX): v.rmse_over_noise for n, v in report.sensors.items()},
-        "affected_sensor": affected.removeprefix(EX), "share_removed": _share_removed(top, affected),
+        "affected_sensor": affected.removeprefix(EX), "signal_to_noise": signal_to_noise,
+        "share_removed": _share_removed(top, affected),
         "true_share_removed": _share_removed(true, affected),
         "noise": {n.removeprefix(EX): v.noise for n, v in report.sensors.items()},
         "candidates": [_candidate_row(e) for e in report.effects],
@@ -224,10 +230,11 @@ def table(rows: list[dict]) -> str:
     named indistinguishable from a significant answer instead; anything significant; for a fault
     outside the catalog, a catalog effect claimed (significant); the median share of the affected
     sensor's held-out error the top candidate and the true candidate remove; the true candidate's
-    rank; the most common top candidate."""
+    rank; the most common top candidate; the median signal the fault leaves at the sensor it moves most,
+    × that sensor's noise σ (plant-side, :func:`affected_sensor`)."""
     lines = ["| cell | runs | right first | right as look-alike | any significant | catalog effect claimed | "
-             "removed by top | removed by true | true rank | top candidate (most often) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "removed by top | removed by true | true rank | top candidate (most often) | signal at its sensor |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     cells: dict[str, list[dict]] = {}
     for row in rows:
         cells.setdefault(row["cell"], []).append(row)
@@ -240,8 +247,17 @@ def table(rows: list[dict]) -> str:
                      f"{_count(group, _catalog_claimed) if group[0]['group'] == 'outside' else '–'} | "
                      f"{_median([r['share_removed'] for r in group])} | "
                      f"{_median([r['true_share_removed'] for r in group]) if catalog else '–'} | "
-                     f"{statistics.median(ranks) if ranks else '–'} | {top} ×{count} |")
+                     f"{statistics.median(ranks) if ranks else '–'} | {top} ×{count} | {_signal(group)} |")
     return "\n".join(lines)
+
+
+def _signal(rows: list[dict]) -> str:
+    """The median signal-to-noise of ``rows`` at their most common affected sensor ("–" where none)."""
+    known = [r for r in rows if r.get("signal_to_noise") is not None]
+    if not known:
+        return "–"
+    sensor = Counter(r["affected_sensor"] for r in known).most_common(1)[0][0]
+    return f"{statistics.median(r['signal_to_noise'] for r in known):.1f}σ ({sensor.removesuffix('_sensor')})"
 
 
 def _round(value: float | None) -> float | None:
@@ -256,6 +272,8 @@ def main() -> None:
     parser.add_argument("--outside-seeds", type=int, default=5, help="seeds per fault outside the catalog")
     parser.add_argument("--first-seed", type=int, default=0, help="every cell's first seed (to add draws)")
     parser.add_argument("--only", default="", help="only the cells whose name contains this")
+    parser.add_argument("--size", type=float, default=None,
+                        help="every selected fault at this size, not its clear and subtle ones (a detection curve)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", type=Path, default=None, help="write every run's row here")
     args = parser.parse_args()
@@ -263,6 +281,9 @@ def main() -> None:
         args.seeds = args.free_seeds = args.outside_seeds = 1
     started = time.perf_counter()
     runs = [r for r in plan(args.seeds, args.free_seeds, args.outside_seeds, args.first_seed) if args.only in r.cell]
+    if args.size is not None:
+        runs = list({(r.fault, r.seed): replace(r, size_label=f"{args.size:g}", size=args.size)
+                     for r in runs if r.fault is not None}.values())
     print(f"{len(runs)} diagnoses on {args.workers} processes")
     rows = []
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"),
@@ -272,7 +293,8 @@ def main() -> None:
             significant = " (significant)" if row["top_significant"] else ""
             print(f"  {row['cell']:<36} seed {row['seed']}: top {row['top']}{significant},"
                   f" right first {row['right_first']}, true rank {row['true_rank']}, failing {row['failing']},"
-                  f" affected {row['affected_sensor']}: removed by top {_round(row['share_removed'])},"
+                  f" affected {row['affected_sensor']} ({_round(row['signal_to_noise'])}σ):"
+                  f" removed by top {_round(row['share_removed'])},"
                   f" by true {_round(row['true_share_removed'])}"
                   f" ({row['wall_s']:.0f} s)", flush=True)
     wall = time.perf_counter() - started
