@@ -60,11 +60,18 @@ DEVICE_OF_SERIES = {"fan_inlet_air_temperature": "fan_inlet_air_temperature_sens
                     "coil_inlet_water_temperature": "coil_inlet_water_temperature_sensor",
                     "coil_outlet_water_temperature": "coil_outlet_water_temperature_sensor"}
 
-#: The plant's plain-language catalog names → graphtwin's effect signatures (the plant knows none).
-EFFECT_IDS = {"valve leakage": "ValveLeakage", "valve stuck": "ValveStuck", "temperature sensor offset": "SensorOffset",
-              "temperature sensor lag": "SensorLag", "fan motor heat": "FanMotorHeat",
-              "constant heat gain": "ConstantHeatGain", "duct heat exchange": "DuctHeatExchange",
-              "coil thermal mass": "CoilThermalMass"}
+#: The plant's plain-language catalog names → the graphtwin effect signatures that name it (the plant
+#: knows none): a water sensor's lag is either lag, the one in contact or the one that lost it.
+EFFECT_IDS = {"valve leakage": ("ValveLeakage",), "valve stuck": ("ValveStuck",),
+              "temperature sensor offset": ("SensorOffset",),
+              "temperature sensor lag": ("SensorLag", "WaterSensorLag"), "fan motor heat": ("FanMotorHeat",),
+              "constant heat gain": ("ConstantHeatGain",), "duct heat exchange": ("DuctHeatExchange",),
+              "coil thermal mass": ("CoilThermalMass",)}
+
+
+def _names_truth(evidence, truth_effects: tuple[str, ...], truth_node: str | None) -> bool:
+    """``evidence`` (anything with ``effect`` and ``node``) is the true effect at the true node."""
+    return evidence is not None and evidence.effect in truth_effects and evidence.node == truth_node
 
 
 @dataclass(frozen=True)
@@ -104,8 +111,7 @@ def plan(seeds: int, free_seeds: int, outside_seeds: int, first_seed: int = 0) -
     admitted = admitted_pairs()
     runs = [Run("fault-free", None, "-", 0.0, seed) for seed in range(first_seed, first_seed + free_seeds)]
     for name, kind in FAULTS.items():
-        expected = (EFFECT_IDS.get(kind.catalog_effect or ""), EX + kind.node)
-        if expected in admitted:
+        if any((effect, EX + kind.node) in admitted for effect in EFFECT_IDS.get(kind.catalog_effect or "", ())):
             runs += [Run("catalog", name, label, getattr(kind, label), seed)
                      for label in ("clear", "subtle") for seed in range(first_seed, first_seed + seeds)]
         else:
@@ -154,9 +160,9 @@ def diagnose_run(run: Run) -> dict:
         data = Path(folder) / "plant.csv"
         write_run_csv(plant, data)
         report = diagnose(store, "case", data, train=TRAIN, test=TEST, seed=run.seed, workers=1)
-    expected = (EFFECT_IDS.get(truth.catalog_effect or ""), EX + truth.node) if truth.node else None
+    true_effects, true_node = EFFECT_IDS.get(truth.catalog_effect or "", ()), EX + truth.node if truth.node else None
     top = report.effects[0] if report.effects else None
-    true_rank = next((i + 1 for i, e in enumerate(report.effects) if (e.effect, e.node) == expected), None)
+    true_rank = next((i + 1 for i, e in enumerate(report.effects) if _names_truth(e, true_effects, true_node)), None)
     true = report.effects[true_rank - 1] if true_rank else None
     significant = report.significant
     failing = sorted(report.failing_sensors, key=lambda n: -report.sensors[n].rmse_over_noise)
@@ -169,11 +175,11 @@ def diagnose_run(run: Run) -> dict:
         "truth": truth.to_dict(),
         "top": None if top is None else f"{top.effect}@{top.node.removeprefix(EX)}",
         "top_significant": bool(top is not None and top.significant),
-        "right_first": bool(top is not None and top.significant and (top.effect, top.node) == expected),
+        "right_first": bool(top is not None and top.significant and _names_truth(top, true_effects, true_node)),
         "true_rank": true_rank, "any_significant": bool(significant),
         "catalog_claimed": any(not isinstance(e, DriftEvidence) for e in significant),
         "lookalikes": [f"{e.effect.effect}@{e.effect.node.removeprefix(EX)}" for e in report.indistinguishable],
-        "true_lookalike": any((e.effect.effect, e.effect.node) == expected for e in report.indistinguishable),
+        "true_lookalike": any(_names_truth(e.effect, true_effects, true_node) for e in report.indistinguishable),
         "failing": [n.removeprefix(EX) for n in failing], "worst_sensor": worst.removeprefix(EX),
         "rmse_over_noise": {n.removeprefix(EX): v.rmse_over_noise for n, v in report.sensors.items()},
         "affected_sensor": affected.removeprefix(EX), "signal_to_noise": signal_to_noise,

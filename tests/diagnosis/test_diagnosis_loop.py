@@ -24,6 +24,7 @@ HIDDEN = {
     "ValveStuck": EX + "heating_valve",
     "SensorOffset": EX + "coil_outlet_water_temperature_sensor",
     "SensorLag": EX + "coil_outlet_air_temperature_sensor",
+    "WaterSensorLag": EX + "coil_outlet_water_temperature_sensor",
     "DuctHeatExchange": EX + "heating_coil_air_side",
     "ConstantHeatGain": EX + "heating_coil_air_side",
 }

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from service.components.component import Parameter, Port, SplicedEffect, first_order_lag_factor
 
-__all__ = ["FirstOrderLag"]
+__all__ = ["FirstOrderLag", "SensorResponseLag"]
 
 
 class FirstOrderLag(SplicedEffect):
@@ -30,3 +30,12 @@ class FirstOrderLag(SplicedEffect):
         lagged = state["lagged"]
         lagged += state["_factor"] * (inputs["value_in"] - lagged)
         return {"value_out": lagged.copy()}
+
+
+class SensorResponseLag(FirstOrderLag):
+    """:class:`FirstOrderLag` with τ up to 2 h [s]: a water sensor that has lost its contact with the
+    water (a strap-on sensor off its pipe, a thermowell without its paste) answers in tens of minutes
+    to hours; in contact, or in moving air, within minutes (:class:`FirstOrderLag`'s 30 min)."""
+
+    parameters = (Parameter("time_constant", "s", 0.0, 0.0, 7200.0, "sensor time constant, τ", null=0.0),)
+    settling_s = 5.0 * parameters[0].upper
