@@ -168,6 +168,7 @@ def diagnose_run(run: Run) -> dict:
     failing = sorted(report.failing_sensors, key=lambda n: -report.sensors[n].rmse_over_noise)
     worst = failing[0] if failing else max(report.sensors, key=lambda n: report.sensors[n].rmse_over_noise)
     affected, signal_to_noise = affected_sensor(run, plant.readings, plant.timestamps)
+    moved_most = affected
     if affected not in report.sensors:  # a boundary input: judged at the most-failing target instead
         affected = worst
     return {
@@ -183,6 +184,7 @@ def diagnose_run(run: Run) -> dict:
         "failing": [n.removeprefix(EX) for n in failing], "worst_sensor": worst.removeprefix(EX),
         "rmse_over_noise": {n.removeprefix(EX): v.rmse_over_noise for n, v in report.sensors.items()},
         "affected_sensor": affected.removeprefix(EX), "signal_to_noise": signal_to_noise,
+        "signal_sensor": moved_most.removeprefix(EX) if moved_most else None,
         "share_removed": _share_removed(top, affected),
         "true_share_removed": _share_removed(true, affected),
         "noise": {n.removeprefix(EX): v.noise for n, v in report.sensors.items()},
@@ -258,11 +260,12 @@ def table(rows: list[dict]) -> str:
 
 
 def _signal(rows: list[dict]) -> str:
-    """The median signal-to-noise of ``rows`` at their most common affected sensor ("–" where none)."""
+    """The median signal-to-noise of ``rows``, with the sensor the fault moves most in most of them
+    ("–" where none)."""
     known = [r for r in rows if r.get("signal_to_noise") is not None]
     if not known:
         return "–"
-    sensor = Counter(r["affected_sensor"] for r in known).most_common(1)[0][0]
+    sensor = Counter(r.get("signal_sensor", r["affected_sensor"]) for r in known).most_common(1)[0][0]
     return f"{statistics.median(r['signal_to_noise'] for r in known):.1f}σ ({sensor.removesuffix('_sensor')})"
 
 
@@ -299,7 +302,8 @@ def main() -> None:
             significant = " (significant)" if row["top_significant"] else ""
             print(f"  {row['cell']:<36} seed {row['seed']}: top {row['top']}{significant},"
                   f" right first {row['right_first']}, true rank {row['true_rank']}, failing {row['failing']},"
-                  f" affected {row['affected_sensor']} ({_round(row['signal_to_noise'])}σ):"
+                  f" affected {row['affected_sensor']},"
+                  f" signal {_round(row['signal_to_noise'])}σ at {row['signal_sensor']}:"
                   f" removed by top {_round(row['share_removed'])},"
                   f" by true {_round(row['true_share_removed'])}"
                   f" ({row['wall_s']:.0f} s)", flush=True)
