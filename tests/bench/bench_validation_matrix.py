@@ -135,8 +135,9 @@ def affected_sensor(run: Run, readings: dict[str, np.ndarray],
         sigma = max(spec.sigma, spec.relative_sigma * float(np.mean(np.abs(twin[series][test]))), 1e-9)
         return float(np.sqrt(np.mean((readings[series][test] - twin[series][test]) ** 2))) / sigma
 
-    moved_most = max(DEVICE_OF_SERIES, key=moved)
-    return EX + DEVICE_OF_SERIES[moved_most], moved(moved_most)
+    signal = {series: moved(series) for series in DEVICE_OF_SERIES}
+    moved_most = max(signal, key=signal.get)
+    return EX + DEVICE_OF_SERIES[moved_most], signal[moved_most]
 
 
 def _share_removed(evidence, device: str) -> float | None:

@@ -18,7 +18,11 @@ class FirstOrderLag(SplicedEffect):
     outputs = (Port("value_out", "degC", "lagged value"),)
     parameters = (Parameter("time_constant", "s", 0.0, 0.0, 1800.0, "first-order time constant, τ", null=0.0),)
     states = ("lagged",)
-    settling_s = 5.0 * parameters[0].upper  # five time constants at the slowest
+
+    @classmethod
+    def settling_time_s(cls) -> float:
+        """Five time constants at the slowest its prior allows (a subclass's own prior included)."""
+        return 5.0 * cls.parameters[0].upper
 
     def initial_state(self, params, inputs, dt_s):
         return {"lagged": inputs["value_in"].copy()}
@@ -38,4 +42,3 @@ class SensorResponseLag(FirstOrderLag):
     to hours; in contact, or in moving air, within minutes (:class:`FirstOrderLag`'s 30 min)."""
 
     parameters = (Parameter("time_constant", "s", 0.0, 0.0, 7200.0, "sensor time constant, τ", null=0.0),)
-    settling_s = 5.0 * parameters[0].upper
