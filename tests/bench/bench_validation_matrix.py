@@ -61,11 +61,13 @@ DEVICE_OF_SERIES = {"fan_inlet_air_temperature": "fan_inlet_air_temperature_sens
                     "coil_outlet_water_temperature": "coil_outlet_water_temperature_sensor"}
 
 #: The plant's plain-language catalog names → the graphtwin effect signatures that name it (the plant
-#: knows none): a water sensor's lag is either lag, the one in contact or the one that lost it.
+#: knows none): a water sensor's lag is either lag, the one in contact or the one that lost it; a
+#: duct's exchange either exchange, with its surroundings measured or not (the plant room is not).
 EFFECT_IDS = {"valve leakage": ("ValveLeakage",), "valve stuck": ("ValveStuck",),
               "temperature sensor offset": ("SensorOffset",),
               "temperature sensor lag": ("SensorLag", "WaterSensorLag"), "fan motor heat": ("FanMotorHeat",),
-              "constant heat gain": ("ConstantHeatGain",), "duct heat exchange": ("DuctHeatExchange",),
+              "constant heat gain": ("ConstantHeatGain",),
+              "duct heat exchange": ("DuctHeatExchange", "DuctHeatExchangeUnmeasured"),
               "coil thermal mass": ("CoilThermalMass",)}
 
 

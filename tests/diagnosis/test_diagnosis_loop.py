@@ -26,6 +26,7 @@ HIDDEN = {
     "SensorLag": EX + "coil_outlet_air_temperature_sensor",
     "WaterSensorLag": EX + "coil_outlet_water_temperature_sensor",
     "DuctHeatExchange": EX + "heating_coil_air_side",
+    "DuctHeatExchangeUnmeasured": EX + "heating_coil_air_side",
     "ConstantHeatGain": EX + "heating_coil_air_side",
 }
 

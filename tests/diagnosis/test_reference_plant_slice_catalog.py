@@ -1,8 +1,9 @@
 """The CI slice of the validation matrix (docs/validation.md): a few cells, one seed each, diagnosed
 on data from the independent reference plant (tests/reference_plant, physics that shares no code
 with service/), so a wiring defect both sides would share fails here rather than only in the bench.
-This module: a subtle stuck valve, a clear sensor offset and a water sensor's two-hour lag (fault-free
-data and a leak: ``test_reference_plant_slice.py``).
+This module: a subtle stuck valve, a clear sensor offset, a clear duct heat exchange with the plant room
+(which the graph does not describe) and a water sensor's two-hour lag (fault-free data and a leak:
+``test_reference_plant_slice.py``).
 
 One seed a cell is a regression guard, not a rate: the rates are the bench's
 (``python tests/bench/bench_validation_matrix.py``). A cell graphtwin gets wrong is marked
@@ -16,7 +17,8 @@ from tests.bench.bench_validation_matrix import Run, cell_run, diagnose_run
 pytestmark = pytest.mark.slow
 
 
-@pytest.mark.parametrize(("fault", "size"), [("valve_stuck", "subtle"), ("sensor_offset", "clear")])
+@pytest.mark.parametrize(("fault", "size"), [("valve_stuck", "subtle"), ("sensor_offset", "clear"),
+                                           ("duct_heat_exchange", "clear")])
 def test_the_injected_fault_is_named_first_and_significant_at_its_node(fault, size):
     row = diagnose_run(cell_run(fault, size))
     assert row["right_first"], (row["top"], row["true_rank"], row["truth"])

@@ -12,7 +12,15 @@ from service.components.component import (
     SplicedEffect,
 )
 
-__all__ = ["DuctHeatExchange"]
+__all__ = ["DuctHeatExchange", "DuctHeatExchangeUnmeasured"]
+
+
+def duct_outlet_temperature(inlet_c, surroundings_c, air_mass_flow_kg_s, conductance_w_k):
+    """T_out = T_amb + (T_in − T_amb) · exp(−UA / (ṁ · c_p)) [°C], ṁ floored at
+    ``MINIMUM_AIR_MASS_FLOW_KG_PER_S``."""
+    flow = np.maximum(air_mass_flow_kg_s, MINIMUM_AIR_MASS_FLOW_KG_PER_S)
+    kept = np.exp(-conductance_w_k / (flow * AIR_SPECIFIC_HEAT_J_PER_KG_K))
+    return surroundings_c + (inlet_c - surroundings_c) * kept
 
 
 class DuctHeatExchange(SplicedEffect):
@@ -34,7 +42,28 @@ class DuctHeatExchange(SplicedEffect):
     )
 
     def step(self, params, inputs, state, dt_s):
-        flow = np.maximum(inputs["air_mass_flow"], MINIMUM_AIR_MASS_FLOW_KG_PER_S)
-        kept = np.exp(-params["duct_conductance"] / (flow * AIR_SPECIFIC_HEAT_J_PER_KG_K))
-        ambient = inputs["ambient_temperature"]
-        return {"value_out": ambient + (inputs["value_in"] - ambient) * kept}
+        return {"value_out": duct_outlet_temperature(inputs["value_in"], inputs["ambient_temperature"],
+                                                     inputs["air_mass_flow"], params["duct_conductance"])}
+
+
+class DuctHeatExchangeUnmeasured(SplicedEffect):
+    """T_out = T_amb + (T_in − T_amb) · exp(−UA / (ṁ · c_p))   [°C], T_amb estimated
+
+    :class:`DuctHeatExchange` where no sensor measures the surroundings (a plant room, a ceiling void,
+    a roof the graph does not describe): their temperature T_amb is a constant estimated with UA,
+    within −20 to 50 °C. Null: UA = 0 (T_amb then has no effect).
+    """
+
+    inputs = (
+        Port("value_in", "degC", "air temperature entering the duct"),
+        Port("air_mass_flow", "kg/s", "air mass flow through the duct"),
+    )
+    outputs = DuctHeatExchange.outputs
+    parameters = DuctHeatExchange.parameters + (
+        Parameter("surroundings_temperature", "degC", 20.0, -20.0, 50.0,
+                  "temperature of the unmeasured surroundings, T_amb"),
+    )
+
+    def step(self, params, inputs, state, dt_s):
+        return {"value_out": duct_outlet_temperature(inputs["value_in"], params["surroundings_temperature"],
+                                                     inputs["air_mass_flow"], params["duct_conductance"])}
