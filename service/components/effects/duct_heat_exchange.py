@@ -15,7 +15,7 @@ from service.components.component import (
 __all__ = ["DuctHeatExchange", "DuctHeatExchangeUnmeasured"]
 
 
-def duct_outlet_temperature(inlet_c, surroundings_c, air_mass_flow_kg_s, conductance_w_k):
+def _duct_outlet_temperature(inlet_c, surroundings_c, air_mass_flow_kg_s, conductance_w_k):
     """T_out = T_amb + (T_in − T_amb) · exp(−UA / (ṁ · c_p)) [°C], ṁ floored at
     ``MINIMUM_AIR_MASS_FLOW_KG_PER_S``."""
     flow = np.maximum(air_mass_flow_kg_s, MINIMUM_AIR_MASS_FLOW_KG_PER_S)
@@ -42,8 +42,8 @@ class DuctHeatExchange(SplicedEffect):
     )
 
     def step(self, params, inputs, state, dt_s):
-        return {"value_out": duct_outlet_temperature(inputs["value_in"], inputs["ambient_temperature"],
-                                                     inputs["air_mass_flow"], params["duct_conductance"])}
+        return {"value_out": _duct_outlet_temperature(inputs["value_in"], inputs["ambient_temperature"],
+                                                      inputs["air_mass_flow"], params["duct_conductance"])}
 
 
 class DuctHeatExchangeUnmeasured(SplicedEffect):
@@ -65,5 +65,5 @@ class DuctHeatExchangeUnmeasured(SplicedEffect):
     )
 
     def step(self, params, inputs, state, dt_s):
-        return {"value_out": duct_outlet_temperature(inputs["value_in"], params["surroundings_temperature"],
-                                                     inputs["air_mass_flow"], params["duct_conductance"])}
+        return {"value_out": _duct_outlet_temperature(inputs["value_in"], params["surroundings_temperature"],
+                                                      inputs["air_mass_flow"], params["duct_conductance"])}
