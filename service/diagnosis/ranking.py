@@ -7,7 +7,8 @@ compared by ΔBIC = Σₖ n_eff,ₖ·ln(RSS₁,ₖ/RSS₀,ₖ) + k·ln(Σ n_eff)
 weighted squared error it removes **out of sample**. Significant: ΔBIC < ``bic_threshold`` and at least
 ``min_test_improvement`` removed; ranked significant first, then the plausible before those demoted
 (an effect fitted only at a bound that is not its null), then by the share removed (two decimals),
-fewer parameters, ΔBIC. The method in full: ``docs/diagnosis.md``, "What is missing".
+ΔBIC (which already charges each extra parameter ln Σn_eff), fewer parameters. The method in full:
+``docs/diagnosis.md``, "What is missing".
 """
 
 from __future__ import annotations
@@ -229,7 +230,7 @@ def rank_evidence(
     def key(item: EffectEvidence):
         improvement = item.test_improvement if np.isfinite(item.test_improvement) else -np.inf
         bic = item.delta_bic if np.isfinite(item.delta_bic) else np.inf
-        return (not item.significant, bool(item.demoted), -round(improvement, 2), len(item.parameter_names), bic,
+        return (not item.significant, bool(item.demoted), -round(improvement, 2), bic, len(item.parameter_names),
                 item.effect, item.node)
 
     return sorted(evidence, key=key)

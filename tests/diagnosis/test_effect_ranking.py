@@ -105,14 +105,25 @@ def _evidence(effect, improvement, bic, n_par):
     )
 
 
-def test_ranking_prefers_significant_then_larger_improvement_then_fewer_parameters():
-    stuck = _evidence("ValveStuck", 0.904, -520.0, 2)
+def test_ranking_prefers_significant_then_larger_improvement_then_the_better_bic():
+    # a stuck valve nests a leak (w = λ at s = 1): fitting no better, it pays ln Σn_eff for s in its ΔBIC
+    stuck = _evidence("ValveStuck", 0.904, -508.0, 2)
     leak = _evidence("ValveLeakage", 0.901, -515.0, 1)
     offset = _evidence("SensorOffset", 0.95, -3.0, 1)  # not significant by BIC
     weak = _evidence("SensorLag", 0.4, -40.0, 1)
     ranked = rank_evidence([stuck, offset, weak, leak])
     assert [e.effect for e in ranked] == ["ValveLeakage", "ValveStuck", "SensorLag", "SensorOffset"]
     assert [e.significant for e in ranked] == [True, True, True, False]
+
+
+def test_where_the_held_out_shares_tie_the_in_sample_evidence_decides_before_the_parameter_count():
+    # the reference plant's duct, seed 3: both remove 87 % of the held-out error, and the exchange's
+    # two parameters fit the training data far better than the offset's one (ΔBIC −4,299 against −3,150)
+    offset = _evidence("SensorOffset", 0.871, -3150.0, 1)
+    duct = _evidence("DuctHeatExchangeUnmeasured", 0.868, -4299.0, 2)
+    assert [e.effect for e in rank_evidence([offset, duct])] == ["DuctHeatExchangeUnmeasured", "SensorOffset"]
+    equal = [_evidence("SensorOffset", 0.87, -3150.0, 1), _evidence("ConstantHeatGain", 0.87, -3150.0, 1)]
+    assert [e.effect for e in rank_evidence(equal)] == ["ConstantHeatGain", "SensorOffset"]  # then by name
 
 
 def test_an_estimate_at_a_bound_of_its_prior_is_flagged_in_the_explanation():
