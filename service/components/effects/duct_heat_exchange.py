@@ -54,10 +54,7 @@ class DuctHeatExchangeUnmeasured(SplicedEffect):
     within −20 to 50 °C. Null: UA = 0 (T_amb then has no effect).
     """
 
-    inputs = (
-        Port("value_in", "degC", "air temperature entering the duct"),
-        Port("air_mass_flow", "kg/s", "air mass flow through the duct"),
-    )
+    inputs = tuple(port for port in DuctHeatExchange.inputs if port.name != "ambient_temperature")
     outputs = DuctHeatExchange.outputs
     parameters = DuctHeatExchange.parameters + (
         Parameter("surroundings_temperature", "degC", 20.0, -20.0, 50.0,
