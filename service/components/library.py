@@ -64,6 +64,12 @@ def _loaded(files: tuple[tuple[Path, int, int], ...]) -> dict[str, Signature]:
         if signature.id in library:
             raise SignatureError(f"{path}: id {signature.id!r} is already used by {library[signature.id].source_file}")
         library[signature.id] = signature
+    for signature in library.values():
+        for i, other in enumerate(signature.yields_to):
+            if other not in library or library[other].kind != "effect":
+                known = ", ".join(sorted(k for k, s in library.items() if s.kind == "effect"))
+                raise signature_error(signature.source_file, f"yields_to[{i}]",
+                                      f"{other!r} is not an effect of the library; its effects: {known}")
     return library
 
 

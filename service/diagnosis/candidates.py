@@ -81,8 +81,8 @@ class Candidate(NamedTuple):
 
 def effect_candidates(store: GraphStore, model_name: str,
                       library: dict[str, Signature]) -> tuple[list[Candidate], list[str]]:
-    """A :class:`Candidate` for every applicable pair the model does not record already; and the
-    reasons the others do not apply."""
+    """A :class:`Candidate` for every applicable pair the model does not record already and no
+    effect it yields to (``yields_to``) applies at; and the reasons the others do not apply."""
     dataset = store.matching_dataset(model_name)
     applied = set(recorded_effects(store, model_name, library))
     candidates, skipped = [], []
@@ -103,7 +103,16 @@ def effect_candidates(store: GraphStore, model_name: str,
                 skipped.append(f"{signature.id} at {local_name(node)}: {reason}")
                 continue
             candidates.append(Candidate(signature, node, model))
-    return candidates, skipped
+    present = {(c.signature.id, c.node) for c in candidates} | {(r.effect, r.node) for r in applied}
+    kept = []
+    for candidate in candidates:
+        specific = next((o for o in candidate.signature.yields_to if (o, candidate.node) in present), None)
+        if specific is None:
+            kept.append(candidate)
+        else:
+            skipped.append(f"{candidate.signature.id} at {local_name(candidate.node)}: {specific} applies there, "
+                           f"which it yields to (yields_to in {candidate.signature.source_file.name})")
+    return kept, skipped
 
 
 def split_windows(train: slice, test: slice) -> tuple[list[slice], slice, slice]:

@@ -142,6 +142,9 @@ class Signature:
     can_appear: bool = True  # effects: may appear from one day to the next (a fault), else a property
     holds_values: bool = False  # measuring devices whose series may hold one value for days (schedules, commands)
     steps: bool = False  # boundary series that step between samples (schedules): held, not interpolated
+    #: effects: the ids of more specific effects this one is not proposed beside where they apply at
+    #: the same node (its own special case or twin, with a wider prior or one parameter fewer)
+    yields_to: tuple[str, ...] = ()
 
     @property
     def iri(self) -> str:
@@ -158,6 +161,7 @@ def signature_iri(signature_id: str) -> str:
 _TOP_KEYS = {
     "id", "label", "comment", "kind", "model", "fmu", "complexity", "modeled_nodes", "nodes",
     "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values", "steps",
+    "yields_to",
 }
 _NODE_KEYS = ("classes", "iri", "literal", "any")
 _TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_reverse", "stop_at"}
@@ -387,6 +391,12 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     steps = data.get("steps", False)
     if not isinstance(steps, bool) or ("steps" in data and kind != "component"):
         raise signature_error(path, "steps", "components only, true or false")
+    yields_to = _array(path, "yields_to", data.get("yields_to", []), "an array of effect ids")
+    if yields_to and kind != "effect":
+        raise signature_error(path, "yields_to", "effects only")
+    for i, other in enumerate(yields_to):
+        if not isinstance(other, str) or not other.isidentifier() or other == sig_id:
+            raise signature_error(path, f"yields_to[{i}]", f"{other!r} must be another effect's id")
     extra = _table(path, "extra", data.get("extra", {}), "a table")
     return Signature(
         id=sig_id, label=label, kind=kind, nodes=nodes,
@@ -394,6 +404,7 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         parameters=tuple(parameters), model=model, fmu=fmu_path, complexity=complexity,
         comment=comment, splice=splice, source_file=path,
         extra=dict(extra), can_appear=can_appear, holds_values=holds_values, steps=steps,
+        yields_to=tuple(yields_to),
     )
 
 

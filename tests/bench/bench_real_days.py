@@ -72,13 +72,17 @@ def last_block(data: Path, day: str) -> str:
         return [row[0] for row in csv.reader(handle) if row[0].startswith(day)][-1]
 
 
-def diagnose_day(day: str, folder: str) -> dict:
-    """One day under the protocol: the report's JSON (``to_dict``) and the table's facts."""
+MODEL = examples_dir() / "flexlab_ahu" / "model.ttl"
+
+
+def diagnose_day(day: str, folder: str, model: Path = MODEL) -> dict:
+    """One day under the protocol, the building model ``model``: the report's JSON (``to_dict``) and
+    the table's facts."""
     train = training_day(day)
     data = Path(folder) / f"szvav_{AVERAGE_MINUTES}min_{day}.csv"
     _block_means(SZVAV, data, AVERAGE_MINUTES, {train, day})
     store = GraphStore.embedded(None)
-    store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+    store.load_model("flexlab", model)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # unclaimed columns (set points, status, occupancy)
@@ -128,6 +132,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--days", nargs="+", default=sorted([*FAULTS, *UNFAULTED]), help="ISO dates (default: all 11)")
     parser.add_argument("--json-dir", type=Path, help="write each day's report.to_dict() as DAY.json here")
+    parser.add_argument("--model", type=Path, default=MODEL,
+                        help="the building model (default: the FLEXLAB example; e.g. one an effect was added to)")
     args = parser.parse_args()
     if not SZVAV.is_file():
         sys.exit(f"skipped: {SZVAV} is absent (the FLEXLAB data live in ../shared/realdata)")
@@ -138,7 +144,7 @@ def main() -> None:
         args.json_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     with tempfile.TemporaryDirectory() as folder, ProcessPoolExecutor(max_workers=2) as pool:
-        futures = {pool.submit(diagnose_day, day, folder): day for day in args.days}
+        futures = {pool.submit(diagnose_day, day, folder, args.model): day for day in args.days}
         for future in as_completed(futures):
             try:
                 row = future.result()

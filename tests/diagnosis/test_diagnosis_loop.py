@@ -190,6 +190,30 @@ def test_an_effect_the_model_records_is_not_offered_again():
     assert "FanMotorHeat at supply_fan: already in the model (gt:hasEffect)" in skipped
 
 
+@pytest.mark.parametrize("extra, general, specific, node", [
+    (b"", "SensorLag", "WaterSensorLag", "coil_outlet_water_temperature_sensor"),
+    (PLANT_ROOM.read_bytes(), "DuctHeatExchangeUnmeasured", "DuctHeatExchange", "heating_coil_air_side"),
+])
+def test_an_effect_is_not_offered_where_one_it_yields_to_applies(extra, general, specific, node):
+    """A water sensor's lag is the water lag alone (the air lag's 30 minutes are its special case); in
+    a plant room with a measured temperature the duct exchanges heat with that room, not with
+    surroundings of unknown temperature. Elsewhere the general effect is still offered."""
+    from service.diagnosis.candidates import effect_candidates
+
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY.read_bytes() + b"\n" + extra)
+    candidates, skipped = effect_candidates(store, "case", LIBRARY)
+    offered = {(signature.id, node) for signature, node, _model in candidates}
+    assert (specific, EX + node) in offered and (general, EX + node) not in offered
+    assert (f"{general} at {node}: {specific} applies there, which it yields to "
+            f"(yields_to in {LIBRARY[general].source_file.name})") in skipped
+    if extra:  # without the room the duct's surroundings are unmeasured
+        store.load_model("bare", CASE_STUDY)
+        assert (general, EX + node) in {(s.id, n) for s, n, _ in effect_candidates(store, "bare", LIBRARY)[0]}
+    else:  # an air sensor is on no water path
+        assert ("SensorLag", EX + "coil_outlet_air_temperature_sensor") in offered
+
+
 @pytest.mark.slow
 def test_an_effect_is_not_credited_with_what_the_refit_base_parameters_gain(tmp_path):
     """Fan motor heat hidden (3 days, seed 1): a valve stuck with a weight of ~0.0002 improves the

@@ -149,3 +149,25 @@ def test_or_reverse_and_stop_at_belong_to_traverses(tmp_path, rule, line, key, p
     text = (TOP + NODES + 'coil = { classes = ["s4bldg:Coil"] }\n[[triples]]\nsubject = "coil"\n'
             f'predicate = "fso:suppliesFluidTo"\nobject = "fan"\nrule = "{rule}"\n{line}\n')
     _refused(tmp_path, text, f"triples[0].{key}", problem)
+
+
+@pytest.mark.parametrize("text, key, problem", [
+    (TOP + 'yields_to = ["E"]\n' + NODES, "yields_to", "effects only"),
+    (EFFECT_TOP.replace("[nodes]", 'yields_to = "WaterSensorLag"\n[nodes]'), "yields_to",
+     "expected an array of effect ids, got a string"),
+    (EFFECT_TOP.replace("[nodes]", 'yields_to = ["E"]\n[nodes]'), "yields_to[0]", "'E' must be another effect's id"),
+    (EFFECT_TOP.replace("[nodes]", 'yields_to = ["Water Sensor Lag"]\n[nodes]'), "yields_to[0]",
+     "must be another effect's id"),
+], ids=["component", "string", "itself", "not-an-id"])
+def test_yields_to_names_other_effects(tmp_path, text, key, problem):
+    splice = '[splice]\nnode = "coil"\ninput = "value_in"\n' if 'kind = "effect"' in text else ""
+    _refused(tmp_path, text + splice, key, problem)
+
+
+def test_the_library_refuses_yielding_to_an_effect_it_does_not_have(tmp_path):
+    text = (EFFECT_TOP.replace("[nodes]", 'yields_to = ["WaterSensorLagg"]\n[nodes]')
+            + '[splice]\nnode = "coil"\ninput = "value_in"\n')
+    (tmp_path / "e.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(SignatureError, match=re.escape(f"{tmp_path / 'e.toml'}: yields_to[0]: 'WaterSensorLagg' is not "
+                                                       "an effect of the library; its effects: E")):
+        SignatureLibrary.load(tmp_path)
