@@ -8,10 +8,12 @@ from __future__ import annotations
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from pydantic import Field, SecretStr, field_validator, model_validator
+from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["Settings", "check_executor"]
+from service.errors import InputError
+
+__all__ = ["Settings", "check_executor", "load_settings"]
 
 
 def check_executor(spec: str) -> str:
@@ -92,3 +94,21 @@ class Settings(BaseSettings):
     @property
     def measurements_dir(self) -> Path:
         return self.data_dir / "measurements"
+
+
+def load_settings(options: dict[str, str] | None = None, **values) -> Settings:
+    """:class:`Settings` from the ``GRAPHTWIN_*`` variables and ``values`` (field → value);
+    ``options``: field → the command-line option that gave it, for the message.
+
+    :raises InputError: naming each variable (or option) and its problem.
+    """
+    try:
+        return Settings(**values)
+    except ValidationError as exc:
+        problems = []
+        for error in exc.errors():
+            field = str(error["loc"][0]) if error["loc"] else ""
+            variable = f"GRAPHTWIN_{field.upper()}" if field else "the settings"
+            where = f"{options[field]} ({variable})" if options and field in options else variable
+            problems.append(f"{where}: {error['msg'].removeprefix('Value error, ')}")
+        raise InputError("; ".join(problems)) from None

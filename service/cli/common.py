@@ -4,7 +4,8 @@ and the one place where graphtwin's errors become a one-line message and exit co
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, ParamSpec
 
@@ -18,8 +19,8 @@ from service.graph.store import GraphStore
 from service.matching.library_triples import ensure_signature_library
 
 __all__ = [
-    "app", "signature_app", "example_app", "console", "error_console", "fail", "error_text", "reports_errors",
-    "open_store", "model_name_for", "load_model_file", "USER_ERROR_EXIT_CODE",
+    "app", "signature_app", "example_app", "data_app", "console", "error_console", "fail", "error_text", "reports_errors",
+    "open_store", "model_name_for", "loaded_model_file", "USER_ERROR_EXIT_CODE",
 ]
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help=(
@@ -29,8 +30,10 @@ app = typer.Typer(no_args_is_help=True, add_completion=False, help=(
     "N-Triples, RDF/XML, JSON-LD), loaded under --name (default: the file name)."))
 signature_app = typer.Typer(no_args_is_help=True, help="Inspect the signature library.")
 example_app = typer.Typer(no_args_is_help=True, help="Example models and synthetic data.")
+data_app = typer.Typer(no_args_is_help=True, help="Prepare measurement files.")
 app.add_typer(signature_app, name="signature")
 app.add_typer(example_app, name="example")
+app.add_typer(data_app, name="data")
 
 console = Console()
 error_console = Console(stderr=True)
@@ -111,8 +114,11 @@ def model_name_for(path: Path, name: str | None) -> str:
     return path.parent.name if path.stem == "model" and path.parent.name else path.stem
 
 
-def load_model_file(store: GraphStore, model: Path, name: str | None) -> str:
-    """Load the model file ``model`` under ``--name`` (or the name :func:`model_name_for` gives); its name.
+@contextmanager
+def loaded_model_file(store: GraphStore, model: Path, name: str | None) -> Iterator[str]:
+    """The model file ``model`` loaded under ``--name`` (or the name :func:`model_name_for` gives),
+    for a command's work: its name. Where that work fails (measurements that do not fit the model,
+    a model nothing in the library matches), the store's model of that name is put back as it was.
 
     :raises InputError: the file's name is no model name and ``--name`` was not given.
     """
@@ -122,5 +128,9 @@ def load_model_file(store: GraphStore, model: Path, name: str | None) -> str:
             GraphStore.check_name(model_name)
         except InputError as exc:
             raise InputError(f"{exc}; the name comes from {model}: give one with --name") from None
-    store.load_model(model_name, model)
-    return model_name
+    load = store.load_model(model_name, model, keep_previous=True)
+    try:
+        yield model_name
+    except BaseException:
+        store.undo_load(model_name, load)
+        raise

@@ -1,4 +1,5 @@
-"""Commands that fit a model to measurements: calibrate, compare, diagnose, compare-strategies."""
+"""Commands that fit a model to measurements (calibrate, compare, diagnose, compare-strategies)
+and prepare them (data block-means)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ from service.cli.common import (
     TrainWindowOption,
     app,
     console,
-    load_model_file,
+    data_app,
+    loaded_model_file,
     open_store,
     reports_errors,
 )
@@ -58,11 +60,11 @@ def calibrate_command(
     from service.workflows.runs import calibrate_model  # SciPy and scikit-learn load with the command, not with --help
 
     graph_store = open_store(store, memory)
-    model_name = load_model_file(graph_store, model, name)
-    request = checked_request(CalibrateRequest, model=model_name, measurements=str(data), train=train, test=test,
-                              method=method, seed=seed, only_when=only_when or [],
-                              gp_inputs=gp_input or list(DEFAULT_GP_INPUTS), start_from=start_from)
-    outcome = calibrate_model(graph_store, request, data, progress=not as_json)
+    with loaded_model_file(graph_store, model, name) as model_name:
+        request = checked_request(CalibrateRequest, model=model_name, measurements=str(data), train=train, test=test,
+                                  method=method, seed=seed, only_when=only_when or [],
+                                  gp_inputs=gp_input or list(DEFAULT_GP_INPUTS), start_from=start_from)
+        outcome = calibrate_model(graph_store, request, data, progress=not as_json)
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
         plot_run(outcome, plots / f"{outcome.record.run_id}.png")
@@ -96,11 +98,11 @@ def _diagnosis_command(rank_effects: bool, doc: str):
         from service.workflows.runs import diagnose_model
 
         graph_store = open_store(store, memory)
-        model_name = load_model_file(graph_store, model, name)
-        request = checked_request(DiagnoseRequest, model=model_name, measurements=str(data), train=train, test=test,
-                                  seed=seed, only_when=only_when or [], start_from=start_from)
-        report = diagnose_model(graph_store, request, data, rank_effects=rank_effects,
-                                on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
+        with loaded_model_file(graph_store, model, name) as model_name:
+            request = checked_request(DiagnoseRequest, model=model_name, measurements=str(data), train=train,
+                                      test=test, seed=seed, only_when=only_when or [], start_from=start_from)
+            report = diagnose_model(graph_store, request, data, rank_effects=rank_effects,
+                                    on_progress=None if as_json else (lambda m: console.print(f"[dim]{m}…[/dim]")))
         if as_json:
             console.print_json(json.dumps(report.to_dict(), default=str))
             return
@@ -138,10 +140,27 @@ def compare_strategies_command(
     from service.calibration.successive import compare_calibration_strategies
 
     graph_store = open_store(store, memory)
-    model_name = load_model_file(graph_store, model, name)
-    comparison = compare_calibration_strategies(graph_store, model_name, data, train=parse_window(train),
-                                                test=parse_window(test) if test else None, n_folds=folds, seed=seed)
+    with loaded_model_file(graph_store, model, name) as model_name:
+        comparison = compare_calibration_strategies(graph_store, model_name, data, train=parse_window(train),
+                                                    test=parse_window(test) if test else None, n_folds=folds,
+                                                    seed=seed)
     if as_json:
         console.print_json(json.dumps(comparison.to_dict(), default=str))
         return
     console.print(comparison.table(), markup=False, highlight=False, soft_wrap=True)  # a text table: no breaks inside numbers
+
+
+@data_app.command("block-means")
+@reports_errors
+def block_means_command(
+    source: Annotated[Path, typer.Argument(help="Measurement CSV: a time column, then series (a BMS log).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="CSV to write (the same columns).")],
+    minutes: Annotated[int, typer.Option(help="Block length: a whole multiple of the log's step.")] = 15,
+    day: Annotated[list[str] | None, typer.Option(help="An ISO date to keep (repeat for several; default: all).")] = None,
+) -> None:
+    """Means over clock-aligned blocks of MINUTES, each stamped with its start, where the log covers
+    the block whole (a 1-minute log as 15-minute means: how the FLEXLAB days are diagnosed)."""
+    from service.data.block_means import write_block_means
+
+    blocks = write_block_means(source, output, minutes, set(day) if day else None)
+    console.print(f"wrote {output}: {blocks} blocks of {minutes} min")

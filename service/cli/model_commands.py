@@ -23,7 +23,7 @@ from service.cli.common import (
     app,
     console,
     example_app,
-    load_model_file,
+    loaded_model_file,
     open_store,
     reports_errors,
     signature_app,
@@ -56,14 +56,14 @@ def assemble_command(
     from service.workflows.runs import assemble_model  # with the calibration floor: loaded by the command, not --help
 
     graph_store = open_store(store, memory)
-    model_name = load_model_file(graph_store, model, name)
-    try:
-        assembled = assemble_model(graph_store, model_name, max_complexity=max_complexity)
-    except GraphtwinError as exc:
-        if not brick_report(graph_store, model_name).is_brick:
-            raise
-        raise InputError(f"{exc}\n{model} is a Brick model: graphtwin brick-report {model} lists what the "
-                         "alignment could not use") from None
+    with loaded_model_file(graph_store, model, name) as model_name:
+        try:
+            assembled = assemble_model(graph_store, model_name, max_complexity=max_complexity)
+        except GraphtwinError as exc:
+            if not brick_report(graph_store, model_name).is_brick:
+                raise
+            raise InputError(f"{exc}\n{model} is a Brick model: graphtwin brick-report {model} lists what the "
+                             "alignment could not use") from None
     if as_json:
         console.print_json(json.dumps(assembly_to_dict(assembled)))
     else:
@@ -88,7 +88,8 @@ def brick_report_command(
 
     graph_store = open_store(store, memory)
     official = official_brick_classes(brick_ontology) if brick_ontology is not None else None
-    report = brick_report(graph_store, load_model_file(graph_store, model, name), official)
+    with loaded_model_file(graph_store, model, name) as model_name:
+        report = brick_report(graph_store, model_name, official)
     if as_json:
         console.print_json(json.dumps(report.to_dict()))
     else:
@@ -150,18 +151,18 @@ def simulate_command(
     from service.model.simulator import loop_substeps, target_series
 
     graph_store = open_store(store, memory)
-    model_name = load_model_file(graph_store, model, name)
-    assembled = assemble(graph_store, model_name)
-    measured = read_model_data(assembled, data)
-    try:
-        values = json.loads(params.read_text()) if params is not None else {}
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{params}: not JSON ({exc})") from None
-    refs = assembled.estimated_parameters
-    known = {r.key for r in refs} | {r.name for r in refs}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise InputError(f"{params}: no estimated parameter named {', '.join(unknown)}")
+    with loaded_model_file(graph_store, model, name) as model_name:
+        assembled = assemble(graph_store, model_name)
+        measured = read_model_data(assembled, data)
+        try:
+            values = json.loads(params.read_text()) if params is not None else {}
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{params}: not JSON ({exc})") from None
+        refs = assembled.estimated_parameters
+        known = {r.key for r in refs} | {r.name for r in refs}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise InputError(f"{params}: no estimated parameter named {', '.join(unknown)}")
     theta = [float(values.get(r.key, values.get(r.name, r.spec.default))) for r in refs]
     md = ModelData(assembled, measured, loop_substeps(assembled, measured.step_s))
     result = md.simulate_all(slice(0, measured.n_steps), np.array(theta))
@@ -215,10 +216,10 @@ def example_generate(
         raise NotFoundError(f"no example or model file {name!r}; see `graphtwin example list`")
     store = GraphStore.embedded(None)
     truth = _medians(truth_from) if truth_from is not None else None
-    model_name = load_model_file(store, path, None if is_file else name)
-    generated = generate_synthetic_data(
-        store, model_name, output, library=SignatureLibrary.load(), hidden_effect=hidden_effect,
-        node=node, seed=seed, n_days=days, operation=operation, truth=truth)
+    with loaded_model_file(store, path, None if is_file else name) as model_name:
+        generated = generate_synthetic_data(
+            store, model_name, output, library=SignatureLibrary.load(), hidden_effect=hidden_effect,
+            node=node, seed=seed, n_days=days, operation=operation, truth=truth)
     if truth_json is not None:
         truth_json.write_text(json.dumps({
             "hidden_effect": generated.effect, "node": generated.node,

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Annotated
 
+import pyoxigraph as ox
 import typer
 from rich.table import Table
 
@@ -63,9 +64,25 @@ def query_command(
         table = Table(title=f"{name} ({len(rows)} rows)")
         for column in columns:
             table.add_column(column, overflow="fold")
-        for row in values:
-            table.add_row(*[local_name(v) if v.startswith("http") else v for v in (row.get(c, "") for c in columns)])
+        for row in rows:
+            table.add_row(*[_table_cell(row[c]) if c in row else "" for c in columns])
         console.print(table)
+
+
+#: Literal datatypes a table shows to six significant digits (CSV and JSON keep every digit).
+_DECIMALS = {f"http://www.w3.org/2001/XMLSchema#{t}" for t in ("double", "float", "decimal")}
+
+
+def _table_cell(term) -> str:
+    """A query result's term as a table shows it: an IRI by its local name, a floating-point
+    number to six significant digits, anything else as written."""
+    value = term.value
+    if isinstance(term, ox.Literal) and term.datatype.value in _DECIMALS:
+        try:
+            return f"{float(value):.6g}"
+        except ValueError:
+            return value
+    return local_name(value) if value.startswith("http") else value
 
 
 def _binding(text: str) -> tuple[str, str]:
@@ -171,17 +188,18 @@ def serve_command(
     """Run the HTTP service (OpenAPI at /docs). Writes need the bearer token in GRAPHTWIN_TOKEN; the
     other settings come from GRAPHTWIN_* variables (service/settings.py)."""
     import uvicorn
-    from pydantic import ValidationError
 
     from service.http.app import create_app
-    from service.settings import Settings
+    from service.settings import load_settings
 
     if store is not None and sparql_endpoint is not None:
         raise fail("give --store or --sparql-endpoint, not both")
     overrides = {"store_dir": store, "sparql_endpoint": sparql_endpoint, "data_dir": data_dir, "executor": executor}
+    options = {"store_dir": "--store", "sparql_endpoint": "--sparql-endpoint", "data_dir": "--data-dir",
+               "executor": "--executor"}
     try:
-        settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
-    except ValidationError as exc:
+        settings = load_settings(options, **{k: v for k, v in overrides.items() if v is not None})
+    except InputError as exc:
         raise fail(exc) from None
     if settings.store_dir is None and settings.sparql_endpoint is None:
         settings = settings.model_copy(update={"store_dir": Path("graphtwin-data")})

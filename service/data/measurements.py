@@ -13,6 +13,7 @@ resampled to the nearer row), longer ones stay NaN. The full contract: ``docs/da
 from __future__ import annotations
 
 import csv
+import difflib
 import io
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -249,6 +250,13 @@ def _check_grid_size(source: str, stamps: np.ndarray, step_s: float) -> None:
         "or cut the file at the jump"])
 
 
+def _near_header(names: set[str], headers: list[str]) -> str | None:
+    """The header of ``headers`` most like one of ``names`` (difflib's ratio ≥ 0.8), or None."""
+    ratio, header = max(((difflib.SequenceMatcher(None, n, h).ratio(), h) for n in names for h in headers),
+                        default=(0.0, None))
+    return header if ratio >= 0.8 else None
+
+
 def read_measurements(
     path: Path | str,
     specs: Mapping[str, SeriesSpec],
@@ -270,8 +278,10 @@ def read_measurements(
     warnings: list[str] = []
     try:
         raw = path.read_bytes()
+    except FileNotFoundError:
+        raise MeasurementError(source, ["no such file"]) from None
     except OSError as exc:
-        raise MeasurementError(source, [str(exc)]) from None
+        raise MeasurementError(source, [f"cannot be read: {exc.strerror or exc}"]) from None
     text = _decoded(raw, source, warnings)
     first_line = text.split("\n", 1)[0]
     delimiter = ";" if ";" in first_line and "," not in first_line else ","
@@ -290,6 +300,7 @@ def read_measurements(
         raise MeasurementError(source, ["line 1: expected a time column and at least one series column"])
 
     claimed: dict[str, int] = {}
+    missing: list[tuple[str, set[str]]] = []
     for node, spec in specs.items():
         names = spec.names()
         found = [i for i, h in enumerate(header[1:], start=1) if h in names]
@@ -299,10 +310,14 @@ def read_measurements(
         if found:
             claimed[node] = found[0]
         elif spec.required:
-            problems.append(
-                f"no column for {node} (expected a header named {' or '.join(sorted(repr(n) for n in names))})"
-            )
+            missing.append((node, names))
     unknown = sorted(set(range(1, len(header))) - set(claimed.values()))
+    for node, names in missing:
+        near = _near_header(names, [header[i] for i in unknown])
+        hint = f"; column {header.index(near) + 1}, {near!r}, is near: a misspelling?" if near else ""
+        problems.append(
+            f"no column for {node} (expected a header named {' or '.join(sorted(repr(n) for n in names))}{hint})"
+        )
     if unknown:
         warnings.append(f"columns no device of the model claims: {', '.join(header[i] for i in unknown)} "
                         "(an operating filter may read them)")

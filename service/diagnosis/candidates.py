@@ -270,10 +270,11 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
 
 def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: dict[str, np.ndarray],
              after: dict[str, np.ndarray], what: str, fit_text: str, lead: str, scales: Mapping[str, float]) -> None:
-    """Set the evidence's residual correlation and sentence: ``lead`` (what a drift does), the sensor
+    """Set the evidence's residual agreement and sentence: ``lead`` (what a drift does), the sensor
     where the effect itself (its prediction ``after`` against the same parameters with the effect at
-    its null) removes the most scaled error, how its residual correlates with what ``what`` adds, and
-    ``fit_text``."""
+    its null) removes the most scaled error, how its residual r follows what ``what`` adds, c — the
+    cosine Σr·c / √(Σr²·Σc²), its mean included (a correlation would miss an effect that shifts a
+    reading by a constant, as a heat gain at a constant flow does) — and ``fit_text``."""
     def mean_square(prediction: dict[str, np.ndarray], node: str) -> float:
         error = observed[node] - prediction[node]
         return float(np.mean(error[np.isfinite(error)] ** 2)) if np.isfinite(error).any() else 0.0
@@ -282,12 +283,14 @@ def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: di
     change = after[best] - null[best]
     residual = observed[best] - null[best]
     mask = np.isfinite(residual) & np.isfinite(change)
-    rho = float(np.corrcoef(residual[mask], change[mask])[0, 1]) if mask.any() and np.std(change[mask]) > 0 else 0.0
-    evidence.residual_correlation = (best, rho)
+    r, c = residual[mask], change[mask]
+    norm = float(np.sqrt(np.sum(r**2) * np.sum(c**2)))
+    cosine = float(np.sum(r * c)) / norm if norm > 0 else 0.0
+    evidence.residual_agreement = (best, cosine)
     removed = 1.0 - mean_square(after, best) / max(mean_square(null, best), 1e-300)
     evidence.explanation = (
         (f"{lead}; " if lead else "")
-        + f"residual on {local_name(best)} correlates {rho:.2f} with what {what} adds; "
+        + f"residual on {local_name(best)} follows what {what} adds (cosine {cosine:.2f}); "
         f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "
         f"sensors); {fit_text}"
     )

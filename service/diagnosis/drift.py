@@ -25,8 +25,8 @@ from service.diagnosis.ranking import EffectEvidence
 from service.graph.namespaces import GTR, local_name
 from service.model.assembled_model import DAY_S, AssembledModel, ParameterDrift, ParameterRef
 
-__all__ = ["DriftCandidate", "DriftEvidence", "drift_candidates", "drifting_components", "step_onset",
-           "drift_identity", "drift_fields", "drift_sentence", "MAX_PARAMETERS_PER_COMPONENT"]
+__all__ = ["DriftCandidate", "DriftEvidence", "drift_candidates", "drifting_components", "drifting_parameter",
+           "step_onset", "drift_identity", "drift_fields", "drift_sentence", "MAX_PARAMETERS_PER_COMPONENT"]
 
 #: Parameters per suspect component and failing sensor that get drift candidates (both shapes each).
 MAX_PARAMETERS_PER_COMPONENT = 2
@@ -74,6 +74,13 @@ def drift_identity(drift: ParameterDrift) -> tuple[str, str, str]:
     effect = f"{drift.shape.capitalize()}Drift/{name}"
     words = "Linear drift" if drift.shape == "linear" else "Step change"
     return effect, GTR.iri(f"drift/{effect}"), f"{words} of {name}"
+
+
+def drifting_parameter(effect_id: str) -> str | None:
+    """The parameter's name in a drift candidate's id (:func:`drift_identity`:
+    ``LinearDrift/air_side_conductance`` → ``air_side_conductance``); None for any other id."""
+    shape, slash, name = effect_id.partition("/")
+    return name if slash and name and shape in ("LinearDrift", "StepDrift") else None
 
 
 def drift_fields(model: AssembledModel, timestamps: np.ndarray, step_s: float) -> dict:

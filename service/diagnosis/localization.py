@@ -33,6 +33,8 @@ class FailureLocation:
     #: The device a controller moves, when some suspects are upstream of its controlled sensor: a
     #: disturbance there is answered by the controller and shows on the device's side.
     through_controller_of: str | None = None
+    #: ``matching_sensor`` is a boundary input: the model is fed its measurement, not judged on it
+    matching_is_input: bool = False
 
     def describe(self) -> str:
         where = " or ".join(local_name(c) for c in self.components) or "no modelled component"
@@ -46,6 +48,12 @@ class FailureLocation:
                 f"The error grows from {local_name(self.matching_sensor)}, which fails too, to "
                 f"{local_name(self.failing_sensor)}: a missing effect sits in {where} between them{loop}."
             )
+        if self.matching_is_input:
+            return (
+                f"The model fails at {local_name(self.failing_sensor)}, downstream of "
+                f"{local_name(self.matching_sensor)}, whose measurement it takes as an input: the missing "
+                f"effect sits in {where} between them{loop}."
+            )
         return (
             f"The model matches {local_name(self.matching_sensor)} but not {local_name(self.failing_sensor)}: "
             f"the missing effect sits in {where} between them{loop}."
@@ -53,7 +61,8 @@ class FailureLocation:
 
     def to_dict(self) -> dict:
         return {"between": [self.matching_sensor, self.failing_sensor], "components": list(self.components),
-                "upstream_fails": self.upstream_fails, "through_controller_of": self.through_controller_of}
+                "upstream_fails": self.upstream_fails, "through_controller_of": self.through_controller_of,
+                "upstream_is_input": self.matching_is_input}
 
 
 class FlowTopology:
@@ -158,7 +167,7 @@ class FlowTopology:
 
 def localize_failures(
     topology: FlowTopology, matches: Mapping[str, bool], sensors: Iterable[str],
-    carries: Callable[[str, str], bool] | None = None,
+    carries: Callable[[str, str], bool] | None = None, inputs: Iterable[str] = (),
 ) -> list[FailureLocation]:
     """Locate every first failure.
 
@@ -166,13 +175,14 @@ def localize_failures(
         they are the measurements themselves); only sensors in this mapping are judged.
     :param sensors: every measuring device of the model (targets and boundary inputs); the upstream
         walks stop at all of them.
+    :param inputs: the boundary inputs among ``sensors`` (a location bounded by one says so).
     :param carries: ``carries(u, f)``: whether the failure at sensor ``f`` is what the failing sensor
         ``u`` upstream of it carries down (None: always).
     :returns: one :class:`FailureLocation` per failing sensor that does not merely inherit a failure
         from a failing sensor upstream (per nearest upstream sensor bounding its suspects), sorted by
         sensor IRI.
     """
-    sensor_set = set(sensors)
+    sensor_set, input_set = set(sensors), set(inputs)
     locations = []
     for sensor in sorted(s for s, ok in matches.items() if not ok):
         place = topology.place(sensor)
@@ -191,5 +201,6 @@ def localize_failures(
             between = topology.nodes_between(reference, place, sensor_set)
             locations.append(FailureLocation(sensor, reference, tuple(sorted(between)),
                                              upstream_fails=reference in grows_from,
-                                             through_controller_of=topology.loop_actuated(reference, between, place)))
+                                             through_controller_of=topology.loop_actuated(reference, between, place),
+                                             matching_is_input=reference in input_set))
     return locations

@@ -120,8 +120,9 @@ def diagnose(
     def locate(located: Mapping[str, bool]) -> list[FailureLocation]:
         """The failures on the flow path of the target sensors ``located`` marks (node → True)."""
         matches = {md.node_of[c]: True for c in model.boundary_inputs} | {n: not bad for n, bad in located.items()}
-        return localize_failures(topology, matches, [md.node_of[c] for c in model.boundary_inputs + model.targets],
-                                 carries=carries)
+        inputs = [md.node_of[c] for c in model.boundary_inputs]
+        return localize_failures(topology, matches, inputs + [md.node_of[c] for c in model.targets],
+                                 carries=carries, inputs=inputs)
 
     failing = [n for n, s in sensors.items() if s.fails]
     # a drift of the parameters of the components suspected for the most-failing sensor competes too

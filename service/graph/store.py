@@ -41,11 +41,13 @@ _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-+]{0,127}")  # 128 at most: a name
 class ModelLoad(NamedTuple):
     """What :meth:`GraphStore.load_model` did: the triples the source holds, whether the store
     changed (False: it held that model already, triple for triple, and kept it as it was), and
-    whether a model of that name was there before."""
+    whether a model of that name was there before; ``previous``: the graphs a changing load replaced
+    (graph → N-Triples), kept when asked for (:meth:`GraphStore.undo_load`)."""
 
     triples: int
     changed: bool
     replaced: bool
+    previous: dict[ox.NamedNode, bytes] | None = None
 
 
 
@@ -172,7 +174,7 @@ class GraphStore:
         return True
 
     def load_model(self, name: str, source: Path | bytes | str, format: str | None = None, *,
-                   source_name: str | None = None) -> ModelLoad:
+                   source_name: str | None = None, keep_previous: bool = False) -> ModelLoad:
         """Load (or replace) building model ``name`` with what alignment infers from it, in one
         transaction that also removes the model's assembly graph (it described the model replaced);
         blank nodes are skolemised (``docs/graph-store.md``). A model the store holds already, triple
@@ -182,6 +184,8 @@ class GraphStore:
         :param source: a file path, or the RDF as bytes.
         :param format: ``ttl``, ``nt``, ``rdf``, ``jsonld`` or a media type; from the suffix when None
             (Turtle for bytes).
+        :param keep_previous: keep the graphs a changing load replaces (``ModelLoad.previous``), so
+            that :meth:`undo_load` can put them back.
         :returns: the number of triples the source holds, whether the store changed, and whether
             a model of that name was there.
         :raises ModelLoadError: the source does not parse or is empty; the store is unchanged.
@@ -208,12 +212,23 @@ class GraphStore:
             if self._holds_model(name, triples):
                 return ModelLoad(len(triples), changed=False, replaced=True)
             replaced = self.has_model(name)
-            self.write_graphs({
-                self.model_graph(name): triples,
-                self.inferred_graph(name): inferred_ntriples(triples, self._ontology_triples),
-                self.assembly_graph(name): [],
-            })
-        return ModelLoad(len(triples), changed=True, replaced=replaced)
+            graphs = (self.model_graph(name), self.inferred_graph(name), self.assembly_graph(name))
+            previous = ({graph: self.backend.dump(graph, ox.RdfFormat.N_TRIPLES) for graph in graphs}
+                        if keep_previous and replaced else None)
+            self.write_graphs(dict(zip(graphs, (triples, inferred_ntriples(triples, self._ontology_triples), []))))
+        return ModelLoad(len(triples), changed=True, replaced=replaced, previous=previous)
+
+    def undo_load(self, name: str, load: ModelLoad) -> None:
+        """Put model ``name`` back as it was before ``load`` (a :meth:`load_model` with
+        ``keep_previous``): its graphs as they were, or no model where there was none; nothing where
+        the load changed nothing."""
+        if not load.changed:
+            return
+        if load.previous is None:
+            self.drop_model(name)
+            return
+        with self._model_lock:
+            self.write_graphs(load.previous)
 
     def _holds_model(self, name: str, triples: list[ox.Triple]) -> bool:
         """Whether model ``name``'s graph holds exactly ``triples`` (compared as N-Triples lines, which

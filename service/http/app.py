@@ -25,7 +25,7 @@ from service.jobs.records import JobRecords
 from service.jobs.runner import JobRunner
 from service.report.brick import official_brick_classes
 from service.runtime import lock_folder
-from service.settings import Settings
+from service.settings import Settings, load_settings
 
 __all__ = ["create_app"]
 
@@ -45,7 +45,7 @@ def create_app(settings: Settings | None = None, *, store: GraphStore | None = N
     :param store: use this store instead of the one ``settings`` describe (tests: an in-memory one).
     Job records a stopped process left queued or running are marked ``interrupted`` here.
     """
-    settings = settings or Settings()
+    settings = settings or load_settings()
     data_lock = lock_folder(settings.data_dir, "graphtwin serve")  # before anything of a live service is touched
     try:
         brick_classes = official_brick_classes(settings.brick_ontology) if settings.brick_ontology is not None else None

@@ -50,8 +50,19 @@ def checked_effect_triples(store: GraphStore, model: str, effect: str, target: s
     """The triples recording ``effect`` at ``target`` in ``model``, once checked that the catalog has
     the effect and that it applies there (the model assembles with it).
 
-    :raises UnknownEffectError: no such effect; :raises AssemblyError: it does not apply at ``target``.
+    :raises UnknownEffectError: no such effect; :raises InputError: ``effect`` names a drift the
+        diagnosis found (a parameter changing, not an effect to add); :raises AssemblyError: it does not
+        apply at ``target``.
     """
+    from service.diagnosis.drift import drifting_parameter  # SciPy: not at the command line's start
+
+    parameter = drifting_parameter(effect)
+    if parameter is not None:
+        raise InputError(
+            f"{effect} is the diagnosis's finding that the parameter {parameter} changed during the test "
+            "window, not an effect the model lacks: nothing to add. Look at the component for what changed "
+            "(fouling, a new setting, a repair), and calibrate again on data from after the change "
+            "(graphtwin calibrate --train FROM/TO)")
     signature = library.effect(effect)
     assemble(store, model, library=library, extra_effects=[EffectRequest(effect, target)])
     return applied_effect_triples(signature, target)

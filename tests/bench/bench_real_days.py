@@ -1,9 +1,8 @@
 """graphtwin's diagnosis on every day of the LBNL FLEXLAB X3A data (SZVAV, September 2017): the seven
 days with one imposed fault each and the four unfaulted days, all with one fixed protocol.
 
-Protocol (no per-day tuning): 15-minute block means of the 1-minute log (``_block_means`` of
-``tests/diagnosis/test_flexlab_real_data.py``); the base model ``flexlab_ahu`` calibrated on the
-unfaulted day nearest in date that is not the test day (ties: the earlier day); the test window is the
+Protocol (no per-day tuning): 15-minute block means of the 1-minute log (``graphtwin data
+block-means``); the base model ``flexlab_ahu`` calibrated on the unfaulted day nearest in date that is not the test day (ties: the earlier day); the test window is the
 whole test day; ``diagnose`` at its defaults, ``seed=0``, ``workers=1``; the days run in a process pool
 of 2. "Right component" is fixed per fault before the run (:data:`RIGHT_COMPONENTS`): heating-coil
 valve faults → ``heating_coil_valve`` or ``heating_coil``, cooling-coil valve faults → ``cooling_coil``
@@ -30,9 +29,9 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: tests/ holds shared_data
 
-from diagnosis.test_flexlab_real_data import _block_means  # noqa: E402
 from shared_data import SZVAV  # noqa: E402
 
+from service.data.block_means import write_block_means  # noqa: E402
 from service.diagnosis.loop import diagnose  # noqa: E402
 from service.errors import GraphtwinError  # noqa: E402
 from service.graph.namespaces import local_name  # noqa: E402
@@ -80,7 +79,7 @@ def diagnose_day(day: str, folder: str, model: Path = MODEL) -> dict:
     the table's facts."""
     train = training_day(day)
     data = Path(folder) / f"szvav_{AVERAGE_MINUTES}min_{day}.csv"
-    _block_means(SZVAV, data, AVERAGE_MINUTES, {train, day})
+    write_block_means(SZVAV, data, AVERAGE_MINUTES, {train, day})
     store = GraphStore.embedded(None)
     store.load_model("flexlab", model)
     start = time.perf_counter()

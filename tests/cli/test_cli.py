@@ -49,6 +49,31 @@ def test_a_broken_model_fails_with_line_and_column(tmp_path):
     assert "line 3" in result.output and "zz:" in result.output
 
 
+@pytest.mark.parametrize("command", ["calibrate", "assemble"])
+def test_a_command_that_fails_leaves_the_stored_model_as_it_was(tmp_path, command):
+    """The same model name, a changed file, and a command that fails after loading it (measurements
+    without the model's columns; a model the library matches nowhere): the store keeps the model and
+    its assembly as the last successful command left them."""
+    store = tmp_path / "store"
+    assert _run(["assemble", str(CASE_STUDY), "--name", "m", "--store", str(store)])[0] == 0
+    queries = ("assembled-components", "flow-edges")
+    before = {q: _run(["query", q, "--model", "m", "--store", str(store)])[1] for q in queries}
+    if command == "calibrate":
+        changed = tmp_path / "changed.ttl"
+        changed.write_text(CASE_STUDY.read_text().replace("supply_fan", "supply_fan_x"))
+        data = tmp_path / "data.csv"
+        data.write_text("timestamp,a\n2026-01-01T00:00,1\n2026-01-01T00:10,2\n")
+        args = ["calibrate", str(changed), str(data)]
+    else:
+        changed = tmp_path / "nothing.ttl"
+        changed.write_text("<https://example.org/a> <https://example.org/b> <https://example.org/c> .\n")
+        args = ["assemble", str(changed)]
+    code, output = _run([*args, "--name", "m", "--store", str(store)])
+    assert code == 2, output
+    after = {q: _run(["query", q, "--model", "m", "--store", str(store)])[1] for q in queries}
+    assert after == before and "supply_fan_x" not in after["flow-edges"] and before["assembled-components"].count("\n") > 10
+
+
 def test_signature_explain_prints_the_compiled_query():
     result = runner.invoke(app, ["signature", "explain", "Fan"])
     assert result.exit_code == 0 and "suppliesFluidTo+" in result.output
@@ -87,6 +112,14 @@ def test_add_effect_writes_the_format_its_output_names_and_refuses_the_same_effe
     unknown = runner.invoke(app, ["add-effect", str(output), "--effect", "FanMotorHeat",
                                   "--target", EX + "supply_fan", "-o", str(tmp_path / "v3.txt")])
     assert unknown.exit_code == 2 and "v3.txt" in unknown.output and "unsupported RDF format" in unknown.output
+
+
+def test_add_effect_says_a_drift_is_a_parameter_that_changed_not_an_effect_to_add(tmp_path):
+    result = runner.invoke(app, ["add-effect", str(CASE_STUDY), "--effect", "LinearDrift/water_side_conductance",
+                                 "--target", EX + "heating_coil_air_side", "-o", str(tmp_path / "x.ttl")])
+    assert result.exit_code == 2 and not (tmp_path / "x.ttl").exists()
+    assert "parameter water_side_conductance changed during the test window" in " ".join(result.output.split())
+    assert "calibrate again on data from after the change" in " ".join(result.output.split())
 
 
 def test_add_effect_refuses_an_effect_that_does_not_apply(tmp_path):
@@ -242,6 +275,18 @@ def _run(args: list[str]) -> tuple[int, str]:
     del result
     gc.collect()
     return outcome
+
+
+def test_a_query_table_shows_floating_point_numbers_to_six_digits_and_iris_by_name():
+    from service.cli.store_commands import _table_cell
+
+    xsd = "http://www.w3.org/2001/XMLSchema#"
+    assert _table_cell(ox.Literal("1862.4781253881902", datatype=ox.NamedNode(xsd + "double"))) == "1862.48"
+    assert _table_cell(ox.Literal("3.328998501128e-11", datatype=ox.NamedNode(xsd + "double"))) == "3.329e-11"
+    assert _table_cell(ox.Literal("0.12345678", datatype=ox.NamedNode(xsd + "decimal"))) == "0.123457"
+    assert _table_cell(ox.Literal("123456789", datatype=ox.NamedNode(xsd + "integer"))) == "123456789"
+    assert _table_cell(ox.Literal("2026-01-15T00:00:00")) == "2026-01-15T00:00:00"
+    assert _table_cell(ox.NamedNode(EX + "supply_fan")) == "supply_fan"
 
 
 def test_query_prints_csv_or_json_with_full_iris_and_refuses_an_unknown_model(tmp_path):

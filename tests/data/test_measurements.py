@@ -60,6 +60,20 @@ def test_every_problem_is_reported_with_line_and_column(tmp_path):
         read_measurements(_write(tmp_path, "time,SAT\n2025-01-01 00:00,20\n2025-01-01 00:10,21\n"), SPECS)
 
 
+def test_a_misspelt_column_is_pointed_at_and_a_missing_file_said_so(tmp_path):
+    with pytest.raises(MeasurementError) as info:
+        read_measurements(_write(tmp_path, "time,SAT ,vlave,other\n2025-01-01 00:00,20,1,2\n2025-01-01 00:10,21,1,2\n"),
+                          SPECS)
+    assert "no column for https://example.org/x#valve" in str(info.value)
+    assert "column 3, 'vlave', is near: a misspelling?" in str(info.value)
+    with pytest.raises(MeasurementError) as info:  # nothing near: no guess
+        read_measurements(_write(tmp_path, "time,SAT ,flow\n2025-01-01 00:00,20,1\n2025-01-01 00:10,21,1\n"), SPECS)
+    assert "misspelling" not in str(info.value)
+    with pytest.raises(MeasurementError) as info:
+        read_measurements(tmp_path / "nope.csv", SPECS)
+    assert str(info.value) == f"{tmp_path / 'nope.csv'}:\n  - no such file"
+
+
 def test_long_gaps_stay_gaps_and_irregular_steps_are_resampled(tmp_path):
     rows = ["time,SAT,valve"] + [f"2025-01-01 00:{m:02d},{50 + m},{m}" for m in range(0, 30)]
     rows[5:15] = [r.split(",")[0] + ",," + r.split(",")[2] for r in rows[5:15]]

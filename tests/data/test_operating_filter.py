@@ -1,5 +1,7 @@
 """Operating filters: conditions in the file's units, all must hold, unmeasured steps excluded."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -32,6 +34,9 @@ def test_bad_conditions_are_named(tmp_path):
     data = read_measurements(path, SPECS)
     with pytest.raises(ValueError, match=r"'fan = 5': expected COLUMN OP NUMBER"):
         operating_mask(data, ["fan = 5"])
+    for doubled in ("fan >> 5", "fan => 5", "fan <> 5"):  # a bad operator, not a column 'fan >'
+        with pytest.raises(ValueError, match=re.escape(f"{doubled!r}: expected COLUMN OP NUMBER")):
+            operating_mask(data, [doubled])
     with pytest.raises(ValueError, match=r"on 'pump'.*known: SAT \(°F\), fan"):
         operating_mask(data, ["pump > 0"])
     with pytest.raises(ValueError, match="no step .* satisfies fan > 50"):

@@ -14,13 +14,13 @@ each calibrates the base model and fits every applicable catalog entry twice).
 
 import csv
 import warnings
-from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 import pytest
 from shared_data import SZVAV
 
+from service.data.block_means import write_block_means
 from service.diagnosis.loop import diagnose
 from service.graph.store import GraphStore
 from service.resources import examples_dir
@@ -38,34 +38,10 @@ pytestmark = [
 ]
 
 
-def _block_means(source: Path, target: Path, minutes: int, days: set[str]) -> None:
-    """``minutes``-long block means of the 1-minute FLEXLAB log for ``days`` (ISO dates), spreadsheet
-    error cells and empty cells left out of the means."""
-    with source.open(newline="", encoding="utf-8") as handle:
-        header, *rows = list(csv.reader(handle))
-    stamps = [datetime.strptime(row[0], "%m/%d/%Y %H:%M") for row in rows]
-    chosen = [(t, row) for t, row in zip(stamps, rows) if t.date().isoformat() in days]
-    out = [header]
-    for start in range(0, len(chosen) - minutes + 1, minutes):
-        block = chosen[start:start + minutes]
-        means = []
-        for column in range(1, len(header)):
-            values = []
-            for _, row in block:
-                try:
-                    values.append(float(row[column]))
-                except ValueError:
-                    pass
-            means.append(repr(float(np.mean(values))) if values else "")
-        out.append([block[0][0].isoformat(sep=" ")] + means)
-    with target.open("w", newline="", encoding="utf-8") as handle:
-        csv.writer(handle).writerows(out)
-
-
 @pytest.fixture(scope="module")
 def reports(tmp_path_factory):
     data = tmp_path_factory.mktemp("flexlab") / "szvav_15min.csv"
-    _block_means(SZVAV, data, AVERAGE_MINUTES, {TRAIN[0], *FAULT_DAYS.values()})
+    write_block_means(SZVAV, data, AVERAGE_MINUTES, {TRAIN[0], *FAULT_DAYS.values()})
     out = {}
     for fault, day in FAULT_DAYS.items():
         store = GraphStore.embedded(None)

@@ -19,6 +19,19 @@ def test_failure_between_last_matching_and_first_failing_sensor_on_a_loop():
     assert locations == {"mat": {"fan", "coil"}, "swt": {"hw_valve", "coil_water", "coil"}}
 
 
+def test_a_location_bounded_by_a_boundary_input_does_not_say_the_model_matches_it():
+    """The supply water temperature is fed to the model, not predicted: the model cannot fail there,
+    and the location says it takes that measurement instead of claiming a match it never checked."""
+    topology = FlowTopology(LOOP)
+    matches = {"oat": True, "mat": True, "sat": False, "rat": True, "swt": True}
+    locations = {loc.matching_sensor: loc for loc in localize_failures(topology, matches, SENSORS, inputs={"swt", "oat"})}
+    assert locations["swt"].matching_is_input and not locations["mat"].matching_is_input
+    assert locations["swt"].describe().startswith("The model fails at sat, downstream of swt, whose measurement it "
+                                                  "takes as an input: the missing effect sits in ")
+    assert locations["mat"].describe().startswith("The model matches mat but not sat")
+    assert locations["swt"].to_dict()["upstream_is_input"] is True
+
+
 def test_both_branches_reported_and_room_never_a_suspect_for_the_supply_sensor():
     topology = FlowTopology(LOOP)
     matches = {"oat": True, "mat": True, "sat": False, "rat": True, "swt": True}

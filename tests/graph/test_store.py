@@ -90,6 +90,29 @@ def test_replacing_a_model_removes_its_assembly_in_the_same_write(case_store):
     assert case_store.backend.triple_count(other) == 1
 
 
+def test_a_load_undone_puts_the_model_back_as_it_was(case_store):
+    """A command that loads a changed model file and then fails (its measurements, an assembly that
+    matches nothing) puts the stored model back: its triples, inferences and assembly; a model that
+    was not there is removed again; a load that changed nothing is left."""
+    assembly = [ox.Triple(ox.NamedNode(EX + "c"), ox.NamedNode(EX + "p"), ox.Literal("assembled"))]
+    case_store.write_graph(case_store.assembly_graph("case"), assembly)
+    graphs = (case_store.model_graph("case"), case_store.inferred_graph("case"), case_store.assembly_graph("case"))
+    before = {g: set(case_store.graph_triples(g)) for g in graphs}
+    other = b"<https://example.org/a> <https://example.org/b> <https://example.org/c> ."
+    load = case_store.load_model("case", other, "nt", keep_previous=True)
+    assert load.changed and set(case_store.graph_triples(graphs[0])) != before[graphs[0]]
+    case_store.undo_load("case", load)
+    assert {g: set(case_store.graph_triples(g)) for g in graphs} == before
+    new = case_store.load_model("new", other, "nt", keep_previous=True)
+    assert not new.replaced and case_store.has_model("new")
+    case_store.undo_load("new", new)
+    assert not case_store.has_model("new")
+    same = case_store.load_model("case", case_store.backend.dump(graphs[0], ox.RdfFormat.N_TRIPLES), "nt",
+                                 keep_previous=True)
+    case_store.undo_load("case", same)
+    assert not same.changed and {g: set(case_store.graph_triples(g)) for g in graphs} == before
+
+
 def test_a_model_loaded_again_unchanged_is_left_as_it_is(case_store):
     """Every CLI command loads its model file: one the store holds triple for triple is not written
     again, and keeps its inferences and its assembly; a changed one replaces them."""
@@ -101,12 +124,12 @@ def test_a_model_loaded_again_unchanged_is_left_as_it_is(case_store):
     case_store.backend.replace_graphs = lambda graphs: (writes.append(list(graphs)), replace_graphs(graphs))
     reordered = b"\n".join(reversed(case_store.backend.dump(case_store.model_graph("case"), ox.RdfFormat.N_TRIPLES).splitlines()))
     held = case_store.backend.triple_count(case_store.model_graph("case"))
-    assert case_store.load_model("case", reordered, "nt") == (held, False, True)
+    assert case_store.load_model("case", reordered, "nt") == (held, False, True, None)
     assert writes == []
     assert case_store.graph_triples(case_store.assembly_graph("case")) == assembly
     assert set(case_store.graph_triples(case_store.inferred_graph("case"))) == inferred
     edited = reordered + b"\n<https://example.org/a> <https://example.org/b> <https://example.org/c> ."
-    assert case_store.load_model("case", edited, "nt") == (held + 1, True, True)
+    assert case_store.load_model("case", edited, "nt") == (held + 1, True, True, None)
     assert writes == [[case_store.model_graph("case"), case_store.inferred_graph("case"), case_store.assembly_graph("case")]]
     assert case_store.assembly_graph("case") not in case_store.backend.graphs()
 
@@ -180,7 +203,7 @@ def test_two_loads_of_a_new_model_at_once_leave_one_of_them_whole():
         writer.join()
     subjects = {t.subject.value.split("/")[3] for t in store.graph_triples(store.model_graph("x"))}
     # one created it, the other replaced it (both said "created" before: each looked before the other wrote)
-    assert sorted(loaded) == [(50, True, False), (50, True, True)] and len(subjects) == 1 and store.backend.triple_count(store.model_graph("x")) == 50
+    assert sorted(load[:3] for load in loaded) == [(50, True, False), (50, True, True)] and len(subjects) == 1 and store.backend.triple_count(store.model_graph("x")) == 50
 
 
 def test_a_store_another_process_holds_is_refused_with_a_clear_error(tmp_path):

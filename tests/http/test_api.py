@@ -647,6 +647,19 @@ def test_settings_never_show_the_token():
     assert "a-long-secret" not in repr(Settings(token="a-long-secret"))
 
 
+def test_a_bad_setting_is_named_by_its_variable_or_option(monkeypatch):
+    from service.errors import InputError
+    from service.settings import load_settings
+
+    monkeypatch.setenv("GRAPHTWIN_TOKEN", "seven77")
+    with pytest.raises(InputError) as refused:
+        load_settings({"executor": "--executor"}, executor="dask://nowhere")
+    message = str(refused.value)
+    assert message.startswith("GRAPHTWIN_TOKEN: a token needs at least 8 non-blank characters")
+    assert "--executor (GRAPHTWIN_EXECUTOR): executor 'dask://nowhere': give threads" in message
+    assert "seven77" not in message and "pydantic" not in message
+
+
 @pytest.mark.parametrize("kind, fields, expected", [
     ("calibrate", {"train": "2030-01-01/2030-01-02"}, "window 2030-01-01T00:00:00 – 2030-01-02T00:00:00 lies outside "
                                                         "the data upload {upload}"),
