@@ -19,8 +19,8 @@ from service.graph.store import GraphStore
 from service.matching.library_triples import ensure_signature_library
 
 __all__ = [
-    "app", "signature_app", "example_app", "data_app", "console", "error_console", "fail", "error_text", "reports_errors",
-    "open_store", "model_name_for", "loaded_model_file", "USER_ERROR_EXIT_CODE",
+    "app", "signature_app", "example_app", "data_app", "console", "error_console", "fail", "error_text",
+    "reports_errors", "open_store", "model_name_for", "loaded_model_file", "USER_ERROR_EXIT_CODE",
 ]
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help=(

@@ -37,7 +37,8 @@ def write_block_means(source: Path, target: Path, minutes: int, days: Collection
     means to ``target``, the header unchanged; ``days``: the ISO dates to keep (all when None).
     Returns the number of blocks written.
 
-    :raises MeasurementError: the file cannot be read, or a time stamp does not parse (its line).
+    :raises MeasurementError: the file cannot be read, a time stamp does not parse (its line), or a
+        day asked for has no rows.
     :raises InputError: ``minutes`` is not a positive whole number of the log's steps.
     """
     try:
@@ -53,9 +54,13 @@ def write_block_means(source: Path, target: Path, minutes: int, days: Collection
             stamps.append(parse_timestamp(row[0]))
         except (InputError, IndexError) as exc:
             raise MeasurementError(str(source), [f"line {line}: {exc}"]) from None
+    absent = sorted(set(days or ()) - {t.date().isoformat() for t in stamps})
+    if absent:
+        raise MeasurementError(str(source), [f"no rows on {', '.join(absent)} (the log runs from "
+                                             f"{min(stamps, default='-')} to {max(stamps, default='-')})"])
     kept = [(t, row) for t, row in zip(stamps, rows) if days is None or t.date().isoformat() in days]
     if len(kept) < 2:
-        raise MeasurementError(str(source), ["fewer than two rows" + (" on the days asked for" if days else "")])
+        raise MeasurementError(str(source), ["fewer than two rows"])
     step_s = float(np.median(np.diff([t.timestamp() for t, _ in kept])))
     rows_per_block = minutes * 60.0 / step_s
     if minutes <= 0 or step_s <= 0 or abs(rows_per_block - round(rows_per_block)) > 1e-9:

@@ -40,6 +40,9 @@ def test_days_are_kept_by_date_and_bad_input_is_named(tmp_path):
     assert {r[1] for r in _rows(tmp_path / "out.csv")[1:]} == {"2.0"}
     with pytest.raises(InputError, match="blocks of 90 min: give a positive whole multiple of the log's step"):
         write_block_means(source, tmp_path / "out.csv", 90)
+    with pytest.raises(MeasurementError, match="no rows on 2026-01-03 \\(the log runs from 2026-01-01 00:00:00 to "
+                                               "2026-01-02 23:00:00\\)"):
+        write_block_means(source, tmp_path / "out.csv", 120, {"2026-01-02", "2026-01-03"})
     with pytest.raises(MeasurementError, match="no such file"):
         write_block_means(tmp_path / "nope.csv", tmp_path / "out.csv", 15)
     source.write_text("t,T\n2026-01-01T00:00,1\nyesterday,2\n")
