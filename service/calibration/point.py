@@ -57,6 +57,8 @@ class PointCalibrator(BaseEstimator):
         the point (one call per accepted step: right for a vectorised simulator, not for an FMU per
         member); None follows the problem's ``vectorised_simulate``.
     :param continuations: times a best start that stopped at ``max_nfev`` runs on from where it stopped.
+    :param cost_tolerance: the least squares stop when a step lowers the cost by less than this share
+        of it (SciPy's ``ftol``).
     :param check_jumps: run the jump check (one more simulate call); off where only θ, its standard
         errors and the residuals are read.
     :param flat_ratio: singular value ratio below which a direction counts as flat.
@@ -90,6 +92,7 @@ class PointCalibrator(BaseEstimator):
         jacobian_with_residuals: bool | None = None,
         continuations: int = 0,
         check_jumps: bool = True,
+        cost_tolerance: float = 1e-8,
     ) -> None:
         self.n_starts = n_starts
         self.n_candidates = n_candidates
@@ -104,6 +107,7 @@ class PointCalibrator(BaseEstimator):
         self.jacobian_with_residuals = jacobian_with_residuals
         self.continuations = continuations
         self.check_jumps = check_jumps
+        self.cost_tolerance = cost_tolerance
 
     def fit(self, problem: CalibrationProblem, candidates: np.ndarray | None = None) -> PointCalibrator:
         """Estimate θ and its uncertainty; returns ``self``.
@@ -192,7 +196,8 @@ class PointCalibrator(BaseEstimator):
             return self._evaluate(problem, unit_theta, simulate, with_jacobian=True)[2]
 
         return least_squares(
-            residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev
+            residuals, start, jac=jacobian, bounds=(0.0, 1.0), method="trf", max_nfev=self.max_nfev,
+            ftol=self.cost_tolerance,
         )
 
     def _evaluate(self, problem: CalibrationProblem, unit_theta: np.ndarray, simulate: Callable, *,

@@ -26,6 +26,9 @@ __all__ = [
     "null_values", "probe_ensemble", "probe_start", "refit_calibrator", "sample_fractions",
 ]
 
+#: A refit stops where a step lowers its cost by less than this share of it (such a step moves
+#: ΔBIC by about Σn_eff·1e-5 ≈ 0.01, a thousandth of the significance threshold; docs/benchmarks.md).
+REFIT_COST_TOLERANCE = 1e-5
 #: Shares of an effect parameter's prior width probed before the refit (0 is its lower bound).
 PROBE_SHARES = (0.05, 0.15, 0.35, 0.65, 1.0)
 
@@ -107,7 +110,7 @@ def refit_calibrator(seed: int, max_nfev: int, *, n_starts: int = 1, n_candidate
     """The least squares of the comparison's refits: continued once where it stops at ``max_nfev``,
     without the jump check (a refit is read for θ, its standard errors and residuals)."""
     return PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev,
-                           continuations=1, check_jumps=False)
+                           continuations=1, check_jumps=False, cost_tolerance=REFIT_COST_TOLERANCE)
 
 
 class Fit(NamedTuple):

@@ -205,6 +205,21 @@ def test_a_fit_stopped_at_its_evaluation_limit_says_so_and_can_run_on_from_where
     assert full.cost_ <= continued.cost_ < stopped.cost_
 
 
+def test_a_looser_cost_tolerance_stops_sooner_at_about_the_same_cost():
+    """The zone (nonlinear, 5 parameters): stopping where a step lowers the cost by less than 1e-5 of
+    it (the diagnosis's refits) takes fewer simulate calls than SciPy's 1e-8, converges, and ends
+    within that share of the tight fit's cost; the refits' calibrator carries that tolerance."""
+    from service.diagnosis.refits import REFIT_COST_TOLERANCE, refit_calibrator
+
+    for seed in (2, 3):  # draws whose tight fit takes its last steps for a few parts per million
+        (problem,) = zone_windows(1, seed=seed)
+        tight = PointCalibrator(n_starts=1, n_candidates=4, random_state=0).fit(problem)
+        loose = PointCalibrator(n_starts=1, n_candidates=4, random_state=0, cost_tolerance=1e-5).fit(problem)
+        assert loose.converged_ and loose.n_simulate_calls_ < tight.n_simulate_calls_
+        assert tight.cost_ <= loose.cost_ <= tight.cost_ * (1 + 1e-5)
+    assert refit_calibrator(0, 30).cost_tolerance == REFIT_COST_TOLERANCE == 1e-5
+
+
 def test_prefetched_rows_are_served_without_a_call_and_only_missing_rows_are_simulated():
     """Two ensembles simulated ahead in one call; a later call asking for some of their rows (one
     moved by a few ulps, as a trip through the unit cube moves it) and one new row simulates the new
