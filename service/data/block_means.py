@@ -17,19 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from service.data.csv_table import read_csv_table
 from service.data.measurements import parse_timestamp
 from service.errors import InputError, MeasurementError
 
 __all__ = ["write_block_means"]
-
-
-def _number(cell: str) -> float:
-    """The cell's finite number, else NaN."""
-    try:
-        value = float(cell)
-    except ValueError:
-        return float("nan")
-    return value if np.isfinite(value) else float("nan")
 
 
 def write_block_means(source: Path, target: Path, minutes: int, days: Collection[str] | None = None) -> int:
@@ -37,17 +29,21 @@ def write_block_means(source: Path, target: Path, minutes: int, days: Collection
     means to ``target``, the header unchanged; ``days``: the ISO dates to keep (all when None).
     Returns the number of blocks written.
 
-    :raises MeasurementError: the file cannot be read, a time stamp does not parse (its line), or a
-        day asked for has no rows.
+    :raises MeasurementError: the file cannot be read (:func:`~service.data.csv_table.read_csv_table`),
+        a time stamp does not parse (its line), or a day asked for has no rows.
     :raises InputError: ``minutes`` is not a positive whole number of the log's steps.
     """
-    try:
-        with source.open(newline="", encoding="utf-8-sig") as handle:
-            header, *rows = list(csv.reader(handle))
-    except FileNotFoundError:
-        raise MeasurementError(str(source), ["no such file"]) from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise MeasurementError(str(source), [f"cannot be read: {exc}"]) from None
+    table = read_csv_table(source, str(source), [])
+    header, rows = table.header, table.rows
+
+    def number(cell: str) -> float:
+        """The cell's finite number, else NaN (a spreadsheet error, an empty cell)."""
+        try:
+            value = table.number(cell)
+        except ValueError:
+            return float("nan")
+        return value if np.isfinite(value) else float("nan")
+
     stamps: list[datetime] = []
     for line, row in enumerate(rows, start=2):
         try:
@@ -74,7 +70,7 @@ def write_block_means(source: Path, target: Path, minutes: int, days: Collection
     for start, members in sorted(blocks.items()):
         if len(members) != round(rows_per_block):
             continue
-        values = np.array([[_number(row[c]) if c < len(row) else np.nan for c in range(1, len(header))]
+        values = np.array([[number(row[c]) if c < len(row) else np.nan for c in range(1, len(header))]
                            for row in members])
         columns = (column[np.isfinite(column)] for column in values.T)
         out.append([start.isoformat(sep=" ")] + [repr(float(np.mean(c))) if c.size else "" for c in columns])

@@ -12,9 +12,7 @@ resampled to the nearer row), longer ones stay NaN. The full contract: ``docs/da
 
 from __future__ import annotations
 
-import csv
 import difflib
-import io
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
@@ -22,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from service.data.csv_table import read_csv_table
 from service.errors import InputError, MeasurementError
 from service.graph.namespaces import local_name
 from service.graph.units import UnitError, convert, unit_label
@@ -136,26 +135,6 @@ class MeasuredData:
         window = self.window(start, end)
         return replace(self, timestamps=self.timestamps[window], series={k: v[window] for k, v in self.series.items()},
                        other_columns={k: v[window] for k, v in self.other_columns.items()})
-
-
-def _decoded(raw: bytes, source: str, warnings: list[str]) -> str:
-    """The file's text: UTF-8 (a byte-order mark dropped), else Windows-1252 — what a BMS export
-    with a ``°`` in its headers often is — with a warning.
-
-    :raises MeasurementError: neither, naming the first offending byte's line and offset.
-    """
-    try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError as utf8:
-        where = "line %d" % (raw.count(b"\n", 0, utf8.start) + 1)
-        try:
-            text = raw.decode("cp1252")
-        except UnicodeDecodeError:
-            raise MeasurementError(source, [
-                f"{where}: byte 0x{raw[utf8.start]:02x} at offset {utf8.start} is neither UTF-8 nor "
-                "Windows-1252 text: is this a CSV file?"]) from None
-        warnings.append(f"not UTF-8 ({where}: byte 0x{raw[utf8.start]:02x}): read as Windows-1252")
-        return text
 
 
 def parse_timestamp(text: str) -> datetime:
@@ -276,26 +255,8 @@ def read_measurements(
     source = source_name or str(path)
     problems: list[str] = []
     warnings: list[str] = []
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise MeasurementError(source, ["no such file"]) from None
-    except OSError as exc:
-        raise MeasurementError(source, [f"cannot be read: {exc.strerror or exc}"]) from None
-    text = _decoded(raw, source, warnings)
-    first_line = text.split("\n", 1)[0]
-    delimiter = ";" if ";" in first_line and "," not in first_line else ","
-    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
-
-    def as_number(cell: str) -> float:
-        """A cell's number (a semicolon file may write decimal commas); :raises ValueError: none."""
-        return float(cell.replace(",", ".") if delimiter == ";" else cell)
-
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        raise MeasurementError(source, ["the file is empty"]) from None
-    rows = list(reader)
+    table = read_csv_table(path, source, warnings)
+    header, rows, as_number = [h.strip() for h in table.header], table.rows, table.number
     if len(header) < 2:
         raise MeasurementError(source, ["line 1: expected a time column and at least one series column"])
 

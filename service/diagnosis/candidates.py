@@ -270,7 +270,7 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
 
 def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: dict[str, np.ndarray],
              after: dict[str, np.ndarray], what: str, fit_text: str, lead: str, scales: Mapping[str, float]) -> None:
-    """Set the evidence's residual agreement and sentence: ``lead`` (what a drift does), the sensor
+    """Set the evidence's sentence: ``lead`` (what a drift does), the sensor
     where the effect itself (its prediction ``after`` against the same parameters with the effect at
     its null) removes the most scaled error, how its residual r follows what ``what`` adds, c — the
     cosine Σr·c / √(Σr²·Σc²), its mean included (a correlation would miss an effect that shifts a
@@ -286,7 +286,6 @@ def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: di
     r, c = residual[mask], change[mask]
     norm = float(np.sqrt(np.sum(r**2) * np.sum(c**2)))
     cosine = float(np.sum(r * c)) / norm if norm > 0 else 0.0
-    evidence.residual_agreement = (best, cosine)
     removed = 1.0 - mean_square(after, best) / max(mean_square(null, best), 1e-300)
     evidence.explanation = (
         (f"{lead}; " if lead else "")

@@ -63,7 +63,6 @@ class EffectEvidence:
     rmse_before: dict[str, float] = field(default_factory=dict)
     rmse_after: dict[str, float] = field(default_factory=dict)
     test_improvement: float = float("nan")
-    residual_agreement: tuple[str, float] | None = None  # (sensor, cosine): candidates._explain
     significant: bool = False
     explanation: str = ""
     demoted: str = ""  # why the ranking puts it below the plausible effects (empty: it does not)

@@ -221,12 +221,17 @@ class GraphStore:
     def undo_load(self, name: str, load: ModelLoad) -> None:
         """Put model ``name`` back as it was before ``load`` (a :meth:`load_model` with
         ``keep_previous``): its graphs as they were, or no model where there was none; nothing where
-        the load changed nothing."""
+        the load changed nothing.
+
+        :raises ValueError: ``load`` replaced a model without keeping its graphs.
+        """
         if not load.changed:
             return
-        if load.previous is None:
+        if not load.replaced:
             self.drop_model(name)
             return
+        if load.previous is None:
+            raise ValueError(f"model {name}: the load replaced it without keeping its graphs (keep_previous)")
         with self._model_lock:
             self.write_graphs(load.previous)
 

@@ -33,6 +33,13 @@ def test_blocks_are_clock_aligned_means_of_whole_blocks_stamped_with_their_start
     assert float(rows[1][1]) == pytest.approx(37.0) and rows[1][2] == ""  # a column with no number: empty
 
 
+def test_a_european_export_is_read_as_the_measurement_contract_reads_it(tmp_path):
+    source = tmp_path / "log.csv"  # semicolons, decimal commas, Windows-1252 (°)
+    source.write_bytes("Zeit;T (°C)\n1.2.2026 0:00;20,5\n1.2.2026 0:10;21,5\n".encode("cp1252"))
+    assert write_block_means(source, tmp_path / "out.csv", 20) == 1
+    assert _rows(tmp_path / "out.csv")[1] == ["2026-02-01 00:00:00", "21.0"]
+
+
 def test_days_are_kept_by_date_and_bad_input_is_named(tmp_path):
     source = tmp_path / "log.csv"
     source.write_text("t,T\n" + "".join(f"2026-01-0{d}T{h:02d}:00,{d}\n" for d in (1, 2) for h in range(24)))

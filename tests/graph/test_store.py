@@ -111,6 +111,10 @@ def test_a_load_undone_puts_the_model_back_as_it_was(case_store):
                                  keep_previous=True)
     case_store.undo_load("case", same)
     assert not same.changed and {g: set(case_store.graph_triples(g)) for g in graphs} == before
+    unkept = case_store.load_model("case", other, "nt")  # without keep_previous: nothing to put back
+    with pytest.raises(ValueError, match="without keeping its graphs"):
+        case_store.undo_load("case", unkept)
+    assert case_store.has_model("case")
 
 
 def test_a_model_loaded_again_unchanged_is_left_as_it_is(case_store):
