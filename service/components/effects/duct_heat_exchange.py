@@ -20,7 +20,9 @@ def _duct_outlet_temperature(inlet_c, surroundings_c, air_mass_flow_kg_s, conduc
     ``MINIMUM_AIR_MASS_FLOW_KG_PER_S``."""
     flow = np.maximum(air_mass_flow_kg_s, MINIMUM_AIR_MASS_FLOW_KG_PER_S)
     kept = np.exp(-conductance_w_k / (flow * AIR_SPECIFIC_HEAT_J_PER_KG_K))
-    return surroundings_c + (inlet_c - surroundings_c) * kept
+    # at UA = 0 (the null) T_in itself, to the last bit: T_amb + (T_in − T_amb) rounds where the two
+    # differ in magnitude (the diagnosis's shared model holds the effect at its null)
+    return np.where(conductance_w_k == 0.0, inlet_c, surroundings_c + (inlet_c - surroundings_c) * kept)
 
 
 class DuctHeatExchange(SplicedEffect):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from service.components.component import Parameter, Port, SplicedEffect, first_order_lag_factor
 
 __all__ = ["FirstOrderLag", "SensorResponseLag"]
@@ -30,9 +32,14 @@ class FirstOrderLag(SplicedEffect):
     def step(self, params, inputs, state, dt_s):
         tau = params["time_constant"]
         if state.get("_time_constant") is not tau:  # the factor kept while the same τ comes
-            state["_time_constant"], state["_factor"] = tau, first_order_lag_factor(dt_s, tau)
+            factor = first_order_lag_factor(dt_s, tau)
+            closed = factor == 1.0
+            state["_time_constant"], state["_factor"], state["_closed"] = tau, factor, closed if closed.any() else None
         lagged = state["lagged"]
         lagged += state["_factor"] * (inputs["value_in"] - lagged)
+        if state["_closed"] is not None:  # no lag (τ = 0, the null): x itself, to the last bit (y + (x − y)
+            # rounds where x and y differ in magnitude; the diagnosis's shared model holds the effect at its null)
+            np.copyto(lagged, inputs["value_in"], where=state["_closed"])
         return {"value_out": lagged.copy()}
 
 
