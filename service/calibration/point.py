@@ -109,11 +109,15 @@ class PointCalibrator(BaseEstimator):
         self.check_jumps = check_jumps
         self.cost_tolerance = cost_tolerance
 
-    def fit(self, problem: CalibrationProblem, candidates: np.ndarray | None = None) -> PointCalibrator:
+    def fit(self, problem: CalibrationProblem, candidates: np.ndarray | None = None,
+            kept: np.ndarray | None = None) -> PointCalibrator:
         """Estimate θ and its uncertainty; returns ``self``.
 
         :param candidates: ndarray[n, n_parameters], physical units: further start candidates
             screened with the Latin hypercube and the problem's default (e.g. a probe's best points).
+        :param kept: ndarray[n, n_parameters], physical units: starts run besides the ``n_starts``
+            screened ones, whatever their cost (a stored calibration: it cannot take the place of a
+            start the screen would have kept, so the fit ends no worse than without it).
         """
         if self.n_starts < 1 or self.n_candidates < self.n_starts:
             raise CalibrationError(
@@ -130,6 +134,8 @@ class PointCalibrator(BaseEstimator):
 
         with threadpool_limits(limits=1):
             starts = self._screen_starts(problem, candidates)
+            if kept is not None:
+                starts = np.vstack([starts, problem.to_unit(np.atleast_2d(kept))])
             if len(starts) > 1 and problem.vectorised_simulate:  # the starts' calls share simulate calls
                 fits = run_in_lockstep(simulate, starts, lambda start, run: self._local_fit(problem, start, run))
             else:

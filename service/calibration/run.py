@@ -327,7 +327,9 @@ def calibrate(
     substeps, train_slice, test_slice = md.substeps, prepared.train, prepared.test
     unscored_s, gp_nodes, window_notes = prepared.unscored_s, prepared.gp_nodes, prepared.window_notes
     start, start_runs, start_note = prepared.start, prepared.start_runs, prepared.start_note
-    problem = md.problem(train_slice, gp_inputs=gp_nodes, default=start)
+    # a point fit screens the components' defaults and runs from the stored start besides; a Bayesian
+    # run's walkers start around the problem's default: the stored start
+    problem = md.problem(train_slice, gp_inputs=gp_nodes, default=None if method == "point" else start)
     n_par = problem.n_parameters
     settings = {"substeps": substeps, "step_s": data.step_s, "warmup_s": md.warmup_s,
                 "unscored_start_s": unscored_s}
@@ -344,8 +346,9 @@ def calibrate(
     regimes = None
     bands: dict[str, PredictiveBand] = {}
     if method == "point":
-        with _non_finite_named(md, train_slice, problem.default):
-            calibrator = PointCalibrator(n_starts=2, n_candidates=32, random_state=seed, max_nfev=40).fit(problem)
+        with _non_finite_named(md, train_slice, problem.default if start is None else start):
+            calibrator = PointCalibrator(n_starts=2, n_candidates=32, random_state=seed, max_nfev=40).fit(
+                problem, kept=None if start is None else start[None, :])
         theta = calibrator.theta_
         se = calibrator.standard_errors_
         lower, upper = problem.lower, problem.upper

@@ -185,6 +185,18 @@ def test_recirculated_air_not_following_the_supply_fan_cuts_the_mixed_air_error(
     assert 0.2 < exponent.median < 1.5, exponent
 
 
+def test_recalibrated_from_the_base_fit_the_version_ends_no_worse_than_fitted_afresh(store, fan_on_comparison,
+                                                                                     recirculation):
+    """``--start-from``, the loop's recalibration after add-effect: the stored start is run besides the
+    starts a fresh fit screens, so it ends no worse than that fit (it took one of the two starts'
+    places before: 2.88 K mixed air, β 0.17 and cost 160.1, against 2.46 K, 0.38 and 157.9 fresh)."""
+    warm = calibrate(store, "school-recirculation", SCHOOL / "AHU7.csv", start_from="school-fixed",
+                     **FAN_ON_WINDOW).record
+    assert warm.settings["start_from"]["model"] == "school-fixed"
+    assert warm.diagnostics.cost <= recirculation.diagnostics.cost * (1 + 1e-9), (
+        warm.diagnostics.cost, recirculation.diagnostics.cost)
+
+
 @pytest.mark.slow
 def test_on_the_units_own_operation_a_hidden_recirculation_effect_is_found(store, recirculation, tmp_path):
     """Semi-synthetic: the school's measured boundary inputs drive a known truth, the unit as the model
