@@ -19,7 +19,7 @@ import numpy as np
 from service.errors import CalibrationError
 
 __all__ = [
-    "TargetMetrics", "IntervalCoverage", "target_metrics", "INTERVAL_SCALE_UNITS",
+    "TargetMetrics", "IntervalCoverage", "target_metrics", "INTERVAL_SCALE_UNITS", "on_interval_scale",
     "GUIDELINE14_HOURLY_CV_RMSE_PERCENT", "GUIDELINE14_HOURLY_NMBE_PERCENT",
 ]
 
@@ -69,10 +69,16 @@ class TargetMetrics:
         return result
 
 
+def on_interval_scale(unit: str) -> bool:
+    """``unit`` (a port unit or a QUDT IRI) has an arbitrary zero (°C, °F): ratios to its mean, CV(RMSE)
+    and NMBE, mean nothing there."""
+    return unit in INTERVAL_SCALE_UNITS or unit.rsplit("/", 1)[-1] in INTERVAL_SCALE_UNITS
+
+
 def _guideline14(unit: str, mean: float, max_abs: float, dof: int, cv: float, nmbe: float):
     if dof <= 0:
         return False, None, f"n − p = {dof} ≤ 0: CV(RMSE) and NMBE undefined"
-    if unit in INTERVAL_SCALE_UNITS:
+    if on_interval_scale(unit):
         return False, None, f"not applied: the mean of a value in {unit} depends on the zero of the scale"
     if abs(mean) < _MEAN_NEAR_ZERO_SHARE * max_abs or mean == 0.0:
         return False, None, (

@@ -41,6 +41,8 @@ error_console = Console(stderr=True)
 #: The exit code of a command refused for its input (a user's error, not a defect).
 USER_ERROR_EXIT_CODE = 2
 
+#: The embedded store's folder when a command is given no --store.
+DEFAULT_STORE = Path("graphtwin-data")
 StoreOption = Annotated[Path, typer.Option("--store", help="Embedded store folder (created if missing).")]
 MemoryOption = Annotated[bool, typer.Option("--memory", help="Use a throw-away in-memory store.")]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")]

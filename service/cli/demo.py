@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from service.cli.common import SeedOption, StoreOption, app, console, open_store, reports_errors
+from service.cli.common import DEFAULT_STORE, SeedOption, StoreOption, app, console, open_store, reports_errors
 from service.cli.printing import print_diagnosis
 from service.components.library import SignatureLibrary
 from service.graph.namespaces import local_name
@@ -28,7 +28,7 @@ def demo_command(
     hidden_effect: Annotated[str, typer.Option(help="The effect hidden in the synthetic truth.")] = "FanMotorHeat",
     seed: SeedOption = 1,
     output: Annotated[Path, typer.Option(help="Folder for the data, the new model and the plots.")] = Path("graphtwin-demo"),
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
 ) -> None:
     """The whole loop on the case study with a hidden effect: before, where it fails, what is missing, after."""
     from service.data.synthetic import generate_synthetic_data

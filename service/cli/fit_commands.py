@@ -11,6 +11,7 @@ import typer
 
 from service.calibration.model_data import DEFAULT_GP_INPUTS
 from service.cli.common import (
+    DEFAULT_STORE,
     JsonOption,
     MeasurementsArgument,
     MemoryOption,
@@ -53,7 +54,7 @@ def calibrate_command(
              "(node local name, IRI or CSV column); repeat for several.")] = None,
     start_from: StartFromOption = None,
     as_json: JsonOption = False,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
     memory: MemoryOption = False,
 ) -> None:
     """Calibrate MODEL against DATA; estimates, metrics and provenance are written to the store."""
@@ -92,7 +93,7 @@ def _diagnosis_command(rank_effects: bool, doc: str):
         plots: PlotsOption = Path("graphtwin-plots"),
         only_when: OnlyWhenOption = None,
         start_from: StartFromOption = None,
-        store: StoreOption = Path("graphtwin-data"),
+        store: StoreOption = DEFAULT_STORE,
         memory: MemoryOption = False,
     ) -> None:
         from service.workflows.runs import diagnose_model
@@ -106,7 +107,7 @@ def _diagnosis_command(rank_effects: bool, doc: str):
         if as_json:
             console.print_json(json.dumps(report.to_dict(), default=str))
             return
-        print_diagnosis(report, stored=not memory, data=Path(data))
+        print_diagnosis(report, stored=not memory, data=Path(data), store=store)
         console.print("plots: " + ", ".join(str(p) for p in save_diagnosis_plots(report, plots)))
 
     command.__doc__ = doc
@@ -131,7 +132,7 @@ def compare_strategies_command(
     name: NameOption = None,
     seed: SeedOption = 0,
     as_json: JsonOption = False,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
     memory: MemoryOption = False,
 ) -> None:
     """Joint against successive (regime by regime, Morris-planned) point calibration on TRAIN: RMSE

@@ -14,6 +14,7 @@ from rich.syntax import Syntax
 from rich.table import Table
 
 from service.cli.common import (
+    DEFAULT_STORE,
     JsonOption,
     MemoryOption,
     ModelFileArgument,
@@ -48,7 +49,7 @@ def assemble_command(
     name: NameOption = None,
     max_complexity: Annotated[int | None, typer.Option(help="Ignore signatures above this complexity.")] = None,
     as_json: JsonOption = False,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
     memory: MemoryOption = False,
 ) -> None:
     """Load MODEL into the store, assemble its simulation model and write it back as triples."""
@@ -79,7 +80,7 @@ def brick_report_command(
         "The official Brick ontology file (Brick.ttl): tells an official class graphtwin does not model "
         "from a misspelt one."))] = None,
     as_json: JsonOption = False,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
     memory: MemoryOption = False,
 ) -> None:
     """What the Brick alignment could not use in MODEL: unaligned classes, unread relations, the
@@ -140,7 +141,7 @@ def simulate_command(
     params: Annotated[Path | None, typer.Option(help="JSON {parameter name or key: value}; others at their defaults.")] = None,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="CSV of measured and simulated series.")] = None,
     name: NameOption = None,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
     memory: MemoryOption = False,
 ) -> None:
     """Simulate MODEL over DATA and write each target's simulation beside its measurement."""

@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 from rich.table import Table
 from rich.text import Text
 
-from service.cli.common import console
+from service.calibration.metrics import on_interval_scale
+from service.cli.common import DEFAULT_STORE, console
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text, unit_label
 
@@ -26,8 +27,9 @@ _PARAMETER_KEY = re.compile(r"\S*/component/[^/\s]+/([^\s/#]+)#(\w+)")
 
 
 def print_metrics(title: str, metrics: dict) -> None:
-    """Per sensor: RMSE, MAE, R², CV(RMSE), NMBE and, for a Bayesian run's prediction intervals, the
-    ACE and mean width of the 90 % one (every level: ``--json``)."""
+    """Per sensor: RMSE, MAE, R², CV(RMSE), NMBE (– for a temperature in °C or °F, whose mean
+    depends on the scale's zero) and, for a Bayesian run's prediction intervals, the ACE and mean
+    width of the 90 % one (every level: ``--json``)."""
     intervals = any(m.coverage for m in metrics.values())
     table = Table(title=title)
     for column in ("sensor", "RMSE", "MAE", "R²", "CV(RMSE) %", "NMBE %", *(("ACE 90 %", "90 % width") if intervals else ()),
@@ -38,8 +40,9 @@ def print_metrics(title: str, metrics: dict) -> None:
         if intervals:
             at_90 = min(m.coverage, key=lambda c: abs(c.level - 0.9), default=None)
             interval_cells = [f"{100 * at_90.ace:+.1f}", f"{at_90.mean_width:.3g}"] if at_90 else ["–", "–"]
-        table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.mae:.3g}", f"{m.r2:.3f}", f"{m.cv_rmse_percent:.1f}",
-                      f"{m.nmbe_percent:+.1f}", *interval_cells, unit_label(m.unit))
+        ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
+        table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells,
+                      unit_label(m.unit))
     console.print(table)
 
 
@@ -67,7 +70,8 @@ def print_calibration(record: CalibrationRecord) -> None:
 
 
 def print_regimes(record: CalibrationRecord) -> None:
-    """The test-window RMSE of each target per operating regime (a run with a test window)."""
+    """The test-window RMSE of each target per operating regime (a run with a test window; a regime
+    the test window never enters is left out)."""
     if not record.regimes:
         return
     units = {node: m.unit for node, m in record.metrics.get("test", {}).items()}
@@ -75,9 +79,12 @@ def print_regimes(record: CalibrationRecord) -> None:
     table = Table(title=f"Test RMSE per operating regime (rule tree accuracy {record.regime_rule_accuracy:.2f})")
     for column in ("regime", "share", *map(local_name, sensors)):
         table.add_column(column, overflow="fold")
-    for row in record.regimes:
+    entered = [r for r in record.regimes if r["share"] > 0]
+    for row in entered:
         table.add_row(row["rule"], f"{100 * row['share']:.0f} %",
                       *(quantity_text(row["rmse"][n], units.get(n, "")) for n in sensors))
+    if len(entered) < len(record.regimes):
+        table.caption = f"{len(record.regimes) - len(entered)} regime(s) the test window never enters left out"
     console.print(table)
 
 
@@ -102,7 +109,8 @@ def plot_run(outcome: CalibrationOutcome, path: Path) -> Path:
                                   title=f"{outcome.record.model_name}: {key} window")
 
 
-def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path | None = None) -> None:
+def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path | None = None,
+                    store: Path | None = None) -> None:
     """The diagnosis as tables and sentences; ``stored``: the run is in a store that outlives this
     command (not ``--memory``), so its report can be made later; ``data``: the measurement file the
     run read (the report command then names it)."""
@@ -157,6 +165,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         console.print(f"  not tried: {reason}", style="dim", markup=False)
     if stored:
         named = f" --data {data}" if data is not None and data.resolve().parent != Path.cwd().resolve() else ""
+        named += f" --store {store}" if store is not None and store != DEFAULT_STORE else ""
         console.print(f"run {report.run_id}: graphtwin report {report.run_id}-diagnosis{named} -o report.html")
     else:
         console.print(f"run {report.run_id} was in a throw-away store (--memory): run again with --store DIR to keep "

@@ -14,7 +14,7 @@ import pyoxigraph as ox
 import typer
 from rich.table import Table
 
-from service.cli.common import StoreOption, app, console, error_console, fail, open_store, reports_errors
+from service.cli.common import DEFAULT_STORE, StoreOption, app, console, error_console, fail, open_store, reports_errors
 from service.errors import InputError, NotFoundError
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text
@@ -25,25 +25,30 @@ __all__ = []
 @app.command("query")
 @reports_errors
 def query_command(
-    name: Annotated[str, typer.Argument(help="A query in queries/ (file name without .rq).")],
+    name: Annotated[str, typer.Argument(help="A query in queries/ (file name without .rq), or a SELECT query's "
+                                             ".rq file of your own.")],
     model: Annotated[str | None, typer.Option(help=(
         "The model: bound to ?model in a query about results; the graphs a query about a building graph runs over."))] = None,
     param: Annotated[list[str] | None, typer.Option(help="More bindings, VAR=VALUE.")] = None,
     output_format: Annotated[str | None, typer.Option(
         "--format", help="table, csv or json (full IRIs); default: a table on a terminal, CSV when piped.")] = None,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
 ) -> None:
-    """Run a named SPARQL query over the store (e.g. calibrated-parameters --model NAME). A query that
-    names no graph (flow-edges, observed-node, measurement-link, applied-effects) reads a building
-    model: it runs over the model's graphs (model, inferences, ontologies); one about results binds
-    ?model to the name, and ?model_graph, ?inferred_graph, ?ontology_graph where it reads them."""
+    """Run a named SPARQL query over the store (e.g. calibrated-parameters --model NAME), or a SELECT
+    query of your own (a .rq file). A query that names no graph (flow-edges, observed-node,
+    measurement-link, applied-effects) reads a building model: it runs over the model's graphs (model,
+    inferences, ontologies); one about results binds ?model to the name, and ?model_graph,
+    ?inferred_graph, ?ontology_graph where it reads them."""
     output_format = output_format or ("table" if console.is_terminal else "csv")
     if output_format not in ("table", "csv", "json"):
         raise InputError(f"--format {output_format!r}: give table, csv or json")
     graph_store = open_store(store, False, reading=True)
     if model is not None and model not in graph_store.models():
         raise NotFoundError(f"no model {model!r} in the store {store}; it holds {', '.join(graph_store.models()) or 'none'}")
-    text = graph_store.named_query_text(name)
+    own = name.endswith(".rq") or "/" in name
+    if own and not Path(name).is_file():
+        raise NotFoundError(f"{name}: no such file")
+    text = Path(name).read_text(encoding="utf-8") if own else graph_store.named_query_text(name)
     reads_a_model = not re.search(r"^[^#]*\bGRAPH\b", text, re.IGNORECASE | re.MULTILINE)  # outside comments
     if reads_a_model and model is None:
         raise InputError(f"query {name} reads a building model's graphs: give --model")
@@ -51,7 +56,12 @@ def query_command(
     if model is not None and not reads_a_model:
         bindings |= {"model": model} | {var: iri for var, iri in graph_store.graph_variables(model).items()
                                         if f"?{var}" in text}
-    rows = graph_store.run_named_query(name, dataset=model if reads_a_model else None, **bindings)
+    try:
+        rows = graph_store.query(text, substitutions=bindings, model=model if reads_a_model else None)
+    except InputError as exc:
+        raise InputError(f"{name}: {exc}") from None
+    if not isinstance(rows, list) or rows and not isinstance(rows[0], dict):
+        raise InputError(f"{name}: not a SELECT query (ASK, CONSTRUCT and DESCRIBE are not shown as a table)")
     columns = list(dict.fromkeys(k for row in rows for k in row))
     values = [{c: row[c].value for c in columns if c in row} for row in rows]
     if output_format == "json":
@@ -98,7 +108,7 @@ def _binding(text: str) -> tuple[str, str]:
 def history_command(
     model: Annotated[str, typer.Argument(help="Model name in the store.")],
     plot: Annotated[Path | None, typer.Option(help="Write a bar chart of the error per version here (PNG).")] = None,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
 ) -> None:
     """Test-window error per sensor and operating regime across the versions of a model (base,
     base+effect, …)."""
@@ -144,7 +154,7 @@ def report_command(
     output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write.")] = Path("report.html"),
     data: Annotated[Path | None, typer.Option(help="The run's measurement CSV (default: the file name the run "
                                                    "recorded, in the current folder).")] = None,
-    store: StoreOption = Path("graphtwin-data"),
+    store: StoreOption = DEFAULT_STORE,
 ) -> None:
     """One self-contained HTML page for RUN: measured vs model per sensor, where it fails on the flow
     topology, the operating regimes, the missing effects with their evidence, the error across versions."""
@@ -163,7 +173,10 @@ def report_command(
             missing.append(str(exc))
             raise
 
-    page = report_html(graph_store, run, locate_data=locate_noting)
+    try:
+        page = report_html(graph_store, run, locate_data=locate_noting)
+    except NotFoundError as exc:  # the store searched, named: a run is often in another --store
+        raise NotFoundError(f"{exc} at {store} (--store: the folder the run was written to)") from None
     output.write_text(page, encoding="utf-8")
     console.print(f"wrote {output}")
     for problem in dict.fromkeys(missing):
@@ -202,7 +215,7 @@ def serve_command(
     except InputError as exc:
         raise fail(exc) from None
     if settings.store_dir is None and settings.sparql_endpoint is None:
-        settings = settings.model_copy(update={"store_dir": Path("graphtwin-data")})
+        settings = settings.model_copy(update={"store_dir": DEFAULT_STORE})
     if settings.token is None:
         error_console.print("[yellow]GRAPHTWIN_TOKEN is not set: every write will be refused.[/yellow]")
     uvicorn.run(create_app(settings), host=host, port=port)

@@ -26,6 +26,7 @@ from service.calibration.lockstep import with_prefetched_rows
 from service.calibration.model_data import ModelData
 from service.diagnosis.drift import (
     DriftEvidence,
+    drift_beyond_range,
     drift_candidates,
     drift_fields,
     drift_sentence,
@@ -249,7 +250,9 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
         mask = np.isfinite(values)
         evidence.rmse_before[node] = float(np.sqrt(np.mean((values[mask] - before[node][mask]) ** 2)))
         evidence.rmse_after[node] = float(np.sqrt(np.mean((values[mask] - after[node][mask]) ** 2)))
-    physics = demotion_reasons(job.model, job.node, theta, effect_columns)
+    physics = "; ".join(filter(None, [
+        demotion_reasons(job.model, job.node, theta, effect_columns),
+        drift_beyond_range(job.model, theta, job.data.step_s, job.evaluation.stop - 1) if drifts else ""]))
     evidence.implausible = bool(physics)
     stopped = "" if converged else f"its refit stopped at its limit of {job.refit_max_nfev} evaluations twice"
     evidence.demoted = "; ".join(filter(None, [physics, stopped]))

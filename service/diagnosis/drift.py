@@ -21,12 +21,15 @@ import numpy as np
 from service.calibration.model_data import ModelData
 from service.components.component import Parameter
 from service.diagnosis.localization import FailureLocation
+from service.diagnosis.plausibility import BOUND_SHARE
 from service.diagnosis.ranking import EffectEvidence
 from service.graph.namespaces import GTR, local_name
+from service.graph.units import quantity_text
 from service.model.assembled_model import DAY_S, AssembledModel, ParameterDrift, ParameterRef
 
 __all__ = ["DriftCandidate", "DriftEvidence", "drift_candidates", "drifting_components", "drifting_parameter",
-           "step_onset", "drift_identity", "drift_fields", "drift_sentence", "MAX_PARAMETERS_PER_COMPONENT"]
+           "step_onset", "drift_identity", "drift_fields", "drift_sentence", "drift_beyond_range",
+           "MAX_PARAMETERS_PER_COMPONENT"]
 
 #: Parameters per suspect component and failing sensor that get drift candidates (both shapes each).
 MAX_PARAMETERS_PER_COMPONENT = 2
@@ -211,6 +214,29 @@ def step_onset(md: ModelData, windows: Sequence[slice], starts: Sequence[np.ndar
     return replace(md.model, drifts=(replace(drift, onset_s=float(best * md.data.step_s)),))
 
 
+def _drifted(model: AssembledModel, theta: np.ndarray, step_s: float, end: int) -> tuple[ParameterRef, float, float]:
+    """(the drifting parameter, its value p₀ at the onset, its value at data step ``end`` — a linear
+    drift's p₀·(1 + r·(t_end − t₀)/day), a step's p₀·(1 + j))."""
+    drift = model.drifts[0]
+    column = {ref.key: j for j, ref in enumerate(model.estimated_parameters)}
+    ref = model.estimated_parameters[column[drift.parameter_key]]
+    value, size = theta[column[drift.parameter_key]], theta[column[drift.size_key]]
+    days = (end - int(round(drift.onset_s / step_s))) * step_s / DAY_S if drift.shape == "linear" else 1.0
+    return ref, float(value), float(value * (1.0 + size * days))
+
+
+def drift_beyond_range(model: AssembledModel, theta: np.ndarray, step_s: float, end: int) -> str:
+    """Why a fitted drift is implausible: the parameter it moves leaves its range (the prior's bounds,
+    which hold what the component can physically be) by data step ``end``; empty when it stays."""
+    ref, _, later = _drifted(model, theta, step_s, end)
+    spec = ref.spec
+    slack = BOUND_SHARE * (spec.upper - spec.lower)
+    if spec.lower - slack <= later <= spec.upper + slack:
+        return ""
+    return (f"the {ref.name} it drifts to, {quantity_text(later, spec.unit, '.4g')}, lies outside its range "
+            f"{spec.lower:g}–{quantity_text(spec.upper, spec.unit, 'g')}")
+
+
 def drift_sentence(model: AssembledModel, theta: np.ndarray, standard_errors: np.ndarray, timestamps: np.ndarray,
                    step_s: float, end: int) -> str:
     """The drift in words, with the parameter's meaning and unit: "the air_side_conductance of
@@ -220,19 +246,19 @@ def drift_sentence(model: AssembledModel, theta: np.ndarray, standard_errors: np
     size's standard error spans its prior range."""
     drift = model.drifts[0]
     column = {ref.key: j for j, ref in enumerate(model.estimated_parameters)}
-    ref = model.estimated_parameters[column[drift.parameter_key]]
     size_spec = model.estimated_parameters[column[drift.size_key]].spec
-    value, size, error = theta[column[drift.parameter_key]], theta[column[drift.size_key]], standard_errors[column[drift.size_key]]
+    size, error = theta[column[drift.size_key]], standard_errors[column[drift.size_key]]
+    ref, value, later = _drifted(model, theta, step_s, end)
     onset = int(round(drift.onset_s / step_s))
     what = f"the {ref.name} of {local_name(model.components[ref.component].node)} ({ref.spec.description})"
     change = (f"{100 * abs(size):.2g} ± {100 * error:.1g} %" if np.isfinite(error) and error <= size_spec.upper - size_spec.lower
               else f"{100 * abs(size):.2g} % (not identified)")
     if drift.shape == "linear":
-        later = value * (1.0 + size * (end - onset) * step_s / DAY_S)
         return (f"{what} {'falls' if size < 0 else 'rises'} {change} a day from {_minute(timestamps[onset])}: "
-                f"{value:.4g} {ref.spec.unit} then, {later:.4g} {ref.spec.unit} at {_minute(timestamps[end])}")
+                f"{quantity_text(value, ref.spec.unit, '.4g')} then, {quantity_text(later, ref.spec.unit, '.4g')} "
+                f"at {_minute(timestamps[end])}")
     return (f"{what} {'drops' if size < 0 else 'rises'} {change} at {_minute(timestamps[onset])}: from {value:.4g} to "
-            f"{value * (1.0 + size):.4g} {ref.spec.unit}")
+            f"{quantity_text(later, ref.spec.unit, '.4g')}")
 
 
 def _minute(stamp: np.datetime64) -> str:

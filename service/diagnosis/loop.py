@@ -27,7 +27,7 @@ from service.diagnosis.episodes import Episode, find_episodes
 from service.diagnosis.localization import FailureLocation, FlowTopology, localize_failures
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
 from service.diagnosis.report import DiagnosisReport, SensorVerdict, diagnosis_triples
-from service.diagnosis.residual_dependence import Dependence, residual_dependence, time_trend
+from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
@@ -183,7 +183,9 @@ def _regimes_with_worst(regimes: list[dict], sensors: Mapping[str, SensorVerdict
 
 def _residual_dependence(base, failing: list[str], residuals: Mapping[str, np.ndarray]) -> dict[str, list[Dependence]]:
     """Per failing sensor, the (up to three) ranked signals its test residual follows: the measured
-    series and the model's outputs, except the sensor's own."""
+    series and the model's outputs, except the sensor's own; a signal that is one before it under a
+    second name (|ρ| ≥ :data:`SAME_SIGNAL_CORRELATION`: a measured input and the model's copy of it, a
+    fan's air flow and its speed) is left out, the measured series kept first."""
     md = base.model_data
     data, train_slice, test_slice = md.data, base.train, base.test
     window = slice(train_slice.start, test_slice.stop) if test_slice.start >= train_slice.start else test_slice
@@ -192,6 +194,7 @@ def _residual_dependence(base, failing: list[str], residuals: Mapping[str, np.nd
     signals = {f"measured {local_name(n)}": data.series[n][test_slice] for n in data.series}
     for (component, port), values in everything.outputs.items():
         signals[f"model {local_name(component)}.{port}"] = values[0][offset:]
+    signals = distinct_signals(signals)
     dependence = {}
     for node in failing:
         ranked = residual_dependence(residuals[node], {k: v for k, v in signals.items() if local_name(node) not in k})

@@ -16,11 +16,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Dependence", "residual_dependence", "COLLINEAR_SHARE", "TimeTrend", "time_trend"]
+__all__ = ["Dependence", "residual_dependence", "COLLINEAR_SHARE", "TimeTrend", "time_trend", "distinct_signals",
+           "SAME_SIGNAL_CORRELATION"]
 
 #: A signal whose variance left after regressing on the signals above is below this share of its
 #: own is a linear combination of them: its partial correlation is reported as 0.
 COLLINEAR_SHARE = 1e-10
+#: Two signals this correlated (|ρ| over their common finite steps) are one signal under two names.
+SAME_SIGNAL_CORRELATION = 0.99
 #: A straight line in time that explains less than this share of a residual's variance is no trend.
 TREND_SHARE = 0.25
 
@@ -207,3 +210,21 @@ def residual_dependence(
         ranked[k] = replace(dependence, partial_correlation=partial, cumulative_r2=float(r2))
         columns.append(x)
     return ranked + skipped
+
+
+def distinct_signals(signals: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``signals`` (name → series aligned in time) without those that are one before them under a
+    second name, |ρ| ≥ :data:`SAME_SIGNAL_CORRELATION` over their common finite steps (a measured input
+    and a model's copy of it; a fan's air flow and its speed): the first of each kept."""
+    kept: dict[str, np.ndarray] = {}
+    for name, values in signals.items():
+        if not any(_same_signal(values, other) for other in kept.values()):
+            kept[name] = values
+    return kept
+
+
+def _same_signal(a: np.ndarray, b: np.ndarray) -> bool:
+    both = np.isfinite(a) & np.isfinite(b)
+    if both.sum() < 3 or np.std(a[both]) == 0 or np.std(b[both]) == 0:
+        return False
+    return abs(float(np.corrcoef(a[both], b[both])[0, 1])) >= SAME_SIGNAL_CORRELATION

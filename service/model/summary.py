@@ -49,6 +49,13 @@ def assembly_to_dict(model: AssembledModel) -> dict[str, Any]:
     }
 
 
+def _value_source(model: AssembledModel, ref: ParameterRef) -> str:
+    """"mapped" for a value the graph states, "fixed" for one the component's model sets from what is
+    measured (:meth:`~service.components.component.ComponentModel.parameters_fixed_by_measurement`:
+    a fan's impeller heat is 0 where no meter measures its power)."""
+    return "mapped" if ref.name in model.components[ref.component].mapped_parameters else "fixed"
+
+
 def _device_entry(model: AssembledModel, iri: str) -> dict[str, Any]:
     link = model.measurement(iri)
     return {"component": iri, "node": link.node, "series_id": link.series_id, "unit": link.unit}
@@ -82,13 +89,15 @@ def print_assembly(model: AssembledModel, console: Console | None = None) -> Non
     for column in ("component", "parameter", "unit", "value / bounds"):
         parameters.add_column(column, overflow="fold")
     for ref in model.mapped_parameters:
-        parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit, f"mapped {ref.value:g}")
+        parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
+                           f"{_value_source(model, ref)} {ref.value:g}")
     for ref in model.estimated_parameters:
         parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
                            f"estimate in [{ref.spec.lower:g}, {ref.spec.upper:g}]")
     console.print(parameters)
+    fixed = sum(_value_source(model, ref) == "fixed" for ref in model.mapped_parameters)
     console.print(f"{len(model.connections)} connections, {len(model.boundary_inputs)} boundary inputs, "
-                  f"{len(model.targets)} targets, {len(model.mapped_parameters)} mapped and "
-                  f"{len(model.estimated_parameters)} estimated parameters")
+                  f"{len(model.targets)} targets, {len(model.mapped_parameters) - fixed} mapped, "
+                  f"{fixed} fixed by what is measured and {len(model.estimated_parameters)} estimated parameters")
     for note in model.notes:
         console.print(f"[yellow]note:[/yellow] {note}")

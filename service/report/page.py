@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from service.calibration.metrics import on_interval_scale
 from service.diagnosis.error_history import error_history
 from service.diagnosis.localization import FlowTopology
 from service.graph.namespaces import GTR, local_name
@@ -110,9 +111,11 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
         test = run.metrics.get("test", {}).get(sensor, {})
         train = run.metrics.get("train", {}).get(sensor, {})
         verdict = ('<span class="bad">yes</span>' if sensor in failing else "no") if diagnosis else "–"
+        ratios = ([None, None] if on_interval_scale(run.units[sensor])  # a mean in °C depends on the zero
+                  else [test.get("cv_rmse_percent"), test.get("nmbe_percent")])
         rows.append([_breakable(sensor), _number(train.get("rmse")), _number(test.get("rmse")),
-                     _number(test.get("mae")), _number(test.get("r2")), _number(test.get("cv_rmse_percent")),
-                     _number(test.get("nmbe_percent")), html.escape(unit_label(run.units[sensor])), verdict])
+                     _number(test.get("mae")), _number(test.get("r2")), *map(_number, ratios),
+                     html.escape(unit_label(run.units[sensor])), verdict])
     out = ["<h2>Measured against the model, per sensor</h2>",
            _table(["sensor", "train RMSE", "test RMSE", "test MAE", "test R²", "CV(RMSE) %", "NMBE %", "unit",
                    "located failure"], rows, "metrics")]
@@ -151,10 +154,11 @@ def _topology_section(store: GraphStore, run: StoredRun, diagnosis: StoredDiagno
     topology = FlowTopology.from_store(store, run.model)
     heat = {(r["from"].value, r["to"].value) for r in store.run_named_query("flow-edges", dataset=run.model)
             if r["kind"].value == "heat"}
-    svg = topology_svg(topology, set(run.units) | _boundary_nodes(store, run.model),
+    inputs = _boundary_nodes(store, run.model)
+    svg = topology_svg(topology, set(run.units) | inputs,
                        suspects=diagnosis.suspects if diagnosis else set(),
                        failing=diagnosis.failing_sensors if diagnosis else set(),
-                       matching=diagnosis.matching_sensors if diagnosis else set(), heat_edges=heat)
+                       matching=diagnosis.matching_sensors if diagnosis else set(), heat_edges=heat, inputs=inputs)
     key = "".join(f'<li><span class="swatch" style="{style}"></span>{html.escape(meaning)}</li>'
                   for style, meaning in TOPOLOGY_KEY)
     out.append(f'<figure>{_img(svg.encode("utf-8"), "image/svg+xml", f"flow topology of {run.model}", "topology")}'

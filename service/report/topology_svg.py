@@ -34,6 +34,7 @@ TOPOLOGY_KEY = (
     (f"background:#fff;border:3px solid {_GREEN};border-radius:8px", "matching sensor"),
     (f"background:{_FILL};border:1.2px solid {_BORDER}", "component"),
     (f"background:#fff;border:1.2px solid {_BORDER};border-radius:8px", "sensor"),
+    (f"background:#fff;border:2px dashed {_BORDER};border-radius:8px", "input sensor (fed to the model, not compared)"),
     (f"border-top:2px solid {_EDGE};height:0", "fluid flow"),
     (f"border-top:2px dashed {_HEAT};height:0", "heat transfer"),
     (f"border-top:2px dotted {_EDGE};height:0", "observes"),
@@ -85,12 +86,15 @@ def _label_lines(iri: str, width: int = _LABEL_CHARS) -> list[str]:
 def topology_svg(
     topology: FlowTopology, sensors: set[str], *, suspects: set[str] = frozenset(),
     failing: set[str] = frozenset(), matching: set[str] = frozenset(), heat_edges: set[tuple[str, str]] = frozenset(),
+    inputs: set[str] = frozenset(),
 ) -> str:
     """The flow topology as an SVG document: nodes in columns along the flow (left to right), fluid
     edges solid, heat edges dashed, loop edges curved back underneath; a sensor off the flow path sits
     below the node it observes, joined by a dotted line. Suspects are drawn red, failing sensors with
-    a red border, matching sensors with a green one (``class`` attributes ``suspect``, ``failing``,
-    ``matching`` and ``data-node`` say the same for machines)."""
+    a red border, matching sensors with a green one, the ``inputs`` (sensors the model takes as
+    boundary inputs: never compared, neither matching nor failing) with a dashed one (``class``
+    attributes ``suspect``, ``failing``, ``matching``, ``input`` and ``data-node`` say the same for
+    machines)."""
     downstream, upstream = topology.physical_paths()  # a control loop's edges are the walks', not drawn
     flow_nodes = sorted(set(topology.downstream) | set(topology.upstream))
     layer, back = _layers(flow_nodes, downstream)
@@ -161,7 +165,7 @@ def topology_svg(
     for n in sorted(box):
         x, y, w = box[n]
         classes = ["node", "sensor" if n in sensors else "component"]
-        marks = (("suspect", suspects), ("failing", failing), ("matching", matching))
+        marks = (("suspect", suspects), ("failing", failing), ("matching", matching - inputs), ("input", inputs))
         classes += [mark for mark, members in marks if n in members]
         first = y + _BOX_H / 2 + 4 - (len(lines[n]) - 1) * _LINE_PX / 2
         text = "".join(f'<tspan x="{x + w / 2:.0f}" y="{first + k * _LINE_PX:.0f}">{html.escape(line)}</tspan>'
@@ -174,7 +178,7 @@ def topology_svg(
              f".node rect{{fill:{_FILL};stroke:{_BORDER};stroke-width:1.2}}.sensor rect{{fill:#fff}}"
              f".suspect rect{{fill:{_SUSPECT};stroke:{_RED};stroke-width:2.5}}"
              f".failing rect{{stroke:{_RED};stroke-width:3}}"
-             f".matching rect{{stroke:{_GREEN};stroke-width:3}}"
+             f".matching rect{{stroke:{_GREEN};stroke-width:3}}.input rect{{stroke-width:2;stroke-dasharray:5 3}}"
              f".edge{{fill:none;stroke:{_EDGE};stroke-width:1.4}}.heat{{stroke:{_HEAT};stroke-dasharray:6 3}}"
              ".observes{stroke-dasharray:2 3}")
     return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0f}" height="{height:.0f}" '

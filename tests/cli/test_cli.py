@@ -39,6 +39,10 @@ def test_assemble_prints_tables_a_terminal_of_80_columns_can_read(monkeypatch):
     assert "coil_outlet_air_temperature_se" in result.output and "°C" in result.output  # names fold, not cut
     assert "HotWaterLoop/heating_" in result.output and "Fan/supply_fan" in result.output  # signature/node
     assert "…" not in result.output
+    # a value the graph states is "mapped", one the model sets from what is measured "fixed"
+    flat = " ".join(result.output.split())
+    assert "3 mapped, 1 fixed by what is measured and 17 estimated parameters" in flat
+    assert "impeller_heat_share" in result.output and "fixed 0.3" in flat
 
 
 def test_a_broken_model_fails_with_line_and_column(tmp_path):
@@ -315,6 +319,26 @@ def test_query_prints_csv_or_json_with_full_iris_and_refuses_an_unknown_model(tm
     assert code == 2 and "query flow-edges reads a building model's graphs: give --model" in output
 
 
+def test_query_runs_a_select_query_of_ones_own_and_names_the_file_of_a_bad_one(tmp_path):
+    store = ["--store", str(tmp_path / "store")]
+    assert _run(["assemble", str(CASE_STUDY), *store])[0] == 0
+    fans = tmp_path / "fans.rq"
+    fans.write_text("PREFIX s4bldg: <https://saref.etsi.org/saref4bldg/>\n"
+                    "SELECT ?fan WHERE { ?fan a s4bldg:Fan }\n")
+    code, output = _run(["query", str(fans), "--model", "ventilation_case_study", *store])
+    assert code == 0 and [r["fan"] for r in csv.DictReader(io.StringIO(output))] == [EX + "supply_fan"], output
+    broken = tmp_path / "broken.rq"
+    broken.write_text("SELECT ?x WHERE { ?x ?p }")
+    code, output = _run(["query", str(broken), "--model", "ventilation_case_study", *store])
+    assert code == 2 and f"{broken}: SPARQL syntax error: error at 1:" in output.replace("\n", "")
+    asked = tmp_path / "ask.rq"
+    asked.write_text("ASK { ?s ?p ?o }")
+    code, output = _run(["query", str(asked), "--model", "ventilation_case_study", *store])
+    assert code == 2 and "not a SELECT query" in output
+    code, output = _run(["query", str(tmp_path / "missing.rq"), *store])
+    assert code == 2 and "missing.rq: no such file" in output
+
+
 def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(tmp_path):
     data = tmp_path / "data.csv"
     assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "2", "--seed", "3",
@@ -332,7 +356,7 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
     assert no_start.exit_code == 2 and "start from 'v0': no such model in the store" in no_start.output
 
 
-def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():
+def test_a_regime_the_test_window_never_enters_is_left_out_and_said_so():
     from types import SimpleNamespace
 
     from service.cli import printing
@@ -345,7 +369,8 @@ def test_a_regime_the_test_window_never_enters_reads_a_dash_not_nan():
         printing.print_regimes(record)
     rows = {line.split("│")[1].strip(): line for line in captured.get().splitlines() if line.count("│") > 2}
     assert "0.31 °C" in rows["setpoint > 18.5 °C"]
-    assert "nan" not in rows["setpoint ≤ 14 °C"] and "–" in rows["setpoint ≤ 14 °C"]
+    assert "setpoint ≤ 14 °C" not in rows and "nan" not in captured.get()
+    assert "1 regime(s) the test window never enters left out" in captured.get()
 
 
 def test_the_command_line_starts_without_the_calibration_libraries():

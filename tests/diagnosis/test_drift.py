@@ -18,9 +18,17 @@ from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
 from service.data.synthetic import generate_synthetic_data
 from service.diagnosis.candidates import rank_catalog
-from service.diagnosis.drift import MAX_PARAMETERS_PER_COMPONENT, MIN_SENSITIVITY, DriftEvidence, drift_candidates
+from service.diagnosis.drift import (
+    MAX_PARAMETERS_PER_COMPONENT,
+    MIN_SENSITIVITY,
+    DriftEvidence,
+    drift_beyond_range,
+    drift_candidates,
+    drift_sentence,
+)
 from service.diagnosis.loop import diagnose, noise_level
 from service.graph.store import GraphStore
+from service.graph.units import quantity_text
 from service.model.assembled_model import ParameterDrift
 from service.model.assembly import assemble
 from service.model.simulator import loop_substeps
@@ -171,6 +179,37 @@ def test_each_failing_sensor_gets_the_drifts_that_would_show_at_it(case_data):
                                                                         noise=noise)}
     assert tried == expected and len(expected) > MAX_PARAMETERS_PER_COMPONENT, (sorted(tried), moved)
     assert len(fixed) == 4 and not tried & fixed  # a pipe's water content, a coil's heat capacity: never tried
+
+
+def test_a_drift_that_takes_its_parameter_out_of_its_range_is_implausible_and_ends_in_its_unit(case_data):
+    """A drift fitted past what the component can be (a school AHU's outdoor-air fraction drifted to
+    1.19, its range 0.5–1) is demoted with the value it reaches; inside the range nothing is said."""
+    md = case_data
+    test, fit = slice(150, 288), slice(36, 150)
+    coil = md.model.component_for_node(COIL).iri
+    noise = {EX + "coil_inlet_water_temperature_sensor": 0.1, EX + "coil_outlet_water_temperature_sensor": 0.1}
+    candidates = drift_candidates(md, md.default_theta(), [coil], test=test, fit_windows=[fit], noise=noise)
+    for candidate in candidates:
+        model = candidate.model
+        refs = model.estimated_parameters
+        drift = model.drifts[0]
+        column = next(j for j, r in enumerate(refs) if r.key == drift.parameter_key)
+        spec = refs[column].spec
+        theta = np.append(md.default_theta(), 0.0)
+        theta[column] = 0.9 * spec.upper
+        days = (test.stop - 1 - drift.onset_s / md.data.step_s) * md.data.step_s / 86400.0
+        size = 0.5 if drift.shape == "step" else 0.5 / days  # 1.35 × the upper bound by the end
+        theta[-1] = size
+        reason = drift_beyond_range(model, theta, md.data.step_s, test.stop - 1)
+        assert f"the {spec.name} it drifts to, " in reason and "lies outside its range" in reason, reason
+        assert f"{1.35 * spec.upper:.4g}" in reason
+        theta[-1] = size / 10  # 0.945 × the upper bound: inside
+        assert drift_beyond_range(model, theta, md.data.step_s, test.stop - 1) == ""
+        sentence = drift_sentence(model, theta, np.full(theta.size, 0.01), md.data.timestamps, md.data.step_s,
+                                  test.stop - 1)
+        reached = theta[column] * (1.0 + theta[-1] * (days if drift.shape == "linear" else 1.0))  # 0.945 × upper
+        assert quantity_text(reached, spec.unit, ".4g") in sentence, sentence  # a plain number ("1") shows no unit
+    assert {c.model.drifts[0].shape for c in candidates} == {"linear", "step"}
 
 
 # --- drift found where it is, and not where it is not ----------------------------------------------

@@ -122,3 +122,17 @@ def test_when_nothing_explains_a_failure_the_summary_describes_its_residual():
     assert "its error is largest where fan speed > 0.5 (RMSE 1.1 °C over 60 % of the test window)" in summary
     assert "it follows measured outdoor_temperature 30 min earlier (ρ = +0.81" in summary
     assert report.to_dict()["residual_trend"][node]["per_day"] == 0.31
+
+
+def test_one_signal_under_two_names_is_ranked_once_the_first_name_kept():
+    from service.diagnosis.residual_dependence import distinct_signals
+
+    rng = np.random.default_rng(4)
+    speed = rng.uniform(0.2, 1.0, 300)
+    speed[5] = np.nan
+    flow = 1.2 * 2.4 * speed + rng.normal(0, 0.005, 300)  # ρ ≈ 0.9999 with the speed
+    other = rng.normal(size=300)
+    kept = distinct_signals({"measured speed": speed, "model fan.measured_value": speed.copy(),
+                             "model fan.outlet_air_mass_flow": flow, "measured outdoor": other,
+                             "flat": np.ones(300)})
+    assert list(kept) == ["measured speed", "measured outdoor", "flat"]

@@ -207,8 +207,10 @@ def test_the_localisation_is_drawn_on_the_topology_with_the_suspects_highlighted
     assert "heating_valve" in suspects
     assert {n for n, classes in drawn.items() if "suspect" in classes} == suspects
     assert {n for n, classes in drawn.items() if "failing" in classes} == {_short(loc.failing_sensor) for loc in locations}
-    assert {n for n, classes in drawn.items() if "matching" in classes} == {
-        _short(loc.matching_sensor) for loc in locations if loc.matching_sensor and not loc.upstream_fails}
+    bounded = {_short(loc.matching_sensor) for loc in locations if loc.matching_sensor and not loc.upstream_fails}
+    inputs = {_short(loc.matching_sensor) for loc in locations if loc.matching_is_input}
+    assert {n for n, classes in drawn.items() if "matching" in classes} == bounded - inputs
+    assert inputs and {n for n, classes in drawn.items() if "input" in classes} >= inputs  # inputs are not compared
     # the whole flow topology is drawn, components and sensors apart
     assert {"supply_fan", "pump", "heating_coil_air_side", "supply_water_temperature_sensor"} <= set(drawn)
     assert "component" in drawn["pump"] and "sensor" in drawn["supply_water_temperature_sensor"]
@@ -309,7 +311,8 @@ def test_the_topology_drawing_cuts_a_recirculation_loop_and_places_off_path_sens
              (x + "supply_sensor", x + "zone"), (x + "zone", x + "return_sensor"), (x + "return_sensor", x + "mixing_box")]
     topology = FlowTopology(edges, {x + "fan_power_meter": x + "fan"})
     svg = topology_svg(topology, {x + "supply_sensor", x + "return_sensor", x + "fan_power_meter"},
-                       suspects={x + "fan"}, failing={x + "supply_sensor"}, matching={x + "return_sensor"})
+                       suspects={x + "fan"}, failing={x + "supply_sensor"},
+                       matching={x + "return_sensor", x + "fan_power_meter"}, inputs={x + "fan_power_meter"})
     root = ET.fromstring(svg)  # well-formed
     ns = {"svg": "http://www.w3.org/2000/svg"}
     nodes = {g.get("data-node"): g for g in root.iterfind("svg:g", ns)}
@@ -317,6 +320,7 @@ def test_the_topology_drawing_cuts_a_recirculation_loop_and_places_off_path_sens
     assert nodes["fan"].get("class") == "node component suspect"
     assert nodes["supply_sensor"].get("class") == "node sensor failing"
     assert nodes["return_sensor"].get("class") == "node sensor matching"
+    assert nodes["fan_power_meter"].get("class") == "node sensor input"  # an input is never compared: not "matching"
     x_of = {n: float(g.find("svg:rect", ns).get("x")) for n, g in nodes.items()}
     y_of = {n: float(g.find("svg:rect", ns).get("y")) for n, g in nodes.items()}
     along = ["outdoor_air", "mixing_box", "fan", "supply_sensor", "zone", "return_sensor"]
@@ -370,8 +374,9 @@ def test_graphtwin_report_writes_the_page_from_an_on_disk_store(case, tmp_path):
     assert without.exit_code == 0 and f"{case.data.name}: no such file" in without.output, without.output
     assert "give its path with --data" in without.output and "no measured-vs-model plots" in without.output
     unknown = CliRunner().invoke(cli, ["report", "case-point-00000000", "-o", str(tmp_path / "x.html"),
-                                       "--store", str(folder)])
+                                       "--store", str(folder)], env={"COLUMNS": "400"})
     assert unknown.exit_code == 2 and "no calibration run 'case-point-00000000'" in unknown.output
+    assert f"at {folder} (--store: the folder the run was written to)" in unknown.output  # the store searched
     assert not (tmp_path / "x.html").exists()
 
 
@@ -530,6 +535,19 @@ def test_the_cli_table_of_effects_says_what_significant_and_score_mean_and_cuts_
     first_column = "".join(line.split("│")[1].strip() for line in effects_table if line.startswith("│"))
     assert first_column == "".join(e.effect for e in case.report.effects)  # every name whole, in rank order
 
+
+
+def test_the_report_command_the_diagnosis_prints_names_a_store_other_than_the_default(case, monkeypatch, tmp_path):
+    from service.cli.common import DEFAULT_STORE, console
+    from service.cli.printing import print_diagnosis
+
+    monkeypatch.setattr(console, "_width", 400)
+    for store, expected in ((tmp_path / "elsewhere", f" --store {tmp_path / 'elsewhere'} -o report.html"),
+                            (DEFAULT_STORE, "-diagnosis -o report.html")):
+        with console.capture() as captured:
+            print_diagnosis(case.report, data=Path.cwd() / "data.csv", store=store)
+        assert f"graphtwin report {case.report.run_id}-diagnosis" in captured.get()
+        assert expected in captured.get(), captured.get()
 
 
 def test_the_cli_says_why_a_catalog_effect_was_not_tried(case):
