@@ -237,15 +237,17 @@ def _catalog_claimed(row: dict) -> bool:
 
 
 def table(rows: list[dict]) -> str:
-    """Per cell: runs; the right effect at the right node first and significant; the right effect
+    """Per cell: runs; the right effect at the right node first and significant; the right effect at
+    the right node ranked first, significant or not (the issue's "right-first"); the right effect
     named indistinguishable from a significant answer instead; anything significant; for a fault
     outside the catalog, a catalog effect claimed (significant); the median share of the affected
     sensor's held-out error the top candidate and the true candidate remove; the true candidate's
     rank; the most common top candidate; the median signal the fault leaves at the sensor it moves most,
     × that sensor's noise σ (plant-side, :func:`affected_sensor`)."""
-    lines = ["| cell | runs | right first | right as look-alike | any significant | catalog effect claimed | "
-             "removed by top | removed by true | true rank | top candidate (most often) | signal at its sensor |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| cell | runs | right first | ranked first | right as look-alike | any significant | "
+             "catalog effect claimed | removed by top | removed by true | true rank | top candidate (most often) | "
+             "signal at its sensor |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     cells: dict[str, list[dict]] = {}
     for row in rows:
         cells.setdefault(row["cell"], []).append(row)
@@ -254,12 +256,40 @@ def table(rows: list[dict]) -> str:
         ranks = [r["true_rank"] for r in group if r["true_rank"] is not None]
         top, count = Counter(r["top"] + (" (sig.)" if r["top_significant"] else "") for r in group).most_common(1)[0]
         lines.append(f"| {cell} | {len(group)} | {_rate(group, 'right_first') if catalog else '–'} | "
+                     f"{_count(group, _ranked_first) if catalog else '–'} | "
                      f"{_rate(group, 'true_lookalike') if catalog else '–'} | {_rate(group, 'any_significant')} | "
                      f"{_count(group, _catalog_claimed) if group[0]['group'] == 'outside' else '–'} | "
                      f"{_median([r['share_removed'] for r in group])} | "
                      f"{_median([r['true_share_removed'] for r in group]) if catalog else '–'} | "
                      f"{statistics.median(ranks) if ranks else '–'} | {top} ×{count} | {_signal(group)} |")
     return "\n".join(lines)
+
+
+def _ranked_first(row: dict) -> bool:
+    """The right effect at the right node at the top of ``row``'s ranking, significant or not."""
+    return row["true_rank"] == 1
+
+
+def goals(rows: list[dict]) -> str:
+    """The issue's goals on ``rows``, each as counted: right first and significant, and ranked first
+    (either), on the clear and the subtle sizes; anything significant on fault-free data; a catalog
+    effect claimed outside the catalog."""
+    def share(holds, size: str) -> str:
+        group = [r for r in rows if r["group"] == "catalog" and r["cell"].endswith(f"({size})")]
+        count = sum(map(holds, group))
+        return f"{count}/{len(group)} = {count / len(group):.0%}" if group else "–"
+
+    free = [r for r in rows if r["group"] == "fault-free"]
+    outside = [r for r in rows if r["group"] == "outside"]
+    return "\n".join([
+        f"right first and significant: clear {share(lambda r: r['right_first'], 'clear')} (goal ≥ 90 %), "
+        f"subtle {share(lambda r: r['right_first'], 'subtle')} (goal ≥ 60 %)",
+        f"ranked first, significant or not: clear {share(_ranked_first, 'clear')}, "
+        f"subtle {share(_ranked_first, 'subtle')}",
+        f"fault-free, anything significant: {_count(free, lambda r: r['any_significant'])} (goal ≤ 5 %)",
+        f"outside the catalog, a catalog effect claimed: {_count(outside, _catalog_claimed)} "
+        "(goal: in at most 1 of 5 per fault)",
+    ])
 
 
 def _signal(rows: list[dict]) -> str:
@@ -288,7 +318,13 @@ def main() -> None:
                         help="every selected fault at this size, not its clear and subtle ones (a detection curve)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", type=Path, default=None, help="write every run's row here")
+    parser.add_argument("--table-from", type=Path, default=None,
+                        help="print the table and goals of rows written by --json, without diagnosing")
     args = parser.parse_args()
+    if args.table_from:
+        rows = json.loads(args.table_from.read_text())
+        print(table(rows) + "\n\n" + goals(rows))
+        return
     if args.quick:
         args.seeds = args.free_seeds = args.outside_seeds = 1
     started = time.perf_counter()
@@ -314,7 +350,7 @@ def main() -> None:
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     print()
-    print(table(rows))
+    print(table(rows) + "\n\n" + goals(rows))
     print(f"\nmatrix wall time: {wall:.0f} s for {len(rows)} diagnoses ({args.workers} processes)")
 
 
