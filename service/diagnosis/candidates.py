@@ -290,11 +290,15 @@ def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: di
     norm = float(np.sqrt(np.sum(r**2) * np.sum(c**2)))
     cosine = float(np.sum(r * c)) / norm if norm > 0 else 0.0
     removed = 1.0 - mean_square(after, best) / max(mean_square(null, best), 1e-300)
+    overall = evidence.test_improvement
+    against_base = (f"against the base model it removes {100 * overall:.0f} % of the test error over all sensors"
+                    if overall >= 0 else
+                    f"against the base model the test error over all sensors grows {100 * -overall:.0f} %")
     evidence.explanation = (
         (f"{lead}; " if lead else "")
         + f"residual on {local_name(best)} follows what {what} adds (cosine {cosine:.2f}); "
-        f"it removes {100 * removed:.0f} % of that sensor's test error ({100 * evidence.test_improvement:.0f} % over all "
-        f"sensors); {fit_text}"
+        f"it removes {100 * removed:.0f} % of that sensor's test error (the refit's other parameters kept); "
+        f"{against_base}; {fit_text}"
     )
 
 

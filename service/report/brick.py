@@ -11,6 +11,7 @@ points off the flow path. The rules for each: ``docs/report.md``, "The Brick rep
 from __future__ import annotations
 
 import difflib
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from rich.table import Table
 
 from service.errors import InputError, NotFoundError
 from service.graph.alignment_derivation import rule_terms
-from service.graph.namespaces import local_name
+from service.graph.namespaces import compact_iri, local_name, namespace_of
 from service.graph.rdf_io import parse_rdf, rdf_format
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
@@ -150,6 +151,16 @@ def _rule_terms() -> frozenset[str]:
     return frozenset(t for t in rule_terms() if t.startswith((BRICK, REF, REC)))
 
 
+#: An IRI inside a sentence (up to the characters that end one there).
+_IRI = re.compile(r"https?://[^\s<>`'\"(),;]+")
+
+
+def _compact(iri: str) -> str:
+    """A prefixed name where graphtwin knows the namespace (``unit:PERCENT``), else the local name."""
+    compact = compact_iri(iri)
+    return local_name(iri) if compact.startswith("<") else compact
+
+
 def _short(iri: str) -> str:
     for prefix, namespace in (("brick:", BRICK), ("rec:", REC), ("ref:", REF)):
         if iri.startswith(namespace):
@@ -172,7 +183,7 @@ def _class_hint(class_iri: str, known: set[str], official: frozenset[str] | None
         close = _close_names(local, known)
         hint = f" (if misspelt: {', '.join(close)}?)" if close else ""
         return (f"not in {subset}, so no rule reads it: a point or equipment graphtwin does not model, or a class "
-                f"that is not official Brick{hint}")
+                f"that is not official Brick{hint}; --brick-ontology Brick.ttl tells which")
     if class_iri in official:
         return ("official Brick, not in graphtwin's subset (ontologies/brick-subset.ttl): not modelled; a rule in "
                 "queries/alignment/ (for equipment also a signature) would be needed")
@@ -258,16 +269,20 @@ def print_brick_report(report: BrickReport, console: Console | None = None) -> N
     if report.unread_relations:
         table = Table(title="Brick relations no alignment rule reads")
         for column in ("relation", "triples", "what it means"):
-            table.add_column(column)
+            table.add_column(column, overflow="fold")
         for r in report.unread_relations:
             table.add_row(_short(r.predicate), str(r.count), r.needed)
         console.print(table)
     if report.assumptions:
-        table = Table(title="Assumptions made where the model is ambiguous")
+        texts = [(a.about, a.assumption, a.resolved_by, a.rule) for a in report.assumptions]
+        namespaces = sorted({namespace_of(iri) for row in texts for text in row for iri in _IRI.findall(text)
+                             if compact_iri(iri).startswith("<")})
+        table = Table(title="Assumptions made where the model is ambiguous",
+                      caption=f"nodes by their local names, in {', '.join(namespaces)}" if namespaces else None)
         for column in ("about", "assumed", "state this to remove it", "rule"):
-            table.add_column(column)
-        for a in report.assumptions:
-            table.add_row(a.about, a.assumption, a.resolved_by, a.rule)
+            table.add_column(column, overflow="fold")
+        for row in texts:
+            table.add_row(*(_IRI.sub(lambda m: _compact(m.group(0)), text) for text in row))
         console.print(table)
     for title, points, needed in (
         ("Points with no column (ref:hasTimeseriesId or rdfs:label)", report.points_without_column,

@@ -82,6 +82,8 @@ def test_the_hidden_effect_ranks_first_and_adding_it_halves_the_error(tmp_path, 
         assert best.rmse_after[node] <= max(0.5 * best.rmse_before[node], 1.1 * noise[node]), (
             node, best.rmse_before, best.rmse_after)
     assert best.explanation and effect in report.summary
+    assert ("that sensor's test error (the refit's other parameters kept); against the base model it removes "
+            f"{100 * best.test_improvement:.0f} % of the test error over all sensors") in best.explanation
     # one story: the answer is located on the flow path, at the sensors where it removes error
     shown = [n for n, verdict in report.sensors.items() if verdict.located]
     assert shown and all(best.error_removed_at(n) >= 0.2 or report.sensors[n].fails for n in shown)
