@@ -143,7 +143,7 @@ def diagnose(
                                        {node: verdict.noise for node, verdict in sensors.items()})
     say("locating the failures")
     localization = locate({n: s.located for n, s in sensors.items()})
-    regimes = _regimes_with_worst(base.regimes.rows(), sensors)
+    regimes = _regimes_with_worst(base.regimes.rows(), sensors, test_slice.stop - test_slice.start)
     episodes: dict[str, list[Episode]] = {}
     for node in observed:
         found = find_episodes(data.timestamps[test_slice], observed[node], residual=residuals[node],
@@ -168,12 +168,17 @@ def diagnose(
     return report
 
 
-def _regimes_with_worst(regimes: list[dict], sensors: Mapping[str, SensorVerdict]) -> list[dict]:
+def _regimes_with_worst(regimes: list[dict], sensors: Mapping[str, SensorVerdict], test_steps: int) -> list[dict]:
     """The calibration's regime rows, each with ``"worst"``: True for the one with the largest mean
-    RMSE / noise over its sensors (none when no regime with a share has a finite one)."""
+    RMSE / noise over its sensors among those holding at least :data:`MIN_TEST_STEPS` of the
+    ``test_steps`` (an RMSE over a step or two is a spike's, not a regime's; all when none does; none
+    when no regime with a share has a finite one)."""
     scaled = [np.array([r["rmse"][k] / sensors[k].noise for k in r["rmse"]]) for r in regimes]
     scaled = [float(np.nanmean(s)) if r["share"] > 0 and np.isfinite(s).any() else np.nan
               for r, s in zip(regimes, scaled)]
+    held = [r["share"] * test_steps >= MIN_TEST_STEPS for r in regimes]
+    if any(h and np.isfinite(v) for h, v in zip(held, scaled)):
+        scaled = [v if h else np.nan for h, v in zip(held, scaled)]
     for row in regimes:
         row["worst"] = False
     if np.isfinite(scaled).any():

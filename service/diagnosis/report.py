@@ -65,7 +65,8 @@ class DiagnosisReport:
     """Everything ``diagnose`` found (see :meth:`to_dict` for the CLI contract).
 
     ``regimes``: the calibration's rows (``{"regime", "rule", "share", "rmse": {sensor: value}}``)
-    with ``"worst"`` marking the one with the largest mean RMSE / noise; ``residual_dependence``: per
+    with ``"worst"`` marking the one with the largest mean RMSE / noise (of those spanning at least
+    ``MIN_TEST_STEPS`` steps); ``residual_dependence``: per
     failing sensor, the (up to three) signals its residual follows, described with ``step_s`` (the
     data's sampling interval, s), and ``residual_trend`` its trend in time; ``effects_tested``: False
     for ``graphtwin compare``.

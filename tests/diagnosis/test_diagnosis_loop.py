@@ -155,6 +155,25 @@ def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tm
     assert abs(estimate - truth) <= 3.0 * standard_error < 0.15, (estimate, truth, standard_error)
 
 
+def test_the_worst_regime_spans_enough_steps_to_be_a_regime_not_a_spike():
+    """A fan start-up regime of one step with an 11 K spike was named the school AHU's worst over the
+    half day with a steady 2.5 K misfit; a regime needs MIN_TEST_STEPS steps to be named worst."""
+    from service.diagnosis.loop import MIN_TEST_STEPS, _regimes_with_worst
+    from service.diagnosis.report import SensorVerdict
+
+    node = "urn:x#mat"
+    verdict = SensorVerdict(rmse=3.0, mae=2.0, cv_rmse_percent=1.0, nmbe_percent=0.0, r2=0.5, unit="degC",
+                            noise=0.1, fails=True)
+    rows = [{"regime": 0, "rule": "start-up", "share": 1 / 96, "rmse": {node: 11.4}},
+            {"regime": 1, "rule": "fan on", "share": 0.5, "rmse": {node: 2.5}},
+            {"regime": 2, "rule": "fan off", "share": 95 / 192, "rmse": {node: 0.3}}]
+    assert [r["worst"] for r in _regimes_with_worst([dict(r) for r in rows], {node: verdict}, 96)] == [
+        False, True, False]
+    assert rows[0]["share"] * 96 < MIN_TEST_STEPS <= rows[1]["share"] * 96  # one step against 48
+    short = [dict(r, share=r["share"] / 10) for r in rows]  # no regime spans enough: the largest RMSE
+    assert [r["worst"] for r in _regimes_with_worst(short, {node: verdict}, 96)] == [True, False, False]
+
+
 def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():
     """A 500 W meter read 4 W (0.8 %) low with 0.3 W of noise: within its ±1 % accuracy, so its noise
     level is 5 W (1 % of the reading), not 1 % of the small residual — it does not "fail"."""
