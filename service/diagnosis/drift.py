@@ -226,8 +226,9 @@ def _drifted(model: AssembledModel, theta: np.ndarray, step_s: float, end: int) 
 
 
 def drift_beyond_range(model: AssembledModel, theta: np.ndarray, step_s: float, end: int) -> str:
-    """Why a fitted drift is implausible: the parameter it moves leaves its range (the prior's bounds,
-    which hold what the component can physically be) by data step ``end``; empty when it stays."""
+    """Why a fitted drift is implausible: the parameter it moves leaves its range (the prior's bounds:
+    what the component is built and run for, a physical limit for a fraction) by data step ``end``;
+    empty when it stays."""
     ref, _, later = _drifted(model, theta, step_s, end)
     spec = ref.spec
     slack = BOUND_SHARE * (spec.upper - spec.lower)
