@@ -270,8 +270,9 @@ def _history_section(store: GraphStore, run: StoredRun) -> str:
     rows.append(["tested on"] + [html.escape(t) for t in history.tested_on])
     out.append(_table(["sensor"] + [_breakable(v) for v in versions], rows, "history"))
     if history.regime_rmse:
-        rows = [[str(number), _rule(rule), _breakable(s)] + cells(values, s)
-                for number, (rule, sensors) in enumerate(history.regime_rmse.items()) for s, values in sensors.items()]
+        numbers = {r["rule"]: html.escape(str(r["regime"])) for r in run.regimes}  # this run's, as above
+        rows = [[numbers.get(rule, "–"), _rule(rule), _breakable(s)] + cells(values, s)
+                for rule, sensors in history.regime_rmse.items() for s, values in sensors.items()]
         out.append(_table(["regime", "rule", "sensor"] + [_breakable(v) for v in versions], rows, "history-regimes",
                           rule_column=1))
     picture = _png(error_history_figure(history))

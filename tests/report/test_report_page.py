@@ -266,6 +266,10 @@ def test_the_error_history_compares_the_model_versions(case, page):
     assert "tested on different data or windows" not in page
     assert parsed.tables["history-regimes"][0] == ["regime", "rule", "sensor", *versions]
     assert [row[1] for row in parsed.tables["regimes"][1:]] == [r["rule"] for r in case.report.regimes]
+    # a regime keeps the number the page's regime table gives it (they had been numbered 0, 1, … apart)
+    number_of = {row[1]: row[0] for row in parsed.tables["regimes"][1:]}
+    assert all(row[0] == number_of.get(row[1], "–") for row in parsed.tables["history-regimes"][1:])
+    assert any(row[0] != "–" for row in parsed.tables["history-regimes"][1:])
     history = next(i for i in parsed.images if i["class"] == "history")
     assert Image.open(io.BytesIO(image_bytes(history, "image/png"))).size[0] > 500
 
