@@ -71,14 +71,15 @@ def _text(signature: Signature, triple: PatternTriple) -> str:
 
 def _missing(signature: Signature, triple: PatternTriple, matched: Sequence[Match], reached: set[str]) -> str:
     """The missing ``triple`` in words, with what its ends are (the nodes ``matched`` for those
-    ``reached``), and the triple to add."""
+    ``reached``), and the triple to add: a matched node by name where it is the only one, else
+    ``<id>`` (one of those listed: naming the first would pick among them for the user)."""
     ends, terms = [], []
     for node_id in (triple.subject, triple.object):
         names = _names(matched, node_id) if node_id in reached and not signature.nodes[node_id].iri else []
         if names:
             shown = " or ".join(names[:_NAMED]) + (f" (or {len(names) - _NAMED} more)" if len(names) > _NAMED else "")
             ends.append(f"?{node_id} {shown}")
-            terms.append(names[0])
+            terms.append(names[0] if len(names) == 1 else f"<{node_id}>")
         elif signature.nodes[node_id].iri:
             ends.append(_term(signature, node_id))
             terms.append(_term(signature, node_id))
