@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script:
 
 from service.components.library import SignatureLibrary  # noqa: E402
 from service.diagnosis.candidates import effect_candidates  # noqa: E402
-from service.diagnosis.drift import DriftEvidence  # noqa: E402
+from service.diagnosis.drift import DriftEvidence, drifting_parameter  # noqa: E402
 from service.diagnosis.loop import diagnose  # noqa: E402
 from service.graph.store import GraphStore  # noqa: E402
 from service.resources import examples_dir  # noqa: E402
@@ -224,16 +224,12 @@ def _median(values: list) -> str:
     return f"{statistics.median(known):.0%}" if known else "–"
 
 
-#: How a drift candidate's name starts (``service.diagnosis.drift.drift_identity``).
-DRIFT_PREFIXES = ("LinearDrift/", "StepDrift/")
-
-
 def _catalog_claimed(row: dict) -> bool:
     """A catalog effect significant in ``row`` (a parameter drift, the generic candidate for what the
     catalog lacks, is none); computed from its candidates where the row predates the key."""
     if "catalog_claimed" in row:
         return row["catalog_claimed"]
-    return any(c["significant"] and not c["candidate"].startswith(DRIFT_PREFIXES) for c in row["candidates"])
+    return any(c["significant"] and drifting_parameter(c["candidate"]) is None for c in row["candidates"])
 
 
 def table(rows: list[dict]) -> str:
