@@ -17,8 +17,22 @@ __all__ = [
 ]
 
 
+def _rebuilt(cls: type, args: tuple, state: dict) -> GraphtwinError:
+    """An error unpickled as it was sent: its message and attributes, without calling its
+    constructor (whose arguments are not its message: ``IncompleteModelError(message)`` would list
+    the message's characters as problems)."""
+    error = cls.__new__(cls)
+    Exception.__init__(error, *args)
+    error.__dict__.update(state)
+    return error
+
+
 class GraphtwinError(Exception):
-    """Base of every error a user can act on; the message says what is wrong and where."""
+    """Base of every error a user can act on; the message says what is wrong and where. Pickles as
+    it is (a job's error comes back from a worker process or a Dask worker)."""
+
+    def __reduce__(self):
+        return _rebuilt, (type(self), self.args, dict(self.__dict__))
 
 
 class InputError(GraphtwinError, ValueError):

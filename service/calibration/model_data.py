@@ -230,6 +230,11 @@ class ModelData:
                 values = values.copy()
                 values[:settling] = np.nan
                 observed.setdefault(node, []).append(values)
+        empty = [node for node, parts in observed.items() if not any(np.isfinite(p).any() for p in parts)]
+        if empty:
+            raise CalibrationError("; ".join(
+                f"target {local_name(node)} (column {self.data.columns.get(node, '?')!r}) has no measurements in the "
+                "window beyond its warm-up: choose a window where the column has values" for node in empty))
         columns = [np.concatenate([self._gp_input_series(name, w) for w in windows]) for name in gp_inputs]
 
         def simulate(theta: np.ndarray) -> dict[str, np.ndarray]:

@@ -355,7 +355,8 @@ def read_measurements(
             problems.append(f"column {header[column]!r}: device {node} declares no unit (saref:isMeasuredIn)")
             continue
         try:
-            converted[node] = convert(values[node], spec.unit, spec.port_unit, where=f"column {header[column]!r}")
+            converted[node] = convert(values[node], spec.unit, spec.port_unit,
+                                      where=f"column {header[column]!r} (the unit {node} declares with saref:isMeasuredIn)")
         except UnitError as exc:
             problems.append(str(exc))
             continue

@@ -10,6 +10,7 @@ to the SI unit of the dimension (K for temperatures); percent becomes the 0–1 
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -18,7 +19,7 @@ import numpy as np
 from service.errors import UnitError
 
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
-           "quantity_text"]
+           "quantity_text", "closest_unit_hint"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -93,9 +94,23 @@ def unit_spec(unit: str, *, where: str = "") -> UnitSpec:
     if local in QUDT_UNITS:
         return QUDT_UNITS[local]
     raise UnitError(
-        f"unknown unit {unit!r}{f' for {where}' if where else ''}: graphtwin knows the QUDT units {', '.join(sorted(QUDT_UNITS))} "
-        f"(as {QUDT_UNIT_NAMESPACE}<name>) and the port units {', '.join(sorted(PORT_UNITS))}"
+        f"unknown unit {unit!r}{f' for {where}' if where else ''}{closest_unit_hint(unit)}: graphtwin knows the QUDT "
+        f"units {', '.join(sorted(QUDT_UNITS))} (as {QUDT_UNIT_NAMESPACE}<name>) and the port units "
+        f"{', '.join(sorted(PORT_UNITS))}"
     )
+
+
+def closest_unit_hint(unit: str) -> str:
+    """`` (did you mean …/DEG_C?)`` for an unknown unit whose local name is a known QUDT unit's but
+    for case, ``_`` and ``-`` (``DEGC``), or close to one; nothing otherwise."""
+    local = unit.rsplit("/", 1)[-1]
+
+    def bare(name: str) -> str:
+        return name.replace("_", "").replace("-", "").lower()
+
+    close = ([name for name in QUDT_UNITS if bare(name) == bare(local)]
+             or difflib.get_close_matches(local, list(QUDT_UNITS), n=1, cutoff=0.75))
+    return f" (did you mean {QUDT_UNIT_NAMESPACE}{close[0]}?)" if close else ""
 
 
 def unit_label(unit: str) -> str:

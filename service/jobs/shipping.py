@@ -108,9 +108,10 @@ def run_shipped_job(run: Callable[[GraphStore, JobRequest, WorkContext], JobResu
 
 
 def _travels(exc: BaseException) -> bool:
-    """Whether ``exc`` unpickles as it was (an error whose constructor takes more than its message does not)."""
+    """Whether ``exc`` unpickles as it was: its type and its message."""
     try:
-        return type(pickle.loads(pickle.dumps(exc))) is type(exc)
+        copy = pickle.loads(pickle.dumps(exc))
+        return type(copy) is type(exc) and str(copy) == str(exc)
     except Exception:  # noqa: BLE001 (any failure to round-trip means: send it as text)
         return False
 

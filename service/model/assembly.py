@@ -20,9 +20,10 @@ import pyoxigraph as ox
 
 from service.components.library import SignatureLibrary
 from service.components.measuring_device import MeasuringDevice
-from service.errors import AssemblyError, IncompleteModelError
+from service.errors import AssemblyError, IncompleteModelError, UnitError
 from service.graph.namespaces import BRICK, OWL, RDF, RDFS, distinct_local_names, local_name, namespace_of
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
+from service.graph.units import closest_unit_hint, unit_spec
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
 from service.matching.signature import PatternTriple, Rule, Signature
 from service.model.assembled_model import AssembledModel, ComponentInstance, mapped_values_outside_bounds
@@ -113,7 +114,12 @@ def assemble(
         instances[instance.iri] = instance
 
     notes += _values_without_unit(store, instances, session)
-    notes += _undeclared_class_notes(store, model_name)
+    notes += [f"{short_name(i.node)}: its unit {i.measurement.unit} (saref:isMeasuredIn) is not a unit graphtwin "
+              f"knows{closest_unit_hint(i.measurement.unit)}: its column cannot be read"
+              for i in instances.values() if i.measurement is not None and i.measurement.unit is not None
+              and not _known_unit(i.measurement.unit)]
+    undeclared = _undeclared_class_notes(store, model_name)  # a misspelt class is often why a pattern misses
+    notes += undeclared
     effect_requests = list(extra_effects) + recorded_effects(store, model_name, library)
     connections, unconnected = wire(instances)
     for request in effect_requests:
@@ -126,7 +132,7 @@ def assemble(
               for u in unconnected if u.component in devices and u.source_modelled]
     incomplete += _unmatched_anchor_report(store, components, claimed=claimed, lost=lost, session=session)
     if incomplete and not allow_incomplete:
-        raise IncompleteModelError(incomplete)
+        raise IncompleteModelError(undeclared + incomplete)
     notes.extend(incomplete)
 
     fed = {c.target for c in connections}
@@ -213,6 +219,14 @@ def _values_without_unit(store: GraphStore, instances: Mapping[str, ComponentIns
             if (iri, m.name) in found]
 
 
+def _known_unit(unit: str) -> bool:
+    try:
+        unit_spec(unit)
+    except UnitError:
+        return False
+    return True
+
+
 def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
     """One sentence per class that no loaded ontology declares and that is all a signature could see
     of the nodes it types (``queries/undeclared-classes.rq``), with the declared class its name is
@@ -231,7 +245,9 @@ def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
         if namespace_of(cls) == BRICK:  # official Brick classes outside graphtwin's subset are no misspelling
             hint = " (graphtwin brick-report says what the Brick alignment needs)"
         else:
-            close = difflib.get_close_matches(local_name(cls), declared[namespace_of(cls)], n=1, cutoff=0.85)
+            names = declared[namespace_of(cls)]
+            close = ([n for n in names if n.lower() == local_name(cls).lower()]  # fan for Fan
+                     or difflib.get_close_matches(local_name(cls), names, n=1, cutoff=0.85))
             hint = f" (did you mean {namespace_of(cls)}{close[0]}?)" if close else ""
         notes.append(f"{short_name(first)}: its class {cls} ({nodes}) is declared by no loaded ontology, and the node has "
                      f"no other type a signature matches: no component models it{hint}")
@@ -261,11 +277,14 @@ def _unmatched_anchor_report(
 ) -> list[str]:
     """For building nodes of a signature's modelled class that no component represents: why that
     signature is not used there, as a sentence — it matched but lost a node it needs to another
-    signature (``lost``), or the first of its required triples that finds nothing there."""
+    signature (``lost``), or the first of its required triples that finds nothing there. A node
+    that a deeper partial match of the same signature already holds in another role (a coil's
+    water side, found from its air side) gets no sentence of its own."""
     problems = []
     for signature in components:
         anchor = signature.modeled_nodes[0]
         instances = session.instances(signature.nodes[anchor].classes)
+        found: dict[str, tuple[str, int, set[str]]] = {}
         for node in sorted(n.value for n in instances if isinstance(n, ox.NamedNode)):
             if node in claimed:
                 continue
@@ -274,24 +293,34 @@ def _unmatched_anchor_report(
                 continue
             missing = _first_failing_triple(store, signature, anchor=anchor, node=node, session=session)
             if missing is not None:
-                problems.append(missing)
+                found[node] = missing
+        held = {other for node, (_, depth, bound) in found.items() if depth > 0 for other in bound - {node}}
+        problems += [sentence for node, (sentence, depth, _) in found.items() if depth > 0 or node not in held]
     return sorted(set(problems))
 
 
 def _first_failing_triple(store: GraphStore, signature: Signature, *, anchor: str, node: str,
-                          session: MatchSession) -> str | None:
-    """Why ``signature`` does not match at ``node`` (bound to ``anchor``): the first of its required
-    triples touching the anchor that finds nothing there, in words; None when each finds something."""
-    required = [t for t in signature.triples if t.rule is not Rule.OPTIONAL and anchor in (t.subject, t.object)]
-    for triple in required:
-        other = triple.object if triple.subject == anchor else triple.subject
+                          session: MatchSession) -> tuple[str, int, set[str]] | None:
+    """Why ``signature`` does not match at ``node`` (bound to ``anchor``): its required triples taken
+    outward from the anchor, each joined to those before it, and the first after which nothing
+    matches there, in words (a check valve missing downstream of a coil's water side is named as
+    such, not as the coil's fault); with how many triples matched before it and the nodes they
+    bound. None when all of them match."""
+    required = [t for t in signature.triples if t.rule is not Rule.OPTIONAL]
+    reached, taken, bound = {anchor}, [], {anchor: node}
+    while (step := next((t for t in required if t not in taken and {t.subject, t.object} & reached), None)):
+        near = step.subject if step.subject in reached else step.object
         probe = dataclasses.replace(
-            signature, nodes={anchor: signature.nodes[anchor], other: signature.nodes[other]},
-            triples=(triple,), modeled_nodes=(anchor,), inputs=(), outputs=(), parameters=(), splice=None,
+            signature, nodes={n: signature.nodes[n] for n in reached | {step.subject, step.object}},
+            triples=(*taken, step), modeled_nodes=(anchor,), inputs=(), outputs=(), parameters=(), splice=None,
         )
         hits = [m for m in match_signature(store, probe, session=session) if m.get(anchor) == node]
         if not hits:
-            return f"{node} is not modelled by {signature.id}: {_describe_missing(triple, signature, anchor=anchor, node=node)}"
+            why = _describe_missing(step, signature, anchor=near, node=bound[near])
+            return f"{node} is not modelled by {signature.id}: {why}", len(taken), set(map(str, bound.values()))
+        taken.append(step)
+        reached |= {step.subject, step.object}
+        bound = {k: str(v) for k, v in hits[0].items() if k in reached}
     return None
 
 

@@ -229,6 +229,16 @@ def test_columns_no_device_claims_are_a_warning_as_in_the_cli(client, auth, case
     assert "columns no device of the model claims: mystery_sensor (an operating filter may read them)" in response.json()["warnings"]
 
 
+def test_measurements_sent_as_a_multipart_form_are_refused_saying_how_to_send_them(client, auth, case_csv, store, snapshot):
+    """``curl -F file=@data.csv`` had been read as a CSV whose first line is the form's boundary."""
+    before = snapshot(store)
+    response = client.post("/models/case/measurements", headers=auth,
+                           files={"file": ("data.csv", case_csv.read_bytes(), "text/csv")})
+    assert response.status_code == 415, response.text
+    assert "--data-binary @data.csv" in response.json()["detail"], response.json()
+    assert snapshot(store) == before
+
+
 def test_a_long_gap_is_accepted_when_asked(client, auth, case_csv):
     response = _upload_csv(client, auth, _bad_csv(case_csv, "NaN"), allow_gaps="true")
     assert response.status_code == 201 and response.json()["rows"] == len(_csv_rows(case_csv)) - 1

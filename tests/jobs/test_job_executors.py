@@ -3,6 +3,7 @@ distributed cluster (a ``LocalCluster`` on loopback TCP, reached as ``GRAPHTWIN_
 like a real scheduler), with the results written to the service's store on return. (The fault test,
 test_service_faults.py, runs the process pool inside a real ``graphtwin serve``.)"""
 
+import pickle
 import time
 
 import pyoxigraph as ox
@@ -10,7 +11,14 @@ import pytest
 from case_study import CASE_STUDY, EX
 from fastapi.testclient import TestClient
 
-from service.errors import ConflictError, NotFoundError
+from service.errors import (
+    ConflictError,
+    IncompleteModelError,
+    MeasurementError,
+    ModelLoadError,
+    NotFoundError,
+    UnknownEffectError,
+)
 from service.graph.store import GraphStore
 from service.http.app import create_app
 from service.jobs.executors import DaskJobExecutor, ProcessJobExecutor
@@ -59,6 +67,31 @@ def test_a_process_pool_job_failing_on_bad_input_fails_clearly_and_the_pool_runs
         assert "case+FanMotorHeat" not in case_store.models()
     finally:
         runner.shutdown(wait=True)
+
+
+def test_an_error_travels_from_a_worker_as_it_was_raised():
+    """Errors whose constructor takes more than their message unpickle with their type, message and
+    fields (``IncompleteModelError(message)`` had listed the message's characters, one a line, in a
+    failed job's error over HTTP)."""
+    for error in (IncompleteModelError(["a valve missing", "a fan missing"], headline="the model is incomplete"),
+                  MeasurementError("data.csv", ["line 3: not a number"]), ModelLoadError("m.ttl", "bad IRI", 4, 7),
+                  UnknownEffectError("Leak", ["ValveLeakage", "ValveStuck"])):
+        copy = pickle.loads(pickle.dumps(error))
+        assert (type(copy), str(copy), copy.__dict__) == (type(error), str(error), error.__dict__)
+
+
+def test_a_pool_job_on_an_incomplete_model_fails_with_one_line_a_problem(tmp_path):
+    text = CASE_STUDY.read_text(encoding="utf-8").replace(
+        "    fso:suppliesFluidTo ex:check_valve .", "    fso:suppliesFluidTo ex:return_water_pipe .")
+    store = GraphStore.embedded(None)
+    store.load_model("no-check-valve", text.encode())
+    runner = JobRunner(store, JobRecords(tmp_path / "jobs"), JOB_KINDS, executor=ProcessJobExecutor(1))
+    try:
+        failed = _wait(runner, runner.submit("assemble", AssembleRequest(model="no-check-valve")).id)
+    finally:
+        runner.shutdown(wait=True)
+    assert failed.status == "failed" and failed.error.startswith("the model is incomplete:\n  - "), failed.error
+    assert f"no Valve downstream of {EX}heating_coil_water_side" in failed.error, failed.error
 
 
 def test_after_a_pool_worker_dies_the_next_job_runs_in_a_new_pool(case_store, tmp_path):

@@ -263,6 +263,52 @@ def test_a_coil_without_a_fan_either_way_is_reported_with_both_directions_and_th
                             "MixingBox instances, building spaces") for p in info.value.problems), info.value.problems
 
 
+def test_a_loop_without_its_check_valve_is_reported_where_the_connection_is_missing():
+    """The hot-water loop's pattern reaches from the coil's air side to its water side and on to a
+    valve downstream: a loop drawn without that valve is reported as that valve missing downstream
+    of the water side (it had said the water side lacks a coil to heat, the first triple touching
+    the air side having matched), and the water side, held by the partial match, gets no line of
+    its own for that signature."""
+    text = CASE_STUDY.read_text(encoding="utf-8").replace(
+        "    fso:suppliesFluidTo ex:check_valve .", "    fso:suppliesFluidTo ex:return_water_pipe .")
+    store = GraphStore.embedded(None)
+    store.load_model("no-check-valve", text.encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "no-check-valve")
+    loop = [p for p in info.value.problems if "by HotWaterLoop" in p]
+    assert loop == [f"{EX}heating_coil_air_side is not modelled by HotWaterLoop: no Valve downstream of "
+                    f"{EX}heating_coil_water_side along https://w3id.org/fso#suppliesFluidTo (the search stops at "
+                    "building spaces, boilers, chillers and cooling towers; signature "
+                    f"{SignatureLibrary.load()['HotWaterLoop'].source_file})"], info.value.problems
+
+
+def test_a_misspelt_class_that_leaves_a_pattern_unmatched_is_named_in_the_error_with_its_spelling():
+    """``s4bldg:fan``: the coil then has no fan, and the error says why first (the class declared
+    nowhere, and the declared class it differs from only in case)."""
+    text = CASE_STUDY.read_text(encoding="utf-8")
+    assert "ex:supply_fan a s4bldg:Fan" in text
+    store = GraphStore.embedded(None)
+    store.load_model("typo", text.replace("ex:supply_fan a s4bldg:Fan", "ex:supply_fan a s4bldg:fan").encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "typo")
+    assert info.value.problems[0].startswith("supply_fan: its class https://saref.etsi.org/saref4bldg/fan"), info.value.problems
+    assert info.value.problems[0].endswith("(did you mean https://saref.etsi.org/saref4bldg/Fan?)")
+
+
+def test_a_sensor_unit_graphtwin_does_not_know_is_a_note_at_assembly_with_the_unit_it_resembles():
+    """``unit:DEGC`` for ``unit:DEG_C``: said when the model is assembled, naming the sensor (it had
+    first surfaced at calibration, blamed on the CSV column)."""
+    text = CASE_STUDY.read_text(encoding="utf-8")
+    store = GraphStore.embedded(None)
+    store.load_model("typo", text.replace(
+        "ex:coil_outlet_water_temperature ;\n    saref:isMeasuredIn unit:DEG_C",
+        "ex:coil_outlet_water_temperature ;\n    saref:isMeasuredIn unit:DEGC").encode())
+    notes = [n for n in assemble(store, "typo").notes if "is not a unit graphtwin knows" in n]
+    assert notes == ["coil_outlet_water_temperature_sensor: its unit http://qudt.org/vocab/unit/DEGC (saref:isMeasuredIn) "
+                     "is not a unit graphtwin knows (did you mean http://qudt.org/vocab/unit/DEG_C?): its column cannot "
+                     "be read"], notes
+
+
 def test_a_misspelt_class_and_a_command_nothing_reads_are_notes():
     """A coil typed with a class no ontology declares matches no signature: the assembly says so and
     which declared class the name is close to; the valve command that drove it is then read by no

@@ -7,6 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
+from service.errors import UnsupportedFormatError
 from service.graph.backend import EmbeddedBackend
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
@@ -114,11 +115,15 @@ def _save_measurements(service: Service, name: str, data: bytes, allow_gaps: boo
 
 
 @router.post("/models/{name}/measurements", response_model=MeasurementsInfo, status_code=201, tags=["models"],
-             dependencies=[WriteAccess], openapi_extra=_CSV_BODY, responses=error_responses(401, 403, 404, 413, 422))
+             dependencies=[WriteAccess], openapi_extra=_CSV_BODY, responses=error_responses(401, 403, 404, 413, 415, 422))
 async def post_measurements(name: str, request: Request, service: ServiceDep,
                             allow_gaps: Annotated[bool, Query(description="accept values missing over long gaps")] = False) -> dict:
     """Upload measurements (CSV, docs/data.md: the data contract) for model ``name``; the id names
     them in jobs."""
+    if request.headers.get("content-type", "").startswith("multipart/"):
+        raise UnsupportedFormatError(
+            "measurements are the CSV itself as the request body (curl --data-binary @data.csv -H 'Content-Type: "
+            "text/csv'), not a multipart form (curl -F)")
     data = await request.body()  # held to the route's limit by the request gate
     return await run_in_threadpool(_save_measurements, service, name, data, allow_gaps)
 
