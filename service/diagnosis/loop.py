@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR
-from service.calibration.run import calibrate
+from service.calibration.run import calibrate, predict_test
 from service.components.library import SignatureLibrary
 from service.data.windows import Window
 from service.diagnosis.candidates import rank_catalog, split_windows
@@ -29,6 +29,7 @@ from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
 from service.diagnosis.report import DiagnosisReport, SensorVerdict, diagnosis_triples
 from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable
+from service.diagnosis.unit_mixup import unit_mixups
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.graph.units import unit_label
@@ -161,7 +162,10 @@ def diagnose(
         regimes=regimes, regime_rule_accuracy=base.regimes.rule_accuracy, episodes=episodes,
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, step_s=data.step_s,
         base_test_prediction=predicted, effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice],
-        test_observed=observed, failure_ratio=failure_ratio, data_warnings=list(base.record.diagnostics.warnings),
+        test_observed=observed, failure_ratio=failure_ratio,
+        data_warnings=list(base.record.diagnostics.warnings) + unit_mixups(
+            data, md.units, observed, [predicted, predict_test(md, base.train, test_slice, md.default_theta())],
+            [n for n, s in sensors.items() if s.fails]),
         indistinguishable=lookalikes, residual_trend=trends,
     )
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
