@@ -163,9 +163,9 @@ def diagnose(
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, step_s=data.step_s,
         base_test_prediction=predicted, effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice],
         test_observed=observed, failure_ratio=failure_ratio,
-        data_warnings=list(base.record.diagnostics.warnings) + unit_mixups(
+        data_warnings=list(base.record.diagnostics.warnings) + (unit_mixups(
             data, md.units, observed, [predicted, predict_test(md, base.train, test_slice, md.default_theta())],
-            [n for n, s in sensors.items() if s.fails]),
+            failing) if failing else []),
         indistinguishable=lookalikes, residual_trend=trends,
     )
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
