@@ -43,7 +43,7 @@ from service.data.windows import Window
 from service.errors import CalibrationError
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
-from service.graph.units import unit_label
+from service.graph.units import convert, unit_label
 from service.model.assembled_model import AssembledModel
 from service.model.assembly import assemble
 from service.model.assembly_triples import assembly_iri, assembly_triples
@@ -86,9 +86,12 @@ def inputs_beyond_training(md: ModelData, train: slice, test: slice) -> list[str
         margin = BEYOND_TRAINING_SHARE * max(high - low, 1e-9)
         above, below = tested > high + margin, tested < low - margin
         if above.any() or below.any():
-            unit = unit_label(md.data.units[node])
-            reach = (f"up to {f'{tested.max():.3g} {unit}'.rstrip()} where training reached {high:.3g}" if above.any()
-                     else f"down to {f'{tested.min():.3g} {unit}'.rstrip()} where training reached {low:.3g}")
+            column_unit = md.data.source_units.get(node, md.data.units[node])  # said as the column reads
+            extreme, reached = convert([tested.max(), high] if above.any() else [tested.min(), low],
+                                       md.data.units[node], column_unit)
+            unit = unit_label(column_unit)
+            reach = (f"{'up' if above.any() else 'down'} to {f'{extreme:.3g} {unit}'.rstrip()} where training "
+                     f"reached {reached:.3g}")
             notes.append(f"the test window drives {local_name(node)} beyond what the training window saw "
                          f"({int(above.sum() + below.sum())} steps, {reach}): predictions there rest on what "
                          "the training could not show")

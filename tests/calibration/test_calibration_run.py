@@ -440,6 +440,9 @@ def test_test_inputs_beyond_what_the_training_saw_are_a_note(synthetic):
     [note] = [n for n in inputs_beyond_training(md, train, test) if n not in before]
     assert note.startswith(f"the test window drives supply_air_flow_meter beyond what the training window saw (3 steps, "
                            f"up to {1.5 * seen:.3g} m³/s where training reached {seen:.3g})"), note
+    md.data.source_units[EX + "supply_air_flow_meter"] = "http://qudt.org/vocab/unit/L-PER-SEC"  # a column in L/s
+    [in_litres] = [n for n in inputs_beyond_training(md, train, test) if "supply_air_flow_meter" in n]
+    assert f"up to {1500 * seen:.3g} L/s where training reached {1000 * seen:.3g})" in in_litres, in_litres  # as it reads
 
 
 def test_a_run_over_a_windows_first_part_is_that_part_run_alone(point_run):
