@@ -145,7 +145,10 @@ def generate_synthetic_data(
         for component in model.boundary_inputs:
             link = model.measurement(component)
             if link.series_id not in synthetic.series:
-                raise InputError(f"the synthetic operation has no series for {link.node} ({link.series_id})")
+                raise InputError(
+                    f"the built-in synthetic operation (the case study's: {', '.join(sorted(synthetic.series))}) has no "
+                    f"series for {link.node} ({link.series_id}): give this model's boundary inputs as measured in a "
+                    "CSV (`graphtwin example generate --operation FILE`; data.md, the data contract)")
             boundary[component] = synthetic.series[link.series_id]
     else:
         measured = read_model_data(model, operation)

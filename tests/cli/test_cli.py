@@ -188,6 +188,11 @@ def test_example_generate_drives_a_given_truth_with_a_measured_operation(tmp_pat
     assert result.exit_code == 2 and "calibrate --json" in result.output
 
 
+def test_example_generate_for_a_model_the_built_in_operation_cannot_drive_names_the_operation_option(tmp_path):
+    result = runner.invoke(app, ["example", "generate", "flexlab_ahu", "--days", "1", "-o", str(tmp_path / "x.csv")])
+    assert result.exit_code == 2 and "--operation FILE" in result.output, result.output
+
+
 def test_simulate_writes_simulation_beside_measurements(tmp_path):
     data = tmp_path / "data.csv"
     assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
