@@ -32,6 +32,10 @@ class GraphtwinError(Exception):
     it is (a job's error comes back from a worker process or a Dask worker)."""
 
     def __reduce__(self):
+        own_constructor = any("__init__" in vars(c) for c in type(self).__mro__
+                              if issubclass(c, GraphtwinError) and c is not GraphtwinError)
+        if not own_constructor:  # built from its message alone: the usual way (OSError's subclasses need it)
+            return super().__reduce__()
         return _rebuilt, (type(self), self.args, dict(self.__dict__))
 
 
@@ -57,8 +61,8 @@ class AssemblyError(InputError):
 
 
 class IncompleteModelError(AssemblyError):
-    """Inputs without a source: ``problems`` lists one sentence per missing connection under
-    ``headline``."""
+    """Nodes or inputs the assembly cannot model: ``problems`` lists one sentence each (a class no
+    ontology declares, a missing connection) under ``headline``."""
 
     def __init__(self, problems: Sequence[str], *, headline: str = "the model is incomplete"):
         self.problems, self.headline = tuple(problems), headline

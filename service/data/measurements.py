@@ -356,7 +356,7 @@ def read_measurements(
             continue
         try:
             converted[node] = convert(values[node], spec.unit, spec.port_unit,
-                                      where=f"column {header[column]!r} (the unit {node} declares with saref:isMeasuredIn)")
+                                      where=f"column {header[column]!r} (the unit {node} declares)")
         except UnitError as exc:
             problems.append(str(exc))
             continue

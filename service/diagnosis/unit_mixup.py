@@ -1,12 +1,14 @@
 """A column in another unit than the model declares for it: the failing sensor's readings, read again
 in each other unit of the same dimension (°F for °C, kW for W, L/s for m³/s), against the model's
 prediction of the test window. Where one such reading misses the prediction by at most a fifth of
-the RMSE as declared, the column is probably in that unit (read in the wrong one of °C, °F and K a
+the RMSE as declared, and by at most a fifth of its own magnitude (readings shrunk towards a
+prediction near zero are not met), the column is probably in that unit (read in the wrong one of °C, °F and K a
 temperature moves by tens of kelvin at least, a power or a flow by a factor of 2 or more): said as
 a warning of the comparison (a BMS export in °F under a model that
 says °C had been calibrated and diagnosed as a 46 K misfit no effect explains). The calibration has
 bent the model towards the misread column, so the model at its parameters' defaults is asked too;
-a meter the model has a free curve for can still hide it (fitted, it does not fail).
+a meter the model has a free curve for can still hide it (fitted, it does not fail). A fraction
+declared as percent, or the reverse, is caught when the data are read (``service.data.measurements``).
 """
 
 from __future__ import annotations
@@ -19,10 +21,12 @@ from service.data.measurements import MeasuredData
 from service.graph.namespaces import local_name
 from service.graph.units import QUDT_UNIT_NAMESPACE, QUDT_UNITS, convert, unit_label, unit_spec
 
-__all__ = ["unit_mixups", "MIXUP_IMPROVEMENT"]
+__all__ = ["unit_mixups", "MIXUP_IMPROVEMENT", "TRACKING_SHARE"]
 
 #: How many times smaller the RMSE read in the other unit must be than as declared.
 MIXUP_IMPROVEMENT = 5.0
+#: The RMSE read in the other unit, at most this share of the re-read readings' RMS magnitude.
+TRACKING_SHARE = 0.2
 
 
 def unit_mixups(data: MeasuredData, port_units: Mapping[str, str], observed: Mapping[str, np.ndarray],
@@ -49,7 +53,9 @@ def unit_mixups(data: MeasuredData, port_units: Mapping[str, str], observed: Map
             for name in others:
                 reread = convert(raw[mask], QUDT_UNIT_NAMESPACE + name, port)
                 alternative = float(np.sqrt(np.mean((reread - predicted[node][mask]) ** 2)))
-                better = alternative * MIXUP_IMPROVEMENT <= rmse
+                # met, not merely shrunk towards a prediction near zero (a flow re-read in a smaller unit)
+                tracks = alternative <= TRACKING_SHARE * float(np.sqrt(np.mean(reread**2)))
+                better = alternative * MIXUP_IMPROVEMENT <= rmse and tracks
                 if better and (found is None or alternative / rmse < found[1] / found[2]):
                     found = (name, alternative, rmse)
         if found is not None:
@@ -58,6 +64,6 @@ def unit_mixups(data: MeasuredData, port_units: Mapping[str, str], observed: Map
             warnings.append(
                 f"column {data.columns.get(node, local_name(node))!r} ({local_name(node)}): read as {other_label} "
                 f"instead of the {unit_label(declared)} the model declares, it would miss the model by "
-                f"{alternative:.3g} {label} instead of {rmse:.3g} {label}: is it in {other_label}? (then declare "
-                f"saref:isMeasuredIn unit:{name})")
+                f"{alternative:.3g} {label} instead of {rmse:.3g} {label}: is it in {other_label}? (then declare its "
+                f"unit as unit:{name})")
     return warnings

@@ -10,7 +10,6 @@ to the SI unit of the dimension (K for temperatures); percent becomes the 0–1 
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -102,14 +101,14 @@ def unit_spec(unit: str, *, where: str = "") -> UnitSpec:
 
 def closest_unit_hint(unit: str) -> str:
     """`` (did you mean …/DEG_C?)`` for an unknown unit whose local name is a known QUDT unit's but
-    for case, ``_`` and ``-`` (``DEGC``), or close to one; nothing otherwise."""
+    for case, ``_`` and ``-`` (``DEGC``, ``deg_c``); nothing otherwise (a name merely close to one,
+    ``L-PER-HR`` to ``M3-PER-HR``, is often another scale: no guess)."""
     local = unit.rsplit("/", 1)[-1]
 
     def bare(name: str) -> str:
         return name.replace("_", "").replace("-", "").lower()
 
-    close = ([name for name in QUDT_UNITS if bare(name) == bare(local)]
-             or difflib.get_close_matches(local, list(QUDT_UNITS), n=1, cutoff=0.75))
+    close = [name for name in QUDT_UNITS if bare(name) == bare(local)]
     return f" (did you mean {QUDT_UNIT_NAMESPACE}{close[0]}?)" if close else ""
 
 

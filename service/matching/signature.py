@@ -398,6 +398,9 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         if not isinstance(other, str) or not other.isidentifier() or other == sig_id:
             raise signature_error(path, f"yields_to[{i}]", f"{other!r} must be another effect's id")
     extra = _table(path, "extra", data.get("extra", {}), "a table")
+    if kind == "component" and (loose := _loose_triples(modeled[0], triples)):
+        raise signature_error(path, "triples", f"{', '.join(loose)} not joined to the modelled node {modeled[0]!r} by "
+                              "required triples (a pattern in pieces matches every combination of its pieces)")
     return Signature(
         id=sig_id, label=label, kind=kind, nodes=nodes,
         triples=tuple(triples), modeled_nodes=modeled, inputs=tuple(inputs), outputs=tuple(outputs),
@@ -406,6 +409,21 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         extra=dict(extra), can_appear=can_appear, holds_values=holds_values, steps=steps,
         yields_to=tuple(yields_to),
     )
+
+
+def _loose_triples(anchor: str, triples: list[PatternTriple]) -> list[str]:
+    """The keys (``triples[i]``) of the required triples that required triples do not join to node
+    ``anchor``."""
+    required = [t for t in triples if t.rule is not Rule.OPTIONAL and not t.optional]
+    reached, grown = {anchor}, True
+    while grown:
+        grown = False
+        for t in required:
+            if {t.subject, t.object} & reached and not {t.subject, t.object} <= reached:
+                reached |= {t.subject, t.object}
+                grown = True
+    return [f"triples[{i}]" for i, t in enumerate(triples)
+            if t.rule is not Rule.OPTIONAL and not t.optional and not {t.subject, t.object} <= reached]
 
 
 def read_signature(path: Path) -> Signature:

@@ -114,7 +114,7 @@ def assemble(
         instances[instance.iri] = instance
 
     notes += _values_without_unit(store, instances, session)
-    notes += [f"{short_name(i.node)}: its unit {i.measurement.unit} (saref:isMeasuredIn) is not a unit graphtwin "
+    notes += [f"{short_name(i.node)}: its unit {i.measurement.unit} is not a unit graphtwin "
               f"knows{closest_unit_hint(i.measurement.unit)}: its column cannot be read"
               for i in instances.values() if i.measurement is not None and i.measurement.unit is not None
               and not _known_unit(i.measurement.unit)]
@@ -305,8 +305,8 @@ def _first_failing_triple(store: GraphStore, signature: Signature, *, anchor: st
     outward from the anchor, each joined to those before it, and the first after which nothing
     matches there, in words (a check valve missing downstream of a coil's water side is named as
     such, not as the coil's fault); with how many triples matched before it and the nodes they
-    bound. None when all of them match."""
-    required = [t for t in signature.triples if t.rule is not Rule.OPTIONAL]
+    bound in the signature's modelled roles. None when all of them match."""
+    required = [t for t in signature.triples if t.rule is not Rule.OPTIONAL and not t.optional]
     reached, taken, bound = {anchor}, [], {anchor: node}
     while (step := next((t for t in required if t not in taken and {t.subject, t.object} & reached), None)):
         near = step.subject if step.subject in reached else step.object
@@ -317,7 +317,8 @@ def _first_failing_triple(store: GraphStore, signature: Signature, *, anchor: st
         hits = [m for m in match_signature(store, probe, session=session) if m.get(anchor) == node]
         if not hits:
             why = _describe_missing(step, signature, anchor=near, node=bound[near])
-            return f"{node} is not modelled by {signature.id}: {why}", len(taken), set(map(str, bound.values()))
+            held = {str(value) for role, value in bound.items() if role in signature.modeled_nodes}
+            return f"{node} is not modelled by {signature.id}: {why}", len(taken), held
         taken.append(step)
         reached |= {step.subject, step.object}
         bound = {k: str(v) for k, v in hits[0].items() if k in reached}

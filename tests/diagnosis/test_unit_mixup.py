@@ -56,3 +56,24 @@ def test_a_column_in_another_unit_is_named_with_the_unit_it_reads_right_in(gener
 def test_the_data_as_generated_raise_no_unit_warning(generated):
     store, path = generated
     assert _warnings(store, path) == []
+
+
+def test_readings_shrunk_towards_a_prediction_near_zero_are_not_a_unit_mixup():
+    """A flow of 0.4 m³/s the model predicts as off: read in L/min it is 0.0067 m³/s, 60 times nearer
+    the prediction of zero without meeting anything (the reviewer's case); read in °F, a °C series
+    that meets its prediction is named."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from service.diagnosis.unit_mixup import unit_mixups
+
+    u = "http://qudt.org/vocab/unit/"
+    rng = np.random.default_rng(0)
+    flow, temperature = 0.4 + 0.01 * rng.normal(size=200), 20.0 + np.sin(np.arange(200) / 20.0)
+    data = SimpleNamespace(source_units={"flow": u + "M3-PER-SEC", "air": u + "DEG_C"},
+                           columns={"flow": "SA flow", "air": "DAT"})
+    observed = {"flow": flow, "air": 32.0 + 1.8 * temperature}  # the air column is in °F
+    predicted = {"flow": np.zeros(200), "air": temperature}
+    warnings = unit_mixups(data, {"flow": "m3/s", "air": "degC"}, observed, [predicted], ["flow", "air"])
+    assert len(warnings) == 1 and warnings[0].startswith("column 'DAT' (air): read as °F"), warnings

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from service.graph.units import QUDT_UNITS, UnitError, convert, unit_label
+from service.graph.units import QUDT_UNITS, UnitError, closest_unit_hint, convert, unit_label
 
 U = "http://qudt.org/vocab/unit/"
 
@@ -58,6 +58,17 @@ def test_incompatible_and_unknown_units_are_named_with_the_port():
         convert([1.0], U + "M3-PER-SEC", "furlong/s")
     with pytest.raises(UnitError, match=r"1/K \(inverse_temperature\) to K \(temperature\)"):
         convert([1.0], "1/K", "K")
+
+
+def test_an_unknown_unit_is_matched_to_a_known_one_only_up_to_case_and_separators():
+    """``DEGC`` and ``deg_c`` are DEG_C; a name merely close to a known one is often another scale or
+    dimension (litres an hour, a kilowatt hour): no guess."""
+    assert closest_unit_hint(U + "DEGC") == closest_unit_hint(U + "deg_c") == f" (did you mean {U}DEG_C?)"
+    assert closest_unit_hint(U + "kilow") == f" (did you mean {U}KiloW?)"
+    for unknown in ("L-PER-HR", "KiloW-HR", "M3-PER-MIN", "KiloGM-PER-MIN", "DEG_K", "FURLONG"):
+        assert closest_unit_hint(U + unknown) == "", unknown
+    with pytest.raises(UnitError, match=r"unknown unit '.*DEGC' for column 'T' \(did you mean .*DEG_C\?\)"):
+        convert([1.0], U + "DEGC", "degC", where="column 'T'")
 
 
 def test_labels_for_reports():

@@ -70,14 +70,20 @@ def test_a_process_pool_job_failing_on_bad_input_fails_clearly_and_the_pool_runs
 
 
 def test_an_error_travels_from_a_worker_as_it_was_raised():
-    """Errors whose constructor takes more than their message unpickle with their type, message and
-    fields (``IncompleteModelError(message)`` had listed the message's characters, one a line, in a
-    failed job's error over HTTP)."""
-    for error in (IncompleteModelError(["a valve missing", "a fan missing"], headline="the model is incomplete"),
-                  MeasurementError("data.csv", ["line 3: not a number"]), ModelLoadError("m.ttl", "bad IRI", 4, 7),
-                  UnknownEffectError("Leak", ["ValveLeakage", "ValveStuck"])):
+    """Every class of the error hierarchy unpickles with its type, message and fields (an error whose
+    constructor takes more than its message, ``IncompleteModelError(message)``, had listed the
+    message's characters one a line in a failed job's error over HTTP)."""
+    from service import errors
+
+    made = {IncompleteModelError: IncompleteModelError(["a valve missing", "a fan missing"], headline="incomplete"),
+            MeasurementError: MeasurementError("data.csv", ["line 3: not a number"]),
+            ModelLoadError: ModelLoadError("m.ttl", "bad IRI", 4, 7),
+            UnknownEffectError: UnknownEffectError("Leak", ["ValveLeakage", "ValveStuck"])}
+    for name in errors.__all__:
+        cls = getattr(errors, name)
+        error = made.get(cls) or cls(f"{name}: what went wrong")
         copy = pickle.loads(pickle.dumps(error))
-        assert (type(copy), str(copy), copy.__dict__) == (type(error), str(error), error.__dict__)
+        assert (type(copy), str(copy), copy.__dict__) == (type(error), str(error), error.__dict__), name
 
 
 def test_a_pool_job_on_an_incomplete_model_fails_with_one_line_a_problem(tmp_path):

@@ -59,10 +59,14 @@ def _refused(tmp_path: Path, text: str, key: str, problem: str) -> None:
     (EFFECT_TOP + '[splice]\nnode = "coil"\noutput = 1\n', "splice.output", "expected a non-empty string, got an integer"),
     (EFFECT_TOP + '[splice]\nnode = "coil"\noutput = "outlet_air_temperature"\nhost_models = "service.components.water_coil:WaterCoil"\n',
      "splice.host_models", "got a string"),
+    (TOP + NODES + 'a = { classes = ["s4bldg:Valve"] }\nb = { classes = ["s4bldg:Pump"] }\n[[triples]]\n'
+     'subject = "a"\npredicate = "fso:suppliesFluidTo"\nobject = "b"\n', "triples",
+     "triples[0] not joined to the modelled node 'fan' by required triples"),
 ], ids=["nodes-string", "input-string", "triples-strings", "triples-table", "modeled-nodes-string",
         "parameters-array", "extra-string", "label-integer", "complexity-boolean", "model-integer", "model-no-module",
         "fmu-integer", "classes-string", "subject-array", "traverse-to-any", "input-unknown-key", "quantity-array",
-        "unit-node-integer", "splice-string", "splice-both-sides", "splice-port-integer", "host-models-string"])
+        "unit-node-integer", "splice-string", "splice-both-sides", "splice-port-integer", "host-models-string",
+        "pattern-in-pieces"])
 def test_a_malformed_key_is_refused_naming_file_and_key(tmp_path, text, key, problem):
     _refused(tmp_path, text, key, problem)
 

@@ -115,12 +115,13 @@ def _save_measurements(service: Service, name: str, data: bytes, allow_gaps: boo
 
 
 @router.post("/models/{name}/measurements", response_model=MeasurementsInfo, status_code=201, tags=["models"],
-             dependencies=[WriteAccess], openapi_extra=_CSV_BODY, responses=error_responses(401, 403, 404, 413, 415, 422))
+             dependencies=[WriteAccess], openapi_extra=_CSV_BODY,
+             responses=error_responses(401, 403, 404, 413, 415, 422))
 async def post_measurements(name: str, request: Request, service: ServiceDep,
                             allow_gaps: Annotated[bool, Query(description="accept values missing over long gaps")] = False) -> dict:
     """Upload measurements (CSV, docs/data.md: the data contract) for model ``name``; the id names
     them in jobs."""
-    if request.headers.get("content-type", "").startswith("multipart/"):
+    if request.headers.get("content-type", "").split(";")[0].strip().lower().startswith("multipart/"):
         raise UnsupportedFormatError(
             "measurements are the CSV itself as the request body (curl --data-binary @data.csv -H 'Content-Type: "
             "text/csv'), not a multipart form (curl -F)")
