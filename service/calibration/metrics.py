@@ -19,7 +19,8 @@ import numpy as np
 from service.errors import CalibrationError
 
 __all__ = [
-    "TargetMetrics", "IntervalCoverage", "target_metrics", "INTERVAL_SCALE_UNITS", "on_interval_scale",
+    "TargetMetrics", "IntervalCoverage", "target_metrics", "effective_sample_fraction", "long_run_variance_factor",
+    "INTERVAL_SCALE_UNITS", "on_interval_scale",
     "GUIDELINE14_HOURLY_CV_RMSE_PERCENT", "GUIDELINE14_HOURLY_NMBE_PERCENT",
 ]
 
@@ -155,3 +156,40 @@ def target_metrics(
         guideline14_applies=applies, guideline14_pass=passed, guideline14_note=note,
         coverage=tuple(coverage),
     )
+
+
+def effective_sample_fraction(residuals: np.ndarray) -> float:
+    """n_eff / n = (1 − ρ₁)/(1 + ρ₁) from the lag-1 autocorrelation ρ₁ of ``residuals`` (one
+    target's series, NaN-free), clipped to [1/n, 1]."""
+    r = np.asarray(residuals, dtype=float)
+    r = r - r.mean()
+    denominator = float(np.dot(r, r))
+    if r.size < 3 or denominator == 0.0:
+        return 1.0
+    rho = float(np.dot(r[1:], r[:-1]) / denominator)
+    return float(np.clip((1.0 - rho) / (1.0 + rho), 1.0 / r.size, 1.0))
+
+
+def long_run_variance_factor(series: np.ndarray) -> float:
+    """σ²_LR/σ² of one target's residual series (NaN where not measured): the Newey–West estimate
+    1 + 2 Σₗ (1 − l/(L + 1)) ρₗ over lags l = 1…L, ρₗ over the pairs measured l steps apart (a gap
+    pairs nothing; concatenated windows pair only beyond a window's unscored warm-up), L from
+    Andrews' AR(1) plug-in 1.1447·(α n)^(1/3), α = 4ρ₁²/((1 − ρ₁)²(1 + ρ₁)²). For AR(1) residuals
+    it approaches (1 + ρ₁)/(1 − ρ₁); for a misfit that oscillates (a loop hunting) the lags cancel
+    and it falls below 1 (the oscillation averages out of what it is fitted with). Bartlett's
+    weights keep it ≥ 0; floored at 1/n."""
+    r = np.asarray(series, dtype=float)
+    measured = np.isfinite(r)
+    n = int(measured.sum())
+    if n < 3:
+        return 1.0
+    centred = np.where(measured, r - r[measured].mean(), 0.0)
+    total = float(np.dot(centred, centred))
+    if total == 0.0:
+        return 1.0
+    rho_1 = float(np.clip(np.dot(centred[:-1], centred[1:]) / total, -0.99, 0.99))
+    alpha = 4.0 * rho_1**2 / ((1.0 - rho_1) ** 2 * (1.0 + rho_1) ** 2)
+    lags = int(min(np.ceil(1.1447 * (alpha * n) ** (1.0 / 3.0)), r.size - 1))
+    weighted = sum((1.0 - lag / (lags + 1.0)) * float(np.dot(centred[:-lag], centred[lag:])) / total
+                   for lag in range(1, lags + 1))
+    return max(1.0 / n, 1.0 + 2.0 * weighted)

@@ -3,8 +3,9 @@
 Cost ``C(θ) = ½ Σ_targets Σ_t ((y_t − ŷ_t(θ)) / s_target)²`` over the measured points (``s`` the
 problem's target scales), minimised by :func:`scipy.optimize.least_squares` (trust-region
 reflective) in the unit cube. Uncertainty: the sandwich ``Cov(θ̂) = (JᵀJ)⁻¹ Jᵀ D J (JᵀJ)⁻¹`` at θ̂,
-``D`` each residual's target variance ``σ̂²_k = Σ_k r² / (n_k (1 − p/n))``. A parameter is poorly
-identified when it lies in a flat direction, is confounded with another, has a large relative
+``D`` each residual's target variance ``σ̂²_k = Σ_k r² / (n_k (1 − p/n))`` times its residuals'
+long-run variance factor (Newey–West: :func:`~service.calibration.metrics.long_run_variance_factor`).
+A parameter is poorly identified when it lies in a flat direction, is confounded with another, has a large relative
 error, a 95 % interval across a bound, or a cost that jumps at ±2 SE. Method, rationale and
 coverage: ``docs/calibration.md``, *Point calibration and identifiability*.
 """
@@ -23,6 +24,7 @@ from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
 from service.calibration.lockstep import run_in_lockstep
+from service.calibration.metrics import long_run_variance_factor
 from service.calibration.problem import CalibrationProblem
 from service.errors import CalibrationError
 
@@ -241,6 +243,12 @@ class PointCalibrator(BaseEstimator):
         target_of = np.repeat(np.arange(counts.size), counts)
         noise_variance = np.divide(np.bincount(target_of, weights=residuals**2, minlength=counts.size), counts * (1 - p / n),
                                    out=np.zeros(counts.size), where=counts > 0)
+        # autocorrelated residuals (a misfit that lasts hours) carry fewer independent values: each
+        # target's variance is its long-run variance (Newey–West over its measured steps)
+        for k, mask in enumerate(problem.masks.values()):
+            series = np.full(mask.shape, np.nan)
+            series[mask] = residuals[target_of == k]
+            noise_variance[k] *= long_run_variance_factor(series)
         u, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
         self.singular_values_ = singular
         floor = singular[0] * 1e-12 if singular[0] > 0 else 1e-300

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 from scipy.stats import binom, chi2
 
+from service.calibration.metrics import effective_sample_fraction
 from service.calibration.problem import CalibrationProblem
 from service.model.assembled_model import AssembledModel
 
@@ -31,7 +32,7 @@ BIC_THRESHOLD = -10.0
 
 __all__ = [
     "MIN_TEST_IMPROVEMENT", "BIC_THRESHOLD", "ScoreTest", "EffectEvidence", "score_test", "score_ensemble",
-    "effective_sample_fraction", "rank_evidence", "delta_bic",
+    "rank_evidence", "delta_bic",
     "weighted_test_error", "step_errors", "residual_step_errors",
 ]
 
@@ -90,18 +91,6 @@ class EffectEvidence:
             "test_improvement": self.test_improvement, "rmse_before": self.rmse_before,
             "rmse_after": self.rmse_after, "explanation": self.explanation, "demoted": self.demoted,
         }
-
-
-def effective_sample_fraction(residuals: np.ndarray) -> float:
-    """n_eff / n = (1 − ρ₁)/(1 + ρ₁) from the lag-1 autocorrelation ρ₁ of ``residuals`` (one
-    target's series, NaN-free), clipped to [1/n, 1]."""
-    r = np.asarray(residuals, dtype=float)
-    r = r - r.mean()
-    denominator = float(np.dot(r, r))
-    if r.size < 3 or denominator == 0.0:
-        return 1.0
-    rho = float(np.dot(r[1:], r[:-1]) / denominator)
-    return float(np.clip((1.0 - rho) / (1.0 + rho), 1.0 / r.size, 1.0))
 
 
 def target_rows(problem: CalibrationProblem) -> np.ndarray:

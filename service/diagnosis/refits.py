@@ -12,12 +12,13 @@ from typing import NamedTuple
 import numpy as np
 
 from service.calibration.lockstep import with_prefetched_rows
+from service.calibration.metrics import effective_sample_fraction
 from service.calibration.model_data import ModelData
 from service.calibration.point import PointCalibrator
 from service.calibration.problem import CalibrationProblem
 from service.data.measurements import MeasuredData
 from service.diagnosis.drift import drift_identity
-from service.diagnosis.ranking import effective_sample_fraction, residual_step_errors
+from service.diagnosis.ranking import residual_step_errors
 from service.matching.signature import Signature
 from service.model.assembled_model import AssembledModel
 

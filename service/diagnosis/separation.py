@@ -18,9 +18,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from service.calibration.metrics import effective_sample_fraction
 from service.calibration.model_data import ModelData
 from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR
-from service.diagnosis.ranking import EffectEvidence, effective_sample_fraction
+from service.diagnosis.ranking import EffectEvidence
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text
 

@@ -148,8 +148,9 @@ def _share_removed(evidence, device: str) -> float | None:
     return 1.0 - (evidence.rmse_after[device] / before) ** 2 if before else None
 
 
-def diagnose_run(run: Run) -> dict:
-    """Write the plant's CSV, diagnose the case study on it, score the verdict against the truth."""
+def diagnose_run(run: Run, train: tuple[str, str] = TRAIN) -> dict:
+    """Write the plant's CSV, diagnose the case study on it (trained on ``train``), score the verdict
+    against the truth."""
     started = time.perf_counter()
     store = GraphStore.embedded(None)
     store.load_model("case", CASE_STUDY)
@@ -162,7 +163,7 @@ def diagnose_run(run: Run) -> dict:
     with tempfile.TemporaryDirectory() as folder:
         data = Path(folder) / "plant.csv"
         write_run_csv(plant, data)
-        report = diagnose(store, "case", data, train=TRAIN, test=TEST, seed=run.seed, workers=1)
+        report = diagnose(store, "case", data, train=train, test=TEST, seed=run.seed, workers=1)
     true_effects, true_node = EFFECT_IDS.get(truth.catalog_effect or "", ()), EX + truth.node if truth.node else None
     top = report.effects[0] if report.effects else None
     true_rank = next((i + 1 for i, e in enumerate(report.effects) if _names_truth(e, true_effects, true_node)), None)
@@ -198,12 +199,13 @@ def diagnose_run(run: Run) -> dict:
 
 def _candidate_row(evidence) -> dict:
     """What a decision rule can be judged on afterwards: ΔBIC, the weighted test-error share removed,
-    the demotion, the fitted effect parameters, and each sensor's RMSE on the evaluation half before
-    and after the effect."""
+    the demotion, the fitted effect parameters and their standard errors, and each sensor's RMSE on
+    the evaluation half before and after the effect."""
     return {"candidate": f"{evidence.effect}@{evidence.node.removeprefix(EX)}", "delta_bic": evidence.delta_bic,
             "test_improvement": evidence.test_improvement, "significant": evidence.significant,
             "demoted": evidence.demoted,
             "estimates": {name.rsplit("/", 1)[-1]: value for name, value in evidence.estimates.items()},
+            "standard_errors": {name.rsplit("/", 1)[-1]: value for name, value in evidence.standard_errors.items()},
             "rmse_before": {n.removeprefix(EX): v for n, v in evidence.rmse_before.items()},
             "rmse_after": {n.removeprefix(EX): v for n, v in evidence.rmse_after.items()}}
 

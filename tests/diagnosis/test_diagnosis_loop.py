@@ -258,3 +258,27 @@ def test_an_effect_is_not_credited_with_what_the_refit_base_parameters_gain(tmp_
     heat_into_the_air = {("SensorOffset", EX + "coil_outlet_air_temperature_sensor"),
                          ("ConstantHeatGain", EX + "heating_coil_air_side")}
     assert all((e.effect, e.node) in heat_into_the_air and e.delta_bic > first.delta_bic + 100 for e in others), summary
+
+
+def test_a_refit_stopped_at_its_evaluation_limit_says_so_and_is_ranked_below_the_converged(tmp_path):
+    """Issue 32 (5): a refit that stops on its iteration limit is continued once, and one still short
+    says so, in its demotion and its sentence, and is ranked below the converged candidates of its
+    significance. Two evaluations cannot fit a hidden leak's refit; forty can."""
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY)
+    data = tmp_path / "data.csv"
+    generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="ValveLeakage", seed=2, n_days=2.0)
+    catalog = {k: s for k, s in LIBRARY.items() if s.kind != "effect" or k in ("ValveLeakage", "SensorOffset")}
+
+    def diagnosed(evaluations: int):
+        return diagnose(store, "case", data, train=("2026-01-12", "2026-01-12T23:59"), test=("2026-01-13", None),
+                        seed=0, library=catalog, refit_max_nfev=evaluations, workers=1).effects
+
+    short = diagnosed(2)
+    stopped = [e for e in short if "its refit stopped at its limit of 2 evaluations twice" in e.demoted]
+    assert stopped, [(e.effect, e.demoted) for e in short]
+    assert all("stopped at its limit" in e.explanation for e in stopped)
+    for higher, lower in zip(short, short[1:]):
+        assert (higher.significant, not higher.demoted) >= (lower.significant, not lower.demoted)
+    leak = next(e for e in diagnosed(40) if e.effect == "ValveLeakage")
+    assert "stopped at its limit" not in leak.demoted, leak.demoted

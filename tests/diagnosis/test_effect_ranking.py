@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
+from service.calibration.metrics import effective_sample_fraction
 from service.calibration.problem import CalibrationProblem
 from service.diagnosis.ranking import (
     EffectEvidence,
     ScoreTest,
     delta_bic,
-    effective_sample_fraction,
     rank_evidence,
     score_test,
 )
