@@ -40,10 +40,10 @@ def unit_mixups(data: MeasuredData, port_units: Mapping[str, str], observed: Map
         declared, port = data.source_units.get(node), port_units[node]
         if declared is None:
             continue
-        dimension = unit_spec(declared).dimension
+        as_declared = unit_spec(declared)
         raw = convert(observed[node], port, declared)
         others = [name for name, spec in QUDT_UNITS.items()
-                  if spec.dimension == dimension and spec != unit_spec(declared) and spec.label != "1"]
+                  if spec.dimension == as_declared.dimension and spec != as_declared and spec.label != "1"]
         found = None  # (the other unit, RMSE read in it, RMSE as declared)
         for predicted in predictions:
             mask = np.isfinite(raw) & np.isfinite(predicted[node])

@@ -12,6 +12,7 @@ ontology-based framework". :func:`read_signature` checks a file's content; every
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Sequence
 from dataclasses import KW_ONLY, dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -23,7 +24,7 @@ from service.graph.namespaces import GTR, expand_curie
 __all__ = [
     "Rule", "PatternNode", "PatternTriple", "InputMapping", "OutputMapping", "ParameterMapping",
     "EffectSplice", "Signature", "SignatureError", "QUANTITIES", "QUANTITY_UNITS", "read_signature",
-    "signature_from_dict", "signature_iri", "signature_error",
+    "signature_from_dict", "signature_iri", "signature_error", "required_outward",
 ]
 
 #: What a port may carry (``signatures/README.md``, *Quantities*) and the simulator's unit of each.
@@ -411,19 +412,22 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     )
 
 
+def required_outward(anchor: str, triples: Sequence[PatternTriple]) -> list[PatternTriple]:
+    """The required triples that required triples join to node ``anchor``, in the order a walk
+    outward from it takes them (each touches a node one before it reached)."""
+    required = [t for t in triples if not t.is_optional]
+    reached, ordered = {anchor}, []
+    while step := next((t for t in required if t not in ordered and {t.subject, t.object} & reached), None):
+        ordered.append(step)
+        reached |= {step.subject, step.object}
+    return ordered
+
+
 def _loose_triples(anchor: str, triples: list[PatternTriple]) -> list[str]:
     """The keys (``triples[i]``) of the required triples that required triples do not join to node
     ``anchor``."""
-    required = [t for t in triples if t.rule is not Rule.OPTIONAL and not t.optional]
-    reached, grown = {anchor}, True
-    while grown:
-        grown = False
-        for t in required:
-            if {t.subject, t.object} & reached and not {t.subject, t.object} <= reached:
-                reached |= {t.subject, t.object}
-                grown = True
-    return [f"triples[{i}]" for i, t in enumerate(triples)
-            if t.rule is not Rule.OPTIONAL and not t.optional and not {t.subject, t.object} <= reached]
+    joined = required_outward(anchor, triples)
+    return [f"triples[{i}]" for i, t in enumerate(triples) if not t.is_optional and t not in joined]
 
 
 def read_signature(path: Path) -> Signature:

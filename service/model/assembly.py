@@ -25,7 +25,7 @@ from service.graph.namespaces import BRICK, OWL, RDF, RDFS, distinct_local_names
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 from service.graph.units import closest_unit_hint, unit_spec
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
-from service.matching.signature import PatternTriple, Rule, Signature
+from service.matching.signature import PatternTriple, Rule, Signature, required_outward
 from service.model.assembled_model import AssembledModel, ComponentInstance, mapped_values_outside_bounds
 from service.model.effect_splicing import EffectRequest, recorded_effects, splice_effect
 from service.model.wiring import (
@@ -306,9 +306,8 @@ def _first_failing_triple(store: GraphStore, signature: Signature, *, anchor: st
     matches there, in words (a check valve missing downstream of a coil's water side is named as
     such, not as the coil's fault); with how many triples matched before it and the nodes they
     bound in the signature's modelled roles. None when all of them match."""
-    required = [t for t in signature.triples if t.rule is not Rule.OPTIONAL and not t.optional]
     reached, taken, bound = {anchor}, [], {anchor: node}
-    while (step := next((t for t in required if t not in taken and {t.subject, t.object} & reached), None)):
+    for step in required_outward(anchor, signature.triples):
         near = step.subject if step.subject in reached else step.object
         probe = dataclasses.replace(
             signature, nodes={n: signature.nodes[n] for n in reached | {step.subject, step.object}},
