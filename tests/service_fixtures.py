@@ -6,12 +6,10 @@ backend on it."""
 import time
 
 import pytest
-from case_study import CASE_STUDY
+from case_study import CASE_STUDY, case_study_data
 from fastapi.testclient import TestClient
 from oxigraph_server import endpoint_backend, oxigraph_server  # noqa: F401 (pytest fixtures, shared with every test here)
 
-from service.components.library import SignatureLibrary
-from service.data.synthetic import generate_synthetic_data
 from service.graph.store import GraphStore
 from service.http.app import create_app
 from service.settings import Settings
@@ -31,10 +29,8 @@ def _no_service_environment(monkeypatch):
 @pytest.fixture(scope="session")
 def case_csv(tmp_path_factory):
     """One day of 10-minute synthetic measurements of the case study (columns by gt:timeSeriesId)."""
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("data") / "case.csv"
-    generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(), n_days=1)
+    case_study_data(path, n_days=1)
     return path
 
 

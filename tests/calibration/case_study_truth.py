@@ -5,16 +5,13 @@ bound to it, training and test windows, the Bayesian fit and its test-window met
 from __future__ import annotations
 
 import numpy as np
-from case_study import CASE_STUDY, EX
+from case_study import EX, case_study_data
 
 from service.calibration.bayesian import BayesianCalibrator
 from service.calibration.metrics import target_metrics
 from service.calibration.model_data import ModelData
 from service.calibration.run import continuation
-from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
-from service.data.synthetic import generate_synthetic_data
-from service.graph.store import GraphStore
 from service.model.assembly import assemble
 from service.model.simulator import loop_substeps
 
@@ -33,11 +30,9 @@ class CaseStudyTruth:
     the training problem and the continuation problem (training start to test end)."""
 
     def __init__(self, folder, hidden_effect: str | None = None, seed: int = 3):
-        self.store = store = GraphStore.embedded(None)
-        store.load_model("case", CASE_STUDY)
         path = folder / f"case-{hidden_effect}-{seed}.csv"
-        self.truth = generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(),
-                                             seed=seed, n_days=2.0, hidden_effect=hidden_effect)
+        self.store, self.truth = case_study_data(path, seed=seed, n_days=2.0, hidden_effect=hidden_effect)
+        store = self.store
         model = assemble(store, "case")
         data = read_model_data(model, path)
         self.md = ModelData(model, data, loop_substeps(model, data.step_s))

@@ -4,7 +4,7 @@ import matplotlib.image
 import numpy as np
 import pyoxigraph as ox
 import pytest
-from case_study import CASE_STUDY, EX, case_study_with_effect
+from case_study import CASE_STUDY, EX, case_study_data, case_study_with_effect
 
 from service.calibration.run import calibrate
 from service.components.library import SignatureLibrary
@@ -19,11 +19,8 @@ TEST = ("2026-01-14", None)
 
 @pytest.fixture(scope="module")
 def synthetic(tmp_path_factory):
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("data") / "case.csv"
-    truth = generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(),
-                                    seed=3, n_days=3.0)
+    store, truth = case_study_data(path, seed=3, n_days=3.0)
     return store, path, truth
 
 

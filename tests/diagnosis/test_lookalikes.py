@@ -11,15 +11,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from case_study import CASE_STUDY, EX
+from case_study import EX, case_study_data
 
 from service.calibration.model_data import ModelData
 from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
-from service.data.synthetic import generate_synthetic_data
 from service.diagnosis.ranking import EffectEvidence, ScoreTest
 from service.diagnosis.separation import errors_tie, indistinguishable
-from service.graph.store import GraphStore
 from service.model.assembly import assemble
 from service.model.effect_splicing import EffectRequest
 
@@ -61,10 +59,8 @@ def test_a_lookalike_ties_on_the_fit_windows_and_held_out_and_is_as_plausible_as
 @pytest.fixture(scope="module")
 def one_fan_speed(tmp_path_factory):
     """The case study's data with the supply air flow held at 1.2 m³/s, and the two effect models."""
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("lookalikes") / "data.csv"
-    generate_synthetic_data(store, "case", path, library=LIBRARY, seed=1, n_days=2.0)
+    store, _ = case_study_data(path, library=LIBRARY, seed=1, n_days=2.0)
     rows = list(csv.reader(path.open()))
     column = rows[0].index("supply_air_flow")
     for row in rows[1:]:

@@ -7,18 +7,16 @@ in ensembles of different sizes, at 1e-16; a least-squares path carries that to 
 
 import numpy as np
 import pytest
-from case_study import CASE_STUDY, EX
+from case_study import EX, case_study_data
 
 from service.calibration.model_data import ModelData
 from service.calibration.run import calibrate
 from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
-from service.data.synthetic import generate_synthetic_data
 from service.diagnosis import candidates as candidates_module
 from service.diagnosis.candidates import effect_candidates, rank_catalog
 from service.diagnosis.drift import _with_drift
 from service.diagnosis.shared_runs import SharedRuns, shared_model
-from service.graph.store import GraphStore
 from service.model.assembly import assemble
 from service.model.effect_splicing import EffectRequest
 
@@ -28,10 +26,8 @@ LIBRARY = SignatureLibrary.load()
 @pytest.fixture(scope="module")
 def leaking(tmp_path_factory):
     """The case study and three days of its data with a leaking heating valve."""
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("shared") / "days.csv"
-    generate_synthetic_data(store, "case", path, library=LIBRARY, hidden_effect="ValveLeakage", seed=3, n_days=3.0)
+    store, _ = case_study_data(path, library=LIBRARY, hidden_effect="ValveLeakage", seed=3, n_days=3.0)
     return store, path
 
 

@@ -135,15 +135,10 @@ COIL_CONDUCTANCES = ("heating_coil_air_side.water_side_conductance", "heating_co
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    from case_study import CASE_STUDY
+    from case_study import case_study_data
 
-    from service.graph.store import GraphStore
-
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("data") / "case.csv"
-    truth = generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(),
-                                    seed=3, n_days=3.0)
+    store, truth = case_study_data(path, seed=3, n_days=3.0)
     model = assemble(store, "case")
     data = read_model_data(model, path)
     md = ModelData(model, data, loop_substeps(model, data.step_s))

@@ -6,22 +6,17 @@ meter the model has a free curve for can hide it: the fan's power in kW under it
 curve, and the meter does not fail."""
 
 import pytest
-from case_study import CASE_STUDY
+from case_study import case_study_data
 
-from service.components.library import SignatureLibrary
-from service.data.synthetic import generate_synthetic_data
 from service.diagnosis.loop import diagnose
-from service.graph.store import GraphStore
 
 TRAIN, TEST = ("2026-01-12", "2026-01-12T23:59"), ("2026-01-13", None)
 
 
 @pytest.fixture(scope="module")
 def generated(tmp_path_factory):
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     path = tmp_path_factory.mktemp("mixup") / "data.csv"
-    generate_synthetic_data(store, "case", path, library=SignatureLibrary.load(), seed=4, n_days=2.0)
+    store, _ = case_study_data(path, seed=4, n_days=2.0)
     return store, path
 
 

@@ -6,15 +6,12 @@ import json
 
 import numpy as np
 import pytest
-from case_study import CASE_STUDY
+from case_study import case_study_data
 from test_report_page import PageParser
 
 from service.calibration.record import PredictiveBand
 from service.calibration.run import calibrate
 from service.calibration.triples import BAND_MAX_POINTS, band_json
-from service.components.library import SignatureLibrary
-from service.data.synthetic import generate_synthetic_data
-from service.graph.store import GraphStore
 from service.report.page import report_html
 from service.report.run_series import INTERVAL_Z, data_file_locator, recompute_series
 from service.report.stored_run import read_run, stored_band
@@ -26,10 +23,8 @@ COVERAGE_RANGE = (0.80, 1.0)
 
 @pytest.fixture(scope="module")
 def bayesian_run(tmp_path_factory):
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     data = tmp_path_factory.mktemp("bayes") / "case.csv"
-    generate_synthetic_data(store, "case", data, library=SignatureLibrary.load(), seed=3, n_days=2.0)
+    store, _ = case_study_data(data, seed=3, n_days=2.0)
     outcome = calibrate(store, "case", data, train=("2026-01-12", "2026-01-12T23:59"),
                         test=("2026-01-13", "2026-01-13T05:59"), method="bayes", seed=1, substeps=1,
                         bayes_settings={"max_steps": 10, "check_interval": 10, "n_temperatures": 2})
