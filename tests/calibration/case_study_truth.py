@@ -32,8 +32,7 @@ class CaseStudyTruth:
     def __init__(self, folder, hidden_effect: str | None = None, seed: int = 3):
         path = folder / f"case-{hidden_effect}-{seed}.csv"
         self.store, self.truth = case_study_data(path, seed=seed, n_days=2.0, hidden_effect=hidden_effect)
-        store = self.store
-        model = assemble(store, "case")
+        model = assemble(self.store, "case")
         data = read_model_data(model, path)
         self.md = ModelData(model, data, loop_substeps(model, data.step_s))
         self.train = data.window(*TRAIN)

@@ -8,7 +8,6 @@ from case_study import CASE_STUDY, EX, case_study_data, case_study_with_effect
 
 from service.calibration.run import calibrate
 from service.components.library import SignatureLibrary
-from service.data.synthetic import generate_synthetic_data
 from service.data.windows import parse_window
 from service.graph.store import GraphStore
 from service.report.calibration_plots import plot_calibration
@@ -380,11 +379,8 @@ def test_recalibrating_after_an_effect_from_the_base_fit_finds_the_truths_basin(
     from service.model.wiring import without_model
 
     library = SignatureLibrary.load()
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     data = tmp_path / "leak.csv"
-    truth = generate_synthetic_data(store, "case", data, library=library, hidden_effect="ValveLeakage", seed=2,
-                                    n_days=1.0)
+    store, truth = case_study_data(data, library=library, hidden_effect="ValveLeakage", seed=2, n_days=1.0)
     train = ("2026-01-12T06:00", "2026-01-12T11:59")
     calibrate(store, "case", data, train=train, seed=0)
     store.load_model("case+ValveLeakage", case_study_with_effect(library["ValveLeakage"], truth.node))

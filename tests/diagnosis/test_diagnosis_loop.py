@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from case_study import CASE_STUDY, EX, case_study_with_effect
+from case_study import CASE_STUDY, EX, case_study_data, case_study_with_effect
 
 from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
@@ -101,10 +101,8 @@ def test_nothing_is_invented_when_nothing_is_missing(tmp_path):
 
 @pytest.mark.slow
 def test_the_report_follows_the_cli_contract_and_is_stored(tmp_path):
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     data = tmp_path / "data.csv"
-    generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="ValveLeakage", seed=2, n_days=4.0)
+    store, _ = case_study_data(data, library=LIBRARY, hidden_effect="ValveLeakage", seed=2, n_days=4.0)
     report = diagnose(store, "case", data, train=TRAIN, test=TEST, seed=0, refit_max_nfev=20)
     out = report.to_dict()
     for node, metrics in out["sensors"].items():
@@ -135,10 +133,8 @@ def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tm
 
     from service.data.measurements import SeriesSpec, read_measurements
 
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     data = tmp_path / "data.csv"
-    generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="FanMotorHeat", seed=2, n_days=2.0)
+    store, _ = case_study_data(data, library=LIBRARY, hidden_effect="FanMotorHeat", seed=2, n_days=2.0)
     flow = read_measurements(data, {"f": SeriesSpec("f", "supply_air_flow", "http://qudt.org/vocab/unit/M3-PER-SEC",
                                                     "m3/s")}).series["f"]
     condition = f"supply_air_flow > {np.nanmedian(flow):.4f}"
@@ -245,10 +241,8 @@ def test_an_effect_is_not_credited_with_what_the_refit_base_parameters_gain(tmp_
     offset of the controlled sensor (+0.54 K), which in the closed loop mimics heat upstream of the
     coil (490 behind in ΔBIC), and a constant heat gain at the coil's air side (270 W where the fan's
     heat follows its power; 1,200 behind)."""
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     data = tmp_path / "data.csv"
-    generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="FanMotorHeat", seed=1, n_days=3.0)
+    store, _ = case_study_data(data, library=LIBRARY, hidden_effect="FanMotorHeat", seed=1, n_days=3.0)
     report = diagnose(store, "case", data, train=("2026-01-12", "2026-01-13T23:50"), test=TEST, seed=0)
     summary = [(e.effect, e.node, e.estimates, e.delta_bic, e.test_improvement) for e in report.effects[:3]]
     significant = [e for e in report.effects if e.significant]
@@ -264,10 +258,8 @@ def test_a_refit_stopped_at_its_evaluation_limit_says_so_and_is_ranked_below_the
     """Issue 32 (5): a refit that stops on its iteration limit is continued once, and one still short
     says so, in its demotion and its sentence, and is ranked below the converged candidates of its
     significance. Two evaluations cannot fit a hidden leak's refit; forty can."""
-    store = GraphStore.embedded(None)
-    store.load_model("case", CASE_STUDY)
     data = tmp_path / "data.csv"
-    generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="ValveLeakage", seed=2, n_days=2.0)
+    store, _ = case_study_data(data, library=LIBRARY, hidden_effect="ValveLeakage", seed=2, n_days=2.0)
     catalog = {k: s for k, s in LIBRARY.items() if s.kind != "effect" or k in ("ValveLeakage", "SensorOffset")}
 
     def diagnosed(evaluations: int):

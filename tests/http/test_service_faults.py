@@ -12,12 +12,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from case_study import CASE_STUDY
+from case_study import CASE_STUDY, case_study_data
 from oxigraph_server import free_loopback_port
-
-from service.components.library import SignatureLibrary
-from service.data.synthetic import generate_synthetic_data
-from service.graph.store import GraphStore
 
 TOKEN = "fault-token-0123456789"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -70,10 +66,8 @@ class Server:
     def upload_four_days(self, folder: Path) -> str:
         """Four days of synthetic case-study data uploaded (a calibration of several seconds: still
         running 0.5 s in on any machine); the upload's id."""
-        store = GraphStore.embedded(None)
-        store.load_model("case", CASE_STUDY)
         days = folder / "four_days.csv"
-        generate_synthetic_data(store, "case", days, library=SignatureLibrary.load(), n_days=4)
+        case_study_data(days, n_days=4)
         return self.client.post("/models/case/measurements", content=days.read_bytes(),
                                 headers={**AUTH, "Content-Type": "text/csv"}).json()["id"]
 
