@@ -228,29 +228,39 @@ def _known_unit(unit: str) -> bool:
 
 
 def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
-    """One sentence per class that no loaded ontology declares and that is all a signature could see
-    of the nodes it types (``queries/undeclared-classes.rq``), with the declared class its name is
-    closest to when one is close (a misspelling): those nodes are in no component."""
+    """One sentence per class that no loaded ontology declares (``queries/undeclared-classes.rq``),
+    with the declared class its name is closest to when one is close (a misspelling): where that
+    class is all a signature could see of the nodes it types, those nodes are in no component; where
+    it sits in an official ontology's namespace on nodes modelled from their other types or
+    properties, the graph still says what its author did not mean. A class of the author's own
+    namespace on a modelled node is theirs to coin, and no Brick class is a misspelling here."""
     rows = store.run_named_query("undeclared-classes", **store.graph_variables(model_name))
-    undeclared = [(row["class"].value, int(row["nodes"].value), row["first_node"].value) for row in rows]
-    if not undeclared:
+    if not rows:
         return []
     declared = defaultdict(list)  # namespace → the local names of the classes the ontologies declare in it
     for t in store.graph_triples(ONTOLOGY_GRAPH):
         if t.predicate == RDF.type and t.object in (OWL.Class, RDFS.Class) and isinstance(t.subject, ox.NamedNode):
             declared[namespace_of(t.subject.value)].append(local_name(t.subject.value))
     notes = []
-    for cls, count, first in undeclared:
-        nodes = first if count == 1 else f"{count} nodes, e.g. {first}"
+    for row in rows:
+        cls, count, unseen = row["class"].value, int(row["nodes"].value), int(row["unseen_nodes"].value)
+        names = declared[namespace_of(cls)]
         if namespace_of(cls) == BRICK:  # official Brick classes outside graphtwin's subset are no misspelling
             hint = " (graphtwin brick-report says what the Brick alignment needs)"
         else:
-            names = declared[namespace_of(cls)]
             close = ([n for n in names if n.lower() == local_name(cls).lower()]  # fan for Fan
                      or difflib.get_close_matches(local_name(cls), names, n=1, cutoff=0.85))
             hint = f" (did you mean {namespace_of(cls)}{close[0]}?)" if close else ""
-        notes.append(f"{short_name(first)}: its class {cls} ({nodes}) is declared by no loaded ontology, and the node has "
-                     f"no other type a signature matches: no component models it{hint}")
+        if unseen:
+            first = row["first_unseen"].value
+            nodes = first if unseen == 1 else f"{unseen} nodes, e.g. {first}"
+            notes.append(f"{short_name(first)}: its class {cls} ({nodes}) is declared by no loaded ontology, and the "
+                         f"node has no other type a signature matches: no component models it{hint}")
+        elif names and namespace_of(cls) != BRICK:
+            first = row["first_node"].value
+            nodes = first if count == 1 else f"{count} nodes, e.g. {first}"
+            notes.append(f"{short_name(first)}: its class {cls} ({nodes}) is not in the loaded ontology of its "
+                         f"namespace{hint}; the node is modelled from its other types and properties")
     return notes
 
 

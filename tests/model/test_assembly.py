@@ -295,6 +295,29 @@ def test_a_misspelt_class_that_leaves_a_pattern_unmatched_is_named_in_the_error_
     assert info.value.problems[0].endswith("(did you mean https://saref.etsi.org/saref4bldg/Fan?)")
 
 
+def test_a_misspelt_official_class_on_a_node_modelled_anyway_is_a_note_and_changes_nothing_else():
+    """``s4bldg:Sensr``: the sensor is still modelled (it observes a property), so the model is the
+    same, and the note names the node, the class and the one it resembles; a class of the author's
+    own namespace on a modelled node is no note."""
+    text = CASE_STUDY.read_text(encoding="utf-8")
+    sensor = "ex:coil_outlet_air_temperature_sensor a s4bldg:Sensor"
+    assert sensor in text
+    store = GraphStore.embedded(None)
+    store.load_model("typo", text.replace(sensor, sensor.replace("Sensor", "Sensr")).encode())
+    store.load_model("own", text.replace(sensor, sensor + ", ex:SupplyAirProbe").encode())
+    store.load_model("right", text.encode())
+    typo, own, right = (assemble(store, name) for name in ("typo", "own", "right"))
+    assert [n for n in typo.notes if n not in right.notes] == [
+        "coil_outlet_air_temperature_sensor: its class https://saref.etsi.org/saref4bldg/Sensr "
+        "(https://example.org/ventilation-case-study#coil_outlet_air_temperature_sensor) is not in the loaded "
+        "ontology of its namespace (did you mean https://saref.etsi.org/saref4bldg/Sensor?); the node is modelled "
+        "from its other types and properties"]
+    assert own.notes == right.notes
+    def roles(model):
+        return sorted(target.split("/component/")[1] for target in model.targets)
+    assert roles(typo) == roles(right) and len(roles(right)) == 5
+
+
 def test_a_sensor_unit_graphtwin_does_not_know_is_a_note_at_assembly_with_the_unit_it_resembles():
     """``unit:DEGC`` for ``unit:DEG_C``: said when the model is assembled, naming the sensor (it had
     first surfaced at calibration, blamed on the CSV column)."""
