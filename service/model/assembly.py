@@ -12,7 +12,6 @@ and gap is a sentence in ``AssembledModel.notes``. Details: ``docs/assembly.md``
 from __future__ import annotations
 
 import dataclasses
-import difflib
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Mapping
 
@@ -21,12 +20,20 @@ import pyoxigraph as ox
 from service.components.library import SignatureLibrary
 from service.components.measuring_device import MeasuringDevice
 from service.errors import AssemblyError, IncompleteModelError, UnitError
-from service.graph.namespaces import BRICK, OWL, RDF, RDFS, distinct_local_names, local_name, namespace_of
-from service.graph.store import ONTOLOGY_GRAPH, GraphStore
+from service.graph.namespaces import (
+    RDFS,
+    distinct_local_names,
+)
+from service.graph.store import GraphStore
 from service.graph.units import closest_unit_hint, unit_spec
+from service.graph.vocabulary import misspelt_term_notes
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
 from service.matching.signature import PatternTriple, Rule, Signature, required_outward
-from service.model.assembled_model import AssembledModel, ComponentInstance, mapped_values_outside_bounds
+from service.model.assembled_model import (
+    AssembledModel,
+    ComponentInstance,
+    mapped_values_outside_bounds,
+)
 from service.model.effect_splicing import EffectRequest, recorded_effects, splice_effect
 from service.model.wiring import (
     MatchValues,
@@ -118,7 +125,7 @@ def assemble(
               f"knows{closest_unit_hint(i.measurement.unit)}: its column cannot be read"
               for i in instances.values() if i.measurement is not None and i.measurement.unit is not None
               and not _known_unit(i.measurement.unit)]
-    undeclared = _undeclared_class_notes(store, model_name)  # a misspelt class is often why a pattern misses
+    undeclared = misspelt_term_notes(store, model_name)  # a misspelt term is often why a pattern misses
     notes += undeclared
     effect_requests = list(extra_effects) + recorded_effects(store, model_name, library)
     connections, unconnected = wire(instances)
@@ -225,43 +232,6 @@ def _known_unit(unit: str) -> bool:
     except UnitError:
         return False
     return True
-
-
-def _undeclared_class_notes(store: GraphStore, model_name: str) -> list[str]:
-    """One sentence per class that no loaded ontology declares (``queries/undeclared-classes.rq``),
-    with the declared class its name is closest to when one is close (a misspelling): where that
-    class is all a signature could see of the nodes it types, those nodes are in no component; where
-    it sits in an official ontology's namespace on nodes modelled from their other types or
-    properties, the graph still says what its author did not mean. A class of the author's own
-    namespace on a modelled node is theirs to coin, and no Brick class is a misspelling here."""
-    rows = store.run_named_query("undeclared-classes", **store.graph_variables(model_name))
-    if not rows:
-        return []
-    declared = defaultdict(list)  # namespace → the local names of the classes the ontologies declare in it
-    for t in store.graph_triples(ONTOLOGY_GRAPH):
-        if t.predicate == RDF.type and t.object in (OWL.Class, RDFS.Class) and isinstance(t.subject, ox.NamedNode):
-            declared[namespace_of(t.subject.value)].append(local_name(t.subject.value))
-    notes = []
-    for row in rows:
-        cls, count, unseen = row["class"].value, int(row["nodes"].value), int(row["unseen_nodes"].value)
-        names = declared[namespace_of(cls)]
-        if namespace_of(cls) == BRICK:  # official Brick classes outside graphtwin's subset are no misspelling
-            hint = " (graphtwin brick-report says what the Brick alignment needs)"
-        else:
-            close = ([n for n in names if n.lower() == local_name(cls).lower()]  # fan for Fan
-                     or difflib.get_close_matches(local_name(cls), names, n=1, cutoff=0.85))
-            hint = f" (did you mean {namespace_of(cls)}{close[0]}?)" if close else ""
-        if unseen:
-            first = row["first_unseen"].value
-            nodes = first if unseen == 1 else f"{unseen} nodes, e.g. {first}"
-            notes.append(f"{short_name(first)}: its class {cls} ({nodes}) is declared by no loaded ontology, and the "
-                         f"node has no other type a signature matches: no component models it{hint}")
-        elif names and namespace_of(cls) != BRICK:
-            first = row["first_node"].value
-            nodes = first if count == 1 else f"{count} nodes, e.g. {first}"
-            notes.append(f"{short_name(first)}: its class {cls} ({nodes}) is not in the loaded ontology of its "
-                         f"namespace{hint}; the node is modelled from its other types and properties")
-    return notes
 
 
 def _optional_block(signature: Signature, node: str, *, through: str, without: str) -> list[PatternTriple]:

@@ -39,6 +39,13 @@ def _official(names) -> list[ox.Triple]:
     return [t for name in names for t in _triples((SHARED / name).read_bytes())]
 
 
+def _fixed(alignment: bytes) -> bytes:
+    """An FSO alignment file with its SAREF namespaces corrected (NAMESPACE_FIXES)."""
+    for wrong, right in NAMESPACE_FIXES.items():
+        alignment = alignment.replace(wrong, right)
+    return alignment
+
+
 def _subsets() -> list[ox.Triple]:
     return [t for path in sorted(ontologies_dir().glob("*-subset.ttl")) for t in _triples(path.read_bytes())]
 
@@ -60,10 +67,7 @@ def test_every_subset_term_is_in_the_current_release_or_listed_as_v3_only():
 def test_every_subclass_axiom_of_the_subsets_follows_from_the_official_files():
     official = _official(V3_FILES + V4_FILES)
     for name in ALIGNMENT_FILES:
-        data = (SHARED / name).read_bytes()
-        for wrong, right in NAMESPACE_FIXES.items():
-            data = data.replace(wrong, right)
-        official += _triples(data)
+        official += _triples(_fixed((SHARED / name).read_bytes()))
     parents = defaultdict(set)
     for t in official:
         if t.predicate in (RDFS.subClassOf, RDFS.subPropertyOf) and isinstance(t.object, ox.NamedNode):
@@ -128,3 +132,34 @@ def test_every_gt_term_the_project_uses_is_declared():
                 used.setdefault(str(GT) + match.group(1), path.relative_to(home))
     assert len(used) > 50
     assert {iri: str(path) for iri, path in used.items() if iri not in declared} == {}
+
+
+@needs_shared
+def test_no_official_term_outside_the_subsets_is_taken_for_a_misspelling_of_one_inside():
+    """The misspelling check (service.graph.vocabulary) sees only the subsets: an official SAREF,
+    SAREF4BLDG, SAREF4SYST or FSO class or property the subsets leave out must not be close enough to
+    a subset term to be called its misspelling."""
+    from service.graph.namespaces import local_name, namespace_of
+    from service.graph.vocabulary import closest_declared
+
+    kinds = {OWL.Class: "class", RDFS.Class: "class", OWL.ObjectProperty: "property",
+             OWL.DatatypeProperty: "property", OWL.AnnotationProperty: "property", RDF.Property: "property"}
+
+    def by_kind(triples):
+        terms = defaultdict(set)
+        for t in triples:
+            if t.predicate == RDF.type and t.object in kinds and isinstance(t.subject, ox.NamedNode):
+                terms[kinds[t.object]].add(t.subject.value)
+        return terms
+
+    official_files = V3_FILES + tuple(f for f in V4_FILES if not f.startswith("brick/"))
+    official = by_kind(_official(official_files) + [t for name in ALIGNMENT_FILES for t in _triples(
+        _fixed((SHARED / name).read_bytes()))])
+    subset = by_kind(_subsets())
+    assert len(official["class"] - subset["class"]) > 40 and len(official["property"] - subset["property"]) > 40
+    for kind in ("class", "property"):
+        declared = defaultdict(list)
+        for iri in subset[kind]:
+            declared[namespace_of(iri)].append(local_name(iri))
+        taken = {iri: closest_declared(iri, declared) for iri in sorted(official[kind] - subset[kind])}
+        assert {iri: meant for iri, meant in taken.items() if meant} == {}

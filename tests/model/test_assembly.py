@@ -295,27 +295,41 @@ def test_a_misspelt_class_that_leaves_a_pattern_unmatched_is_named_in_the_error_
     assert info.value.problems[0].endswith("(did you mean https://saref.etsi.org/saref4bldg/Fan?)")
 
 
-def test_a_misspelt_official_class_on_a_node_modelled_anyway_is_a_note_and_changes_nothing_else():
-    """``s4bldg:Sensr``: the sensor is still modelled (it observes a property), so the model is the
-    same, and the note names the node, the class and the one it resembles; a class of the author's
-    own namespace on a modelled node is no note."""
+def test_misspelt_official_terms_are_notes_naming_the_node_and_the_term_meant():
+    """``s4bldg:Sensr``: the sensor is still modelled (it observes a property), the model is the same,
+    and a note names the node, the class and the one it resembles. ``fso:suppliesFluidToo``: the coil
+    no longer feeds the sensor, which becomes a boundary input, and a note says which property no
+    signature follows. A class or property of the author's own namespace is no note."""
     text = CASE_STUDY.read_text(encoding="utf-8")
     sensor = "ex:coil_outlet_air_temperature_sensor a s4bldg:Sensor"
-    assert sensor in text
+    feeds = "fso:suppliesFluidTo ex:coil_outlet_air_temperature_sensor"
+    assert sensor in text and text.count(feeds) == 1
     store = GraphStore.embedded(None)
-    store.load_model("typo", text.replace(sensor, sensor.replace("Sensor", "Sensr")).encode())
-    store.load_model("own", text.replace(sensor, sensor + ", ex:SupplyAirProbe").encode())
+    store.load_model("class", text.replace(sensor, sensor.replace("Sensor", "Sensr")).encode())
+    store.load_model("property", text.replace(feeds, feeds.replace("FluidTo", "FluidToo")).encode())
+    store.load_model("own", text.replace(sensor, sensor + ", ex:SupplyAirProbe ;\n    ex:installedBy ex:us").encode())
     store.load_model("right", text.encode())
-    typo, own, right = (assemble(store, name) for name in ("typo", "own", "right"))
-    assert [n for n in typo.notes if n not in right.notes] == [
-        "coil_outlet_air_temperature_sensor: its class https://saref.etsi.org/saref4bldg/Sensr "
-        "(https://example.org/ventilation-case-study#coil_outlet_air_temperature_sensor) is not in the loaded "
-        "ontology of its namespace (did you mean https://saref.etsi.org/saref4bldg/Sensor?); the node is modelled "
-        "from its other types and properties"]
-    assert own.notes == right.notes
+    models = {name: assemble(store, name) for name in ("class", "property", "own", "right")}
+    right = models["right"]
+
     def roles(model):
         return sorted(target.split("/component/")[1] for target in model.targets)
-    assert roles(typo) == roles(right) and len(roles(right)) == 5
+
+    def new_notes(model):
+        return [n for n in model.notes if n not in right.notes]
+
+    node = "https://example.org/ventilation-case-study#coil_outlet_air_temperature_sensor"
+    assert new_notes(models["class"]) == [
+        f"coil_outlet_air_temperature_sensor: its class https://saref.etsi.org/saref4bldg/Sensr ({node}) is declared "
+        "by no loaded ontology (did you mean https://saref.etsi.org/saref4bldg/Sensor?); the node is modelled "
+        "from its other types and properties"]
+    assert roles(models["class"]) == roles(right) and len(roles(right)) == 5
+    assert new_notes(models["property"])[0] == (
+        "heating_coil_air_side: its property https://w3id.org/fso#suppliesFluidToo (1 triple, e.g. from "
+        "https://example.org/ventilation-case-study#heating_coil_air_side) is declared by no loaded ontology "
+        "(did you mean https://w3id.org/fso#suppliesFluidTo?): no signature follows it"), new_notes(models["property"])
+    assert len(roles(models["property"])) == 4
+    assert models["own"].notes == right.notes
 
 
 def test_a_sensor_unit_graphtwin_does_not_know_is_a_note_at_assembly_with_the_unit_it_resembles():
