@@ -1,10 +1,11 @@
-"""Misspelt ontology terms in a building model: classes and properties no loaded ontology declares.
+"""Misspelt ontology terms in a building model: classes, properties and values no loaded ontology declares.
 
-A class or property in an ontology's namespace that the ontology does not declare is most often a
-misspelling (``s4bldg:Sensr``, ``fso:suppliesFluidToo``); graphtwin's signatures then see less of the
-graph than its author wrote. Each such term gets one sentence naming a node that uses it and the
-declared term its local name is closest to (the same letters apart from case, or ``difflib`` ratio
-≥ 0.85). The loaded ontologies are subsets of the official ones, so a term is only called a
+A class, property or value in an ontology's namespace that the ontology does not declare is most
+often a misspelling (``s4bldg:Sensr``, ``fso:suppliesFluidToo``, ``s4bldg:nominalAirflowRate``):
+graphtwin's signatures then see less of the graph than its author wrote. Each such term gets one
+sentence naming a node that uses it and the declared term of its kind (class, property, or a value a
+property points to) its local name is closest to (the same letters apart from case, or ``difflib``
+ratio ≥ 0.85). The loaded ontologies are subsets of the official ones, so a term is only called a
 misspelling where a declared term is that close, or where nothing else lets a signature see the node.
 """
 
@@ -19,32 +20,39 @@ import pyoxigraph as ox
 from service.graph.namespaces import BRICK, OWL, RDF, RDFS, local_name, namespace_of
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
-__all__ = ["misspelt_term_notes", "closest_declared"]
+__all__ = ["misspelt_term_notes", "closest_declared", "CLASS_TYPES", "PROPERTY_TYPES"]
 
 #: The ``rdf:type`` objects that declare a class, and those that declare a property.
-_CLASS_TYPES = (OWL.Class, RDFS.Class)
-_PROPERTY_TYPES = (OWL.ObjectProperty, OWL.DatatypeProperty, OWL.AnnotationProperty, RDF.Property)
+CLASS_TYPES = (OWL.Class, RDFS.Class)
+PROPERTY_TYPES = (OWL.ObjectProperty, OWL.DatatypeProperty, OWL.AnnotationProperty, RDF.Property)
 #: ``difflib`` ratio from which a declared term's name counts as the one meant.
 CLOSE_NAME_RATIO = 0.85
 
 
 @dataclass(frozen=True)
 class _DeclaredTerms:
-    """The local names the loaded ontologies declare, per namespace, for classes and for properties."""
+    """The local names the loaded ontologies declare, per namespace: classes, properties, and the
+    values a property can point to (every typed term that is not a property: classes, and
+    individuals such as SAREF4BLDG's nominal properties)."""
 
     classes: dict[str, list[str]]
     properties: dict[str, list[str]]
+    values: dict[str, list[str]]
 
     @classmethod
     def of(cls, store: GraphStore) -> _DeclaredTerms:
-        classes, properties = defaultdict(list), defaultdict(list)
+        types = defaultdict(set)
         for t in store.graph_triples(ONTOLOGY_GRAPH):
-            if t.predicate != RDF.type or not isinstance(t.subject, ox.NamedNode):
-                continue
-            kind = classes if t.object in _CLASS_TYPES else properties if t.object in _PROPERTY_TYPES else None
-            if kind is not None:
-                kind[namespace_of(t.subject.value)].append(local_name(t.subject.value))
-        return cls(classes, properties)
+            if t.predicate == RDF.type and isinstance(t.subject, ox.NamedNode):
+                types[t.subject.value].add(t.object)
+        kinds = defaultdict(lambda: defaultdict(list))  # kind → namespace → local names
+        for iri, declared_as in sorted(types.items()):
+            is_property = bool(declared_as & set(PROPERTY_TYPES))
+            for kind, member in (("classes", bool(declared_as & set(CLASS_TYPES))), ("properties", is_property),
+                                 ("values", not is_property)):
+                if member:
+                    kinds[kind][namespace_of(iri)].append(local_name(iri))
+        return cls(**{kind: dict(kinds[kind]) for kind in ("classes", "properties", "values")})
 
 
 def closest_declared(term: str, declared: dict[str, list[str]]) -> str | None:
@@ -65,15 +73,15 @@ def _nodes(first: str, count: int) -> str:
 
 
 def misspelt_term_notes(store: GraphStore, model_name: str) -> list[str]:
-    """One sentence per undeclared class (``queries/undeclared-classes.rq``) or property
-    (``queries/undeclared-properties.rq``) of model ``model_name`` that is likely misspelt: a class
+    """One sentence per undeclared class (``queries/undeclared-classes.rq``), property or property
+    value (``queries/undeclared-terms.rq``) of model ``model_name`` that is likely misspelt: a class
     that is all a signature could see of the nodes it types (those nodes are in no component), a
-    class or property whose name is close to a declared one. Official Brick classes outside
+    class, property or value whose name is close to a declared term. Official Brick classes outside
     graphtwin's subset point to ``graphtwin brick-report`` instead."""
     variables = store.graph_variables(model_name)
     class_rows = store.run_named_query("undeclared-classes", **variables)
-    property_rows = store.run_named_query("undeclared-properties", **variables)
-    if not class_rows and not property_rows:
+    term_rows = store.run_named_query("undeclared-terms", **variables)
+    if not class_rows and not term_rows:
         return []
     declared = _DeclaredTerms.of(store)
     notes = []
@@ -91,12 +99,14 @@ def misspelt_term_notes(store: GraphStore, model_name: str) -> list[str]:
             notes.append(f"{_node_name(first)}: its class {cls} ({_nodes(first, int(row['nodes'].value))}) is "
                          f"declared by no loaded ontology{hint}; the node is modelled from its other types and "
                          "properties")
-    for row in property_rows:
-        prop = row["property"].value
-        meant = closest_declared(prop, declared.properties)
+    for row in term_rows:
+        term, is_property = row["term"].value, row["position"].value == "property"
+        meant = closest_declared(term, declared.properties if is_property else declared.values)
         if meant:
             first, uses = row["first_subject"].value, int(row["uses"].value)
             triples = "1 triple" if uses == 1 else f"{uses} triples"
-            notes.append(f"{_node_name(first)}: its property {prop} ({triples}, e.g. from {first}) is declared by no "
-                         f"loaded ontology (did you mean {meant}?): no signature follows it")
+            role = ("its property", "no signature follows it") if is_property else (
+                "the value", "no signature matches it")
+            notes.append(f"{_node_name(first)}: {role[0]} {term} ({triples}, e.g. from {first}) is declared by no "
+                         f"loaded ontology (did you mean {meant}?): {role[1]}")
     return notes

@@ -299,7 +299,8 @@ def test_misspelt_official_terms_are_notes_naming_the_node_and_the_term_meant():
     """``s4bldg:Sensr``: the sensor is still modelled (it observes a property), the model is the same,
     and a note names the node, the class and the one it resembles. ``fso:suppliesFluidToo``: the coil
     no longer feeds the sensor, which becomes a boundary input, and a note says which property no
-    signature follows. A class or property of the author's own namespace is no note."""
+    signature follows. ``s4bldg:nominalAirflowRate``: the fan's nominal flow is no longer mapped, and
+    a note says so. A class or property of the author's own namespace is no note."""
     text = CASE_STUDY.read_text(encoding="utf-8")
     sensor = "ex:coil_outlet_air_temperature_sensor a s4bldg:Sensor"
     feeds = "fso:suppliesFluidTo ex:coil_outlet_air_temperature_sensor"
@@ -307,9 +308,10 @@ def test_misspelt_official_terms_are_notes_naming_the_node_and_the_term_meant():
     store = GraphStore.embedded(None)
     store.load_model("class", text.replace(sensor, sensor.replace("Sensor", "Sensr")).encode())
     store.load_model("property", text.replace(feeds, feeds.replace("FluidTo", "FluidToo")).encode())
+    store.load_model("value", text.replace("s4bldg:nominalAirFlowRate", "s4bldg:nominalAirflowRate").encode())
     store.load_model("own", text.replace(sensor, sensor + ", ex:SupplyAirProbe ;\n    ex:installedBy ex:us").encode())
     store.load_model("right", text.encode())
-    models = {name: assemble(store, name) for name in ("class", "property", "own", "right")}
+    models = {name: assemble(store, name) for name in ("class", "property", "value", "own", "right")}
     right = models["right"]
 
     def roles(model):
@@ -329,6 +331,11 @@ def test_misspelt_official_terms_are_notes_naming_the_node_and_the_term_meant():
         "https://example.org/ventilation-case-study#heating_coil_air_side) is declared by no loaded ontology "
         "(did you mean https://w3id.org/fso#suppliesFluidTo?): no signature follows it"), new_notes(models["property"])
     assert len(roles(models["property"])) == 4
+    assert new_notes(models["value"])[0] == (
+        "supply_fan_nominal_air_flow: the value https://saref.etsi.org/saref4bldg/nominalAirflowRate (1 triple, "
+        "e.g. from https://example.org/ventilation-case-study#supply_fan_nominal_air_flow) is declared by no loaded "
+        "ontology (did you mean https://saref.etsi.org/saref4bldg/nominalAirFlowRate?): no signature matches it")
+    assert len(models["value"].mapped_parameters) == len(right.mapped_parameters) - 1
     assert models["own"].notes == right.notes
 
 
