@@ -17,16 +17,20 @@ from dataclasses import dataclass
 
 import pyoxigraph as ox
 
-from service.graph.namespaces import BRICK, OWL, RDF, RDFS, local_name, namespace_of
+from service.graph.namespaces import BRICK, OWL, RDF, RDFS, REF, local_name, namespace_of
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
-__all__ = ["misspelt_term_notes", "closest_declared", "CLASS_TYPES", "PROPERTY_TYPES"]
+__all__ = ["misspelt_terms", "MisspeltTerms", "closest_declared", "CLASS_TYPES", "PROPERTY_TYPES"]
 
 #: The ``rdf:type`` objects that declare a class, and those that declare a property.
 CLASS_TYPES = (OWL.Class, RDFS.Class)
 PROPERTY_TYPES = (OWL.ObjectProperty, OWL.DatatypeProperty, OWL.AnnotationProperty, RDF.Property)
-#: ``difflib`` ratio from which a declared term's name counts as the one meant.
+#: ``difflib`` ratio from which a declared term's name counts as the one meant; the names of Brick
+#: and what it ships (its ``ref:`` and RealEstateCore terms) lie closer to one another (an official
+#: class graphtwin leaves out is up to 0.92 from one it loads), so there only a nearer name counts.
 CLOSE_NAME_RATIO = 0.85
+BRICK_CLOSE_NAME_RATIO = 0.95
+_BRICK_NAMESPACES = (str(BRICK), str(REF), "https://w3id.org/rec#")
 
 
 @dataclass(frozen=True)
@@ -59,8 +63,9 @@ def closest_declared(term: str, declared: dict[str, list[str]]) -> str | None:
     """The declared term (``declared``: namespace → local names) of ``term``'s namespace its local
     name is closest to, if one is close."""
     names, name = declared.get(namespace_of(term), []), local_name(term)
+    cutoff = BRICK_CLOSE_NAME_RATIO if namespace_of(term) in _BRICK_NAMESPACES else CLOSE_NAME_RATIO
     close = ([n for n in names if n.lower() == name.lower()]
-             or difflib.get_close_matches(name, names, n=1, cutoff=CLOSE_NAME_RATIO))
+             or difflib.get_close_matches(name, names, n=1, cutoff=cutoff))
     return namespace_of(term) + close[0] if close else None
 
 
@@ -72,33 +77,44 @@ def _nodes(first: str, count: int) -> str:
     return first if count == 1 else f"{count} nodes, e.g. {first}"
 
 
-def misspelt_term_notes(store: GraphStore, model_name: str) -> list[str]:
+@dataclass(frozen=True)
+class MisspeltTerms:
+    """What :func:`misspelt_terms` found: ``dropped`` the sentences about nodes a likely misspelt class
+    leaves out of every component (an incomplete model), ``notes`` the rest."""
+
+    dropped: list[str]
+    notes: list[str]
+
+
+def misspelt_terms(store: GraphStore, model_name: str) -> MisspeltTerms:
     """One sentence per undeclared class (``queries/undeclared-classes.rq``), property or property
     value (``queries/undeclared-terms.rq``) of model ``model_name`` that is likely misspelt: a class
-    that is all a signature could see of the nodes it types (those nodes are in no component), a
-    class, property or value whose name is close to a declared term. Official Brick classes outside
-    graphtwin's subset point to ``graphtwin brick-report`` instead."""
+    that is all a signature could see of the nodes it types (those nodes are in no component; with a
+    declared class close to it, they were meant to be), a class, property or value whose name is close
+    to a declared term. Brick classes with no loaded class that close point to ``graphtwin
+    brick-report`` (graphtwin loads only the Brick classes its alignment maps)."""
     variables = store.graph_variables(model_name)
     class_rows = store.run_named_query("undeclared-classes", **variables)
     term_rows = store.run_named_query("undeclared-terms", **variables)
+    found = MisspeltTerms([], [])
     if not class_rows and not term_rows:
-        return []
+        return found
     declared = _DeclaredTerms.of(store)
-    notes = []
     for row in class_rows:
         cls, unseen = row["class"].value, int(row["unseen_nodes"].value)
-        meant = None if namespace_of(cls) == BRICK else closest_declared(cls, declared.classes)
-        hint = (" (graphtwin brick-report says what the Brick alignment needs)" if namespace_of(cls) == BRICK
-                else f" (did you mean {meant}?)" if meant else "")
+        meant = closest_declared(cls, declared.classes)
+        hint = (f" (did you mean {meant}?)" if meant else
+                " (graphtwin brick-report says what the Brick alignment needs)" if namespace_of(cls) == BRICK else "")
         if unseen:
             first = row["first_unseen"].value
-            notes.append(f"{_node_name(first)}: its class {cls} ({_nodes(first, unseen)}) is declared by no loaded "
-                         f"ontology, and the node has no other type a signature matches: no component models it{hint}")
+            (found.dropped if meant else found.notes).append(
+                f"{_node_name(first)}: its class {cls} ({_nodes(first, unseen)}) is declared by no loaded ontology, "
+                f"and the node has no other type a signature matches: no component models it{hint}")
         elif meant:
             first = row["first_node"].value
-            notes.append(f"{_node_name(first)}: its class {cls} ({_nodes(first, int(row['nodes'].value))}) is "
-                         f"declared by no loaded ontology{hint}; the node is modelled from its other types and "
-                         "properties")
+            found.notes.append(f"{_node_name(first)}: its class {cls} ({_nodes(first, int(row['nodes'].value))}) is "
+                               f"declared by no loaded ontology{hint}; the node is modelled from its other types and "
+                               "properties")
     for row in term_rows:
         term, is_property = row["term"].value, row["position"].value == "property"
         meant = closest_declared(term, declared.properties if is_property else declared.values)
@@ -107,6 +123,6 @@ def misspelt_term_notes(store: GraphStore, model_name: str) -> list[str]:
             triples = "1 triple" if uses == 1 else f"{uses} triples"
             role = ("its property", "no signature follows it") if is_property else (
                 "the value", "no signature matches it")
-            notes.append(f"{_node_name(first)}: {role[0]} {term} ({triples}, e.g. from {first}) is declared by no "
-                         f"loaded ontology (did you mean {meant}?): {role[1]}")
-    return notes
+            found.notes.append(f"{_node_name(first)}: {role[0]} {term} ({triples}, e.g. from {first}) is declared "
+                               f"by no loaded ontology (did you mean {meant}?): {role[1]}")
+    return found

@@ -26,7 +26,7 @@ from service.graph.namespaces import (
 )
 from service.graph.store import GraphStore
 from service.graph.units import closest_unit_hint, unit_spec
-from service.graph.vocabulary import misspelt_term_notes
+from service.graph.vocabulary import misspelt_terms
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
 from service.matching.signature import PatternTriple, Rule, Signature, required_outward
 from service.model.assembled_model import (
@@ -125,8 +125,8 @@ def assemble(
               f"knows{closest_unit_hint(i.measurement.unit)}: its column cannot be read"
               for i in instances.values() if i.measurement is not None and i.measurement.unit is not None
               and not _known_unit(i.measurement.unit)]
-    undeclared = misspelt_term_notes(store, model_name)  # a misspelt term is often why a pattern misses
-    notes += undeclared
+    misspelt = misspelt_terms(store, model_name)  # a misspelt term is often why a pattern misses
+    notes += misspelt.notes
     effect_requests = list(extra_effects) + recorded_effects(store, model_name, library)
     connections, unconnected = wire(instances)
     for request in effect_requests:
@@ -134,12 +134,12 @@ def assemble(
                                     connections=connections, session=session)
     # measuring devices without a modelled source are boundary inputs, not missing connections
     devices = {iri for iri, inst in instances.items() if issubclass(inst.model_class, MeasuringDevice)}
-    incomplete = [u.reason for u in unconnected if u.component not in devices]
+    incomplete = misspelt.dropped + [u.reason for u in unconnected if u.component not in devices]
     notes += [f"{u.reason}: {instances[u.component].node} is a boundary input, not a calibration target"
               for u in unconnected if u.component in devices and u.source_modelled]
     incomplete += _unmatched_anchor_report(store, components, claimed=claimed, lost=lost, session=session)
     if incomplete and not allow_incomplete:
-        raise IncompleteModelError(undeclared + incomplete)
+        raise IncompleteModelError(misspelt.dropped + misspelt.notes + incomplete[len(misspelt.dropped):])
     notes.extend(incomplete)
 
     fed = {c.target for c in connections}

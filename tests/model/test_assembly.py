@@ -353,24 +353,38 @@ def test_a_sensor_unit_graphtwin_does_not_know_is_a_note_at_assembly_with_the_un
                      "be read"], notes
 
 
-def test_a_misspelt_class_and_a_command_nothing_reads_are_notes():
-    """A coil typed with a class no ontology declares matches no signature: the assembly says so and
-    which declared class the name is close to; the valve command that drove it is then read by no
-    component, and that is said too (before, the coil silently vanished from the model)."""
+def test_a_misspelt_class_that_leaves_its_node_out_is_an_incomplete_model_and_with_leave_a_note():
+    """A coil typed with a class no ontology declares matches no signature. The name is close to a
+    declared class, so the coil was meant to be a component: the model is incomplete, and the error
+    says which class the name is close to, first. Allowed incomplete, the coil is missing and that
+    is a note, and so is the valve command that drove it, now read by no component. The same
+    misspelling of a Brick class (long names: a nearer match counts) is treated alike."""
     from service.resources import examples_dir
 
     text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8")
     store = GraphStore.embedded(None)
     store.load_model("typo", text.replace("ex:heating_coil a gt:HeatingCoil", "ex:heating_coil a gt:HeatingColi").encode())
-    model = assemble(store, "typo")
+    dropped = ("heating_coil: its class https://w3id.org/graphtwin/ontology#HeatingColi "
+               "(https://example.org/flexlab-x3a#heating_coil) is declared by no loaded ontology, and the node has no "
+               "other type a signature matches: no component models it "
+               "(did you mean https://w3id.org/graphtwin/ontology#HeatingCoil?)")
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "typo")
+    assert info.value.problems[0] == dropped
+    model = assemble(store, "typo", allow_incomplete=True)
     assert model.component_for_node(FLEXLAB + "heating_coil") is None
-    assert ("heating_coil: its class https://w3id.org/graphtwin/ontology#HeatingColi (https://example.org/flexlab-x3a#heating_coil) "
-            "is declared by no loaded ontology, and the node has no other type a signature matches: no component models it "
-            "(did you mean https://w3id.org/graphtwin/ontology#HeatingCoil?)") in model.notes
+    assert dropped in model.notes
     assert "heating_coil_valve_command: measured, but no component reads it (what it drives or sets is not in the model)" in model.notes
     store.load_model("right", text.encode())
     right = assemble(store, "right")
     assert not any("declared by no loaded ontology" in n or "heating_coil_valve_command" in n for n in right.notes), right.notes
+
+    brick = (examples_dir() / "flexlab_ahu_brick" / "model.ttl").read_text(encoding="utf-8")
+    assert brick.count("brick:Hot_Water_Coil") == 1
+    store.load_model("brick", brick.replace("brick:Hot_Water_Coil", "brick:Hot_Watter_Coil").encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "brick")
+    assert info.value.problems[0].endswith("(did you mean https://brickschema.org/schema/Brick#Hot_Water_Coil?)")
 
 
 def test_a_model_nothing_matches_is_an_error_not_an_empty_assembly():
