@@ -58,10 +58,25 @@ UNFAULTED = ("2017-09-20", "2017-09-21", "2017-09-23", "2017-09-24")
 RIGHT_COMPONENTS = {day: right for day, (_, right) in FAULTS.items()}
 
 
+#: The unfaulted days that follow one another: the two-day training stretches.
+UNFAULTED_PAIRS = (("2017-09-20", "2017-09-21"), ("2017-09-23", "2017-09-24"))
+
+
 def training_day(day: str) -> str:
     """The unfaulted day nearest in date to ``day`` that is not ``day`` (ties: the earlier)."""
     test = date.fromisoformat(day)
     return min((d for d in UNFAULTED if d != day), key=lambda d: (abs((date.fromisoformat(d) - test).days), d))
+
+
+def training_days(day: str, count: int) -> tuple[str, str]:
+    """The first and last day of the training window: :func:`training_day` for one day; for two, the
+    pair of consecutive unfaulted days without ``day`` whose nearer day is nearest to it (ties: the
+    earlier pair)."""
+    if count == 1:
+        return (training_day(day),) * 2
+    test = date.fromisoformat(day)
+    pairs = [p for p in UNFAULTED_PAIRS if day not in p]
+    return min(pairs, key=lambda p: (min(abs((date.fromisoformat(d) - test).days) for d in p), p))
 
 
 def last_block(data: Path, day: str) -> str:
@@ -74,18 +89,19 @@ def last_block(data: Path, day: str) -> str:
 MODEL = examples_dir() / "flexlab_ahu" / "model.ttl"
 
 
-def diagnose_day(day: str, folder: str, model: Path = MODEL) -> dict:
-    """One day under the protocol, the building model ``model``: the report's JSON (``to_dict``) and
-    the table's facts."""
-    train = training_day(day)
+def diagnose_day(day: str, folder: str, model: Path = MODEL, training_count: int = 1) -> dict:
+    """One day under the protocol, the building model ``model``, trained on ``training_count``
+    unfaulted days (:func:`training_days`): the report's JSON (``to_dict``) and the table's facts."""
+    first, last = training_days(day, training_count)
+    train = first if first == last else f"{first}/{last[5:]}"
     data = Path(folder) / f"szvav_{AVERAGE_MINUTES}min_{day}.csv"
-    write_block_means(SZVAV, data, AVERAGE_MINUTES, {train, day})
+    write_block_means(SZVAV, data, AVERAGE_MINUTES, {first, last, day})
     store = GraphStore.embedded(None)
     store.load_model("flexlab", model)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # unclaimed columns (set points, status, occupancy)
-        report = diagnose(store, "flexlab", data, train=(train, last_block(data, train)),
+        report = diagnose(store, "flexlab", data, train=(first, last_block(data, last)),
                           test=(day, last_block(data, day)), seed=0, workers=1)
     seconds = time.perf_counter() - start
     top = report.effects[0] if report.effects else None
@@ -130,6 +146,8 @@ def table(rows: list[dict]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--days", nargs="+", default=sorted([*FAULTS, *UNFAULTED]), help="ISO dates (default: all 11)")
+    parser.add_argument("--training-days", type=int, choices=(1, 2), default=1,
+                        help="train on the nearest unfaulted day (1, the protocol) or two consecutive ones (2)")
     parser.add_argument("--json-dir", type=Path, help="write each day's report.to_dict() as DAY.json here")
     parser.add_argument("--model", type=Path, default=MODEL,
                         help="the building model (default: the FLEXLAB example; e.g. one an effect was added to)")
@@ -143,7 +161,7 @@ def main() -> None:
         args.json_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     with tempfile.TemporaryDirectory() as folder, ProcessPoolExecutor(max_workers=2) as pool:
-        futures = {pool.submit(diagnose_day, day, folder, args.model): day for day in args.days}
+        futures = {pool.submit(diagnose_day, day, folder, args.model, args.training_days): day for day in args.days}
         for future in as_completed(futures):
             try:
                 row = future.result()
