@@ -13,6 +13,7 @@ resampled to the nearer row), longer ones stay NaN. The full contract: ``docs/da
 from __future__ import annotations
 
 import difflib
+from collections import defaultdict
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
@@ -230,9 +231,9 @@ def _check_grid_size(source: str, stamps: np.ndarray, step_s: float) -> None:
 
 
 def _near_header(names: set[str], headers: list[str]) -> str | None:
-    """The header of ``headers`` most like one of ``names`` (difflib's ratio ≥ 0.8), or None."""
-    ratio, header = max(((difflib.SequenceMatcher(None, n, h).ratio(), h) for n in names for h in headers),
-                        default=(0.0, None))
+    """The header of ``headers`` most like one of ``names`` (difflib's ratio ≥ 0.8, case ignored), or None."""
+    ratio, header = max(((difflib.SequenceMatcher(None, n.lower(), h.lower()).ratio(), h) for n in names
+                         for h in headers), default=(0.0, None))
     return header if ratio >= 0.8 else None
 
 
@@ -272,6 +273,12 @@ def read_measurements(
             claimed[node] = found[0]
         elif spec.required:
             missing.append((node, names))
+    readers = defaultdict(list)  # column → the devices it is claimed by
+    for node, column in claimed.items():
+        readers[column].append(node)
+    problems += [f"column {column + 1} ({header[column]!r}) is claimed by {len(nodes)} devices, {', '.join(nodes)}: "
+                 "each would be fitted to the same readings; give each its own column (its gt:timeSeriesId)"
+                 for column, nodes in sorted(readers.items()) if len(nodes) > 1]
     unknown = sorted(set(range(1, len(header))) - set(claimed.values()))
     for node, names in missing:
         near = _near_header(names, [header[i] for i in unknown])

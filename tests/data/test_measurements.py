@@ -296,6 +296,25 @@ def test_two_columns_naming_one_device_are_refused(tmp_path):
         read_measurements(path, SPECS)
 
 
+def test_one_column_claimed_by_two_devices_is_refused_and_a_header_in_another_case_is_pointed_at(tmp_path):
+    """Two devices given one series id (a copy-paste slip) would each be fitted to the same readings
+    (before: silently, a return-water sensor fitted to the supply air). A header that differs from
+    the expected name only in case is named as the likely one."""
+    specs = dict(SPECS) | {"https://example.org/x#hwr": SeriesSpec("https://example.org/x#hwr", "SAT ",
+                                                                 "http://qudt.org/vocab/unit/DEG_F", "degC")}
+    with pytest.raises(MeasurementError) as info:
+        read_measurements(_write(tmp_path, "time,SAT ,valve\n2025-01-01 00:00,20,1\n2025-01-01 00:10,21,1\n"), specs)
+    assert ("column 2 ('SAT') is claimed by 2 devices, https://example.org/x#sat, https://example.org/x#hwr: "
+            "each would be fitted to the same readings") in str(info.value)
+    specs = dict(SPECS) | {"https://example.org/x#hwr": SeriesSpec("https://example.org/x#hwr", None,
+                                                                 "http://qudt.org/vocab/unit/DEG_F", "degC")}
+    with pytest.raises(MeasurementError) as info:
+        read_measurements(_write(tmp_path, "time,SAT ,valve,HWR\n2025-01-01 00:00,20,1,3\n2025-01-01 00:10,21,1,3\n"),
+                          specs)
+    assert "no column for https://example.org/x#hwr (expected a header named 'https://example.org/x#hwr' or 'hwr'; column 4, 'HWR', is near" in str(
+        info.value)
+
+
 def test_a_window_is_given_on_the_datas_clock(tmp_path):
     """Stamps with an offset are read as UTC: a window without one would be read as UTC too and land
     hours off without a word; a window with an offset on local stamps the same. Both are refused."""
