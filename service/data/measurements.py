@@ -363,7 +363,7 @@ def read_measurements(
             continue
         try:
             converted[node] = convert(values[node], spec.unit, spec.port_unit,
-                                      where=f"column {header[column]!r} (the unit {node} declares)")
+                                      where=f"column {header[column]!r}, in the unit device {node} declares")
         except UnitError as exc:
             problems.append(str(exc))
             continue

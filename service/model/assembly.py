@@ -28,7 +28,13 @@ from service.graph.store import GraphStore
 from service.graph.units import closest_unit_hint, unit_spec
 from service.graph.vocabulary import misspelt_terms
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
-from service.matching.signature import PatternTriple, Rule, Signature, required_outward
+from service.matching.signature import (
+    QUANTITY_UNITS,
+    PatternTriple,
+    Rule,
+    Signature,
+    required_outward,
+)
 from service.model.assembled_model import (
     AssembledModel,
     ComponentInstance,
@@ -121,10 +127,7 @@ def assemble(
         instances[instance.iri] = instance
 
     notes += _values_without_unit(store, instances, session)
-    notes += [f"{short_name(i.node)}: its unit {i.measurement.unit} is not a unit graphtwin "
-              f"knows{closest_unit_hint(i.measurement.unit)}: its column cannot be read"
-              for i in instances.values() if i.measurement is not None and i.measurement.unit is not None
-              and not _known_unit(i.measurement.unit)]
+    notes += [note for i in instances.values() if i.measurement is not None for note in _unit_notes(i)]
     misspelt = misspelt_terms(store, model_name)  # a misspelt term is often why a pattern misses
     notes += misspelt.notes
     effect_requests = list(extra_effects) + recorded_effects(store, model_name, library)
@@ -226,12 +229,23 @@ def _values_without_unit(store: GraphStore, instances: Mapping[str, ComponentIns
             if (iri, m.name) in found]
 
 
-def _known_unit(unit: str) -> bool:
+def _unit_notes(instance: ComponentInstance) -> list[str]:
+    """What the column of a measured device will meet when read: no unit declared, a unit graphtwin
+    does not know (with the one it resembles), or a unit of another dimension than the quantity the
+    device's signature measures (a temperature sensor in percent): each column is refused then."""
+    unit, name = instance.measurement.unit, short_name(instance.node)
+    if unit is None:
+        return [f"{name}: declares no unit (saref:isMeasuredIn): its column cannot be read"]
     try:
-        unit_spec(unit)
+        declared = unit_spec(unit)
     except UnitError:
-        return False
-    return True
+        return [f"{name}: its unit {unit} is not a unit graphtwin knows{closest_unit_hint(unit)}: its column cannot "
+                "be read"]
+    quantity = next((o.quantity for o in instance.signature.outputs if o.port == "measured_value"), None)
+    if quantity in QUANTITY_UNITS and declared.dimension != unit_spec(QUANTITY_UNITS[quantity]).dimension:
+        return [f"{name}: its unit {unit} is a unit of {declared.dimension.replace('_', ' ')}, but the device "
+                f"measures a {quantity.replace('_', ' ')}: its column cannot be read"]
+    return []
 
 
 def _optional_block(signature: Signature, node: str, *, through: str, without: str) -> list[PatternTriple]:

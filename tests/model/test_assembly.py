@@ -339,9 +339,10 @@ def test_misspelt_official_terms_are_notes_naming_the_node_and_the_term_meant():
     assert models["own"].notes == right.notes
 
 
-def test_a_sensor_unit_graphtwin_does_not_know_is_a_note_at_assembly_with_the_unit_it_resembles():
-    """``unit:DEGC`` for ``unit:DEG_C``: said when the model is assembled, naming the sensor (it had
-    first surfaced at calibration, blamed on the CSV column)."""
+def test_a_sensor_unit_graphtwin_cannot_read_is_a_note_at_assembly():
+    """``unit:DEGC`` for ``unit:DEG_C``: said when the model is assembled, naming the sensor and the
+    unit it resembles (it had first surfaced at calibration, blamed on the CSV column); so are a
+    temperature sensor in percent and a sensor with no unit (before: said only when data were read)."""
     text = CASE_STUDY.read_text(encoding="utf-8")
     store = GraphStore.embedded(None)
     store.load_model("typo", text.replace(
@@ -351,6 +352,16 @@ def test_a_sensor_unit_graphtwin_does_not_know_is_a_note_at_assembly_with_the_un
     assert notes == ["coil_outlet_water_temperature_sensor: its unit http://qudt.org/vocab/unit/DEGC "
                      "is not a unit graphtwin knows (did you mean http://qudt.org/vocab/unit/DEG_C?): its column cannot "
                      "be read"], notes
+    store.load_model("units", text.replace(
+        "ex:coil_outlet_water_temperature ;\n    saref:isMeasuredIn unit:DEG_C", "ex:coil_outlet_water_temperature ;"
+    ).replace("ex:coil_outlet_air_temperature ;\n    saref:isMeasuredIn unit:DEG_C",
+              "ex:coil_outlet_air_temperature ;\n    saref:isMeasuredIn unit:PERCENT").encode())
+    store.load_model("right", text.encode())
+    right = assemble(store, "right").notes
+    assert [n for n in assemble(store, "units").notes if n not in right] == [
+        "coil_outlet_air_temperature_sensor: its unit http://qudt.org/vocab/unit/PERCENT is a unit of fraction, but "
+        "the device measures a temperature: its column cannot be read",
+        "coil_outlet_water_temperature_sensor: declares no unit (saref:isMeasuredIn): its column cannot be read"]
 
 
 def test_a_misspelt_class_that_leaves_its_node_out_is_an_incomplete_model_and_with_leave_a_note():
