@@ -468,6 +468,9 @@ def test_job_requests_for_unknown_things_are_refused(client, auth, case_csv):
         assert bad_seed.status_code == 422 and "seed" in bad_seed.json()["detail"]
     effect = client.post("/jobs/add-effect", json={"model": "case", "effect": "Nope", "target": EX + "supply_fan"}, headers=auth)
     assert effect.status_code == 422 and "FanMotorHeat" in effect.json()["detail"]
+    effect = client.post("/jobs/add-effect", json={"model": "case", "effect": "FanMotorHeat", "target": "supply_fan"},
+                         headers=auth)  # a node's local name: named with its IRI, as at the command line
+    assert effect.status_code == 422 and effect.json()["detail"].endswith(f"give its full IRI, e.g. {EX}supply_fan")
     assert client.post("/jobs/diagnose", json={"model": "case", "measurements": upload, "train": "/"}, headers=auth).status_code == 422
     misspelt = client.post("/jobs/calibrate", headers=auth, json={"model": "case", "measurements": upload, "start-from": "v0"})
     assert misspelt.status_code == 422 and "start-from" in misspelt.json()["detail"]  # not ignored
