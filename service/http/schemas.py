@@ -81,12 +81,22 @@ class BrickReportPublic(BaseModel):
     temperature_points_off_path: list[str]
 
 
+class AssemblyCheck(BaseModel):
+    """What assembling the uploaded model says, without writing anything (``POST /jobs/assemble``
+    writes the assembly)."""
+
+    complete: bool = Field(description="it assembles: every node of a component's class is in a component")
+    problems: list[str] = Field(description="why it does not (one sentence a node or input), empty when it does")
+    notes: list[str] = Field(description="the assembly's notes: choices it made, terms it did not know, units")
+
+
 class ModelUploaded(ModelSummary):
     triples: int
     replaced: bool = Field(description="a model of this name existed and was replaced")
     changed: bool = Field(description=(
         "the store changed: false when it held this model already, triple for triple (its inferences, "
         "assembly and runs are kept as they were)"))
+    assembly: AssemblyCheck
 
 
 class MeasurementsInfo(BaseModel):

@@ -93,6 +93,7 @@ def test_a_model_uploads_in_every_format_and_is_replaced(client, auth, store, fm
     created = client.put("/models/copy", content=body, headers={**auth, "Content-Type": fmt.media_type})
     assert created.status_code == 201, created.text
     assert created.json()["triples"] == len(set(triples)) and not created.json()["replaced"] and created.json()["changed"]
+    assert created.json()["assembly"] == {"complete": True, "problems": [], "notes": list(assemble(store, "copy").notes)}
     assert store.backend.triple_count(store.model_graph("copy")) == len(set(triples))
     replaced = client.put("/models/copy", content=body[: len(body)], headers={**auth, "Content-Type": fmt.media_type})
     assert replaced.status_code == 200 and replaced.json()["replaced"] and not replaced.json()["changed"]
@@ -103,6 +104,17 @@ def test_a_model_uploads_in_every_format_and_is_replaced(client, auth, store, fm
     assert [m["name"] for m in client.get("/models").json()["data"]] == ["case", "copy"]
     info = client.get("/models/copy").json()
     assert info["triples"] == len(set(triples)) + 1 and info["inferred_triples"] > 0 and not info["assembled"]
+
+
+def test_an_upload_that_does_not_assemble_is_stored_and_says_why(client, auth, store):
+    """A misspelt class leaves the fan out: the upload is stored (201), and its answer says that the
+    model is incomplete and why, before any data are sent (before: 201 and nothing else)."""
+    body = CASE_STUDY.read_text(encoding="utf-8").replace("ex:supply_fan a s4bldg:Fan", "ex:supply_fan a s4bldg:Fann")
+    created = client.put("/models/fann", content=body.encode(), headers={**auth, "Content-Type": "text/turtle"})
+    assert created.status_code == 201 and store.has_model("fann")
+    check = created.json()["assembly"]
+    assert not check["complete"] and check["problems"][0].startswith("supply_fan: its class https://saref.etsi.org/saref4bldg/Fann")
+    assert check["problems"][0].endswith("(did you mean https://saref.etsi.org/saref4bldg/Fan?)")
 
 
 def test_malformed_rdf_is_refused_with_line_and_column_and_changes_nothing(client, auth, store, snapshot):

@@ -7,11 +7,17 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
-from service.errors import UnsupportedFormatError
+from service.errors import GraphtwinError, IncompleteModelError, UnsupportedFormatError
 from service.graph.backend import EmbeddedBackend
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
-from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, require_model
+from service.http.deps import (
+    ReadAccess,
+    Service,
+    ServiceDep,
+    WriteAccess,
+    require_model,
+)
 from service.http.errors import ApiError, error_responses
 from service.http.schemas import (
     BrickReportPublic,
@@ -22,6 +28,7 @@ from service.http.schemas import (
     ModelList,
     ModelUploaded,
 )
+from service.model.assembly import assemble
 from service.report.brick import brick_report
 
 __all__ = ["router"]
@@ -73,7 +80,19 @@ def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | N
     fmt = rdf_format(content_type or "text/turtle")
     loaded = store.load_model(name, data, fmt.media_type, source_name=f"model {name}")
     return {"name": name, "graph": store.model_graph(name).value, "triples": loaded.triples, "replaced": loaded.replaced,
-            "changed": loaded.changed}
+            "changed": loaded.changed, "assembly": _assembly_check(store, name)}
+
+
+def _assembly_check(store: GraphStore, name: str) -> dict:
+    """Assemble model ``name`` without writing: complete or not, why not, and its notes (an upload is
+    stored either way; the answer says what the model is worth before any data are sent)."""
+    try:
+        model = assemble(store, name)
+    except IncompleteModelError as exc:
+        return {"complete": False, "problems": list(exc.problems), "notes": []}
+    except GraphtwinError as exc:
+        return {"complete": False, "problems": [str(exc)], "notes": []}
+    return {"complete": True, "problems": [], "notes": list(model.notes)}
 
 
 @router.delete("/models/{name}", status_code=204, tags=["models"], dependencies=[WriteAccess],
@@ -101,7 +120,8 @@ def get_brick_report(name: str, service: ServiceDep) -> dict:
 @router.put("/models/{name}", response_model=ModelUploaded, tags=["models"], dependencies=[WriteAccess],
             openapi_extra=_RDF_BODY, responses=error_responses(400, 401, 403, 413, 415, 422))
 async def put_model(name: str, request: Request, response: Response, service: ServiceDep) -> dict:
-    """Upload or replace building model ``name`` (its named graph; alignment runs at once).
+    """Upload or replace building model ``name`` (its named graph; alignment runs at once), and say
+    what assembling it finds (``assembly``: complete or not, why not, its notes; nothing written).
     201 when new, 200 when replaced."""
     data = await request.body()  # held to the route's limit by the request gate
     uploaded = await run_in_threadpool(_load_model, service.store, name, data, request.headers.get("content-type"))
