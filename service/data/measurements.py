@@ -164,6 +164,14 @@ def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
     return parsed, False
 
 
+def _duration_text(seconds: float) -> str:
+    """``7 d``, ``5 h``, ``20 min``, ``30 s``: a spacing in its largest whole unit."""
+    for unit, size in (("d", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:g} s"
+
+
 def _fill_short_gaps(values: np.ndarray, max_gap: int, *, hold: bool = False) -> tuple[np.ndarray, int]:
     """Interpolate NaN runs of at most ``max_gap`` steps between two measured values (``hold``: keep
     the last value, a zero-order hold for schedules); returns the filled array and the
@@ -384,10 +392,13 @@ def read_measurements(
         grid = np.arange(stamps[0], stamps[-1] + np.timedelta64(1, "s"), np.timedelta64(int(step_s), "s"))
         t_old = (stamps - stamps[0]).astype(np.int64).astype(float)
         t_new = (grid - stamps[0]).astype(np.int64).astype(float)
-        n_irregular = int(np.sum(np.diff(stamps).astype(np.int64) != step_s))
+        spacings = np.diff(stamps).astype(np.int64)
+        widest = int(np.argmax(spacings))
         warnings.append(
-            f"irregular time stamps ({n_irregular} spacings differ from the median step {step_s:g} s): "
-            f"resampled linearly to {grid.size} steps"
+            f"irregular time stamps ({int(np.sum(spacings != step_s))} spacings differ from the median step "
+            f"{step_s:g} s, the widest {_duration_text(float(spacings[widest]))} after "
+            f"{np.datetime_as_string(stamps[widest], unit='m')}): resampled linearly to {grid.size} steps, "
+            f"the gaps longer than {max_gap_steps} steps left empty"
         )
         # a gap longer than the limit stays a gap: interpolate a grid point only between two of the
         # series' own values at most max_gap_steps + 1 steps apart (a run of empty cells is as much
@@ -416,13 +427,20 @@ def read_measurements(
         converted = {node: on_grid(series, specs[node].steps) for node, series in converted.items()}
         others = {name: on_grid(series) for name, series in others.items()}
         stamps = grid
+    unfilled = defaultdict(list)  # (runs, where the series is missing) → the columns with those gaps
     for node in list(converted):
         converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps, hold=specs[node].steps)
         if long_runs:
-            warnings.append(
-                f"column {header[claimed[node]]!r}: {long_runs} gap(s) longer than {max_gap_steps} steps left "
-                f"unfilled ({int(np.isnan(converted[node]).sum())} steps)"
-            )
+            missing = np.isnan(converted[node])
+            unfilled[(long_runs, missing.tobytes())].append(header[claimed[node]])
+    for (long_runs, _), names in unfilled.items():
+        missing = np.isnan(converted[next(n for n in converted if header[claimed[n]] == names[0])])
+        first = int(np.argmax(missing))
+        columns = f"column {names[0]!r}" if len(names) == 1 else f"{len(names)} columns ({', '.join(map(repr, names))})"
+        warnings.append(
+            f"{columns}: {long_runs} gap(s) longer than {max_gap_steps} steps left unfilled ({int(missing.sum())} "
+            f"steps, the first from {np.datetime_as_string(stamps[first], unit='m')})"
+        )
     return MeasuredData(
         timestamps=stamps, step_s=step_s, series=converted,
         units={n: specs[n].port_unit for n in converted}, source=source,

@@ -226,6 +226,17 @@ def test_empty_cells_stay_a_gap_in_an_irregular_file_as_in_a_regular_one(tmp_pat
     assert irregular.series[sat][35] == pytest.approx((regular.series[sat][34] + regular.series[sat][36]) / 2)
 
 
+def test_columns_with_the_same_long_gap_are_one_warning_that_says_where(tmp_path):
+    """Two days joined in one file leave every column the same gap: one sentence naming the columns
+    and where the gap starts, not one a column (the FLEXLAB recipe printed ten alike)."""
+    stamps = _ten_minute_stamps(20) + [f"2025-01-02 {i * 10 // 60:02d}:{i * 10 % 60:02d}" for i in range(20)]
+    rows = "".join(f"{t},{20 + i % 3},{0.1 * (i % 5):.1f}\n" for i, t in enumerate(stamps))
+    data = read_measurements(_write(tmp_path, "time,SAT ,valve\n" + rows), SPECS)
+    gaps = [w for w in data.warnings if "left unfilled" in w]
+    assert gaps == ["2 columns ('SAT', 'valve'): 1 gap(s) longer than 5 steps left unfilled (124 steps, the first "
+                    "from 2025-01-01T03:20)"], data.warnings
+
+
 def test_a_row_just_before_a_long_row_gap_keeps_its_measured_value(tmp_path):
     stamps = ["2025-01-01 00:00", "2025-01-01 00:30", "2025-01-01 01:00", "2025-01-01 05:00", "2025-01-01 05:30",
               "2025-01-01 06:00"]
