@@ -107,7 +107,7 @@ def _diagnosis_command(rank_effects: bool, doc: str):
         if as_json:
             console.print_json(json.dumps(report.to_dict(), default=str))
             return
-        print_diagnosis(report, stored=not memory, data=Path(data), store=store)
+        print_diagnosis(report, stored=not memory, data=Path(data), store=store, model_file=Path(model))
         console.print("plots: " + ", ".join(str(p) for p in save_diagnosis_plots(report, plots)))
 
     command.__doc__ = doc

@@ -110,11 +110,13 @@ def plot_run(outcome: CalibrationOutcome, path: Path) -> Path:
 
 
 def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path | None = None,
-                    store: Path | None = None) -> None:
+                    store: Path | None = None, model_file: Path | None = None) -> None:
     """The diagnosis as tables and sentences; ``stored``: the run is in a store that outlives this
     command (not ``--memory``), so its report can be made later; ``data``: the measurement file the
-    run read (the report command then names it)."""
-    from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT  # scipy: not at the CLI's start
+    run read (the report command then names it); ``model_file``: the building model, for the command
+    that adds the answer to it."""
+    from service.diagnosis.drift import drifting_parameter  # scipy: not at the CLI's start
+    from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT
 
     print_data_warnings(report.data_warnings)
     table = Table(title="Test window: model vs measurements")
@@ -157,6 +159,11 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         if e.demoted:
             console.print(f"  ↓ {e.effect} at {local_name(e.node)}: {e.demoted}")
     console.print(f"[bold]{report.summary}[/bold]")
+    answer = report.answer
+    if answer is not None and model_file is not None and drifting_parameter(answer.effect) is None:
+        added = Path(f"{model_file.stem}+{answer.effect}.ttl")
+        console.print(f"add it to the model: graphtwin add-effect {model_file} --effect {answer.effect} "
+                      f"--target {answer.node} -o {added}", markup=False, soft_wrap=True)  # one line to copy
     for lookalike in report.indistinguishable:
         console.print(f"  {lookalike.effect.effect} at {local_name(lookalike.effect.node)} would be told apart by:")
         for text in lookalike.would_separate:

@@ -21,6 +21,7 @@ import numpy as np
 
 from service.errors import InputError
 from service.model.assembled_model import AssembledModel, Connection
+from service.model.wiring import short_name
 
 __all__ = ["Simulator", "SimulationResult", "simulate", "ComponentOrder", "component_order", "loop_substeps",
            "MAX_LOOP_STEP_S", "target_series", "held_over_gaps", "warmup_index"]
@@ -163,10 +164,9 @@ def component_order(model: AssembledModel) -> ComponentOrder:
                                            c.target, c.target_port, c.source))
         chosen = candidates[0]
         delayed.add(chosen)
-        notes.append(
-            f"cycle without a feedback port: delayed {chosen.source}.{chosen.source_port} → "
-            f"{chosen.target}.{chosen.target_port} by one step"
-        )
+        source, target = (short_name(model.components[c].node) for c in (chosen.source, chosen.target))
+        notes.append(f"{target} reads {source}'s {chosen.source_port} one step late (as {chosen.target_port}): "
+                     "they form a loop with no feedback port, broken there")
 
 
 def loop_substeps(model: AssembledModel, step_s: float) -> int:

@@ -236,6 +236,23 @@ def test_compare_locates_a_hidden_leak_without_testing_the_catalog_and_saves_its
     assert all(imread(p).shape[0] > 200 for p in pngs)
 
 
+def test_diagnose_prints_the_command_that_adds_its_answer_and_that_command_works(tmp_path, monkeypatch):
+    """The answer's next step as one line to copy: run as printed, it writes the model with the effect."""
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--hidden-effect", "ValveLeakage",
+                               "--days", "2", "--seed", "2", "-o", str(data)]).exit_code == 0
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, ["diagnose", str(CASE_STUDY), str(data), "--train", "2026-01-12/2026-01-12T23:59",
+                                 "--test", "2026-01-13/", "--memory", "--plots", str(tmp_path / "plots")])
+    assert result.exit_code == 0, result.output
+    line = next(t for t in result.output.splitlines() if t.startswith("add it to the model: "))
+    assert line == (f"add it to the model: graphtwin add-effect {CASE_STUDY} --effect ValveLeakage --target "
+                    f"{EX}heating_valve -o model+ValveLeakage.ttl")
+    added = runner.invoke(app, line.removeprefix("add it to the model: graphtwin ").split())
+    assert added.exit_code == 0, added.output
+    assert "ValveLeakage" in (tmp_path / "model+ValveLeakage.ttl").read_text()
+
+
 def test_compare_strategies_prints_both_fits_per_regime_and_their_cross_validation(tmp_path):
     data = tmp_path / "data.csv"
     assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "--seed", "1",

@@ -90,7 +90,7 @@ def test_a_cycle_without_feedback_port_is_broken_with_a_note():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a note to report, not a Python warning on the terminal
         simulator = Simulator(model, 60.0)
-    assert any("cycle without a feedback port" in note for note in simulator.notes)
+    assert any("they form a loop with no feedback port, broken there" in note for note in simulator.notes)
 
 
 def test_ensemble_is_member_by_member_and_boundary_gaps_are_held():
@@ -217,7 +217,7 @@ def test_a_cycle_without_feedback_port_is_broken_at_a_flow():
                            mapped_parameters=(), estimated_parameters=())
     order, delayed, notes = component_order(model)
     assert delayed == {connections[0]} and order == ["urn:b", "urn:a"]
-    assert notes == ["cycle without a feedback port: delayed urn:a.m → urn:b.a by one step"]
+    assert notes == ["urn:b reads urn:a's m one step late (as a): they form a loop with no feedback port, broken there"]
 
 
 class Lag(ComponentModel):
