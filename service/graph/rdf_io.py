@@ -1,4 +1,5 @@
-"""RDF in: the format of a file name, suffix or media type, and a complete parse of a document.
+"""RDF in: the format of a file name, suffix or media type, a complete parse of a document, and a
+SPARQL syntax error a user can act on.
 
 Turtle, N-Triples, RDF/XML and JSON-LD, parsed by pyoxigraph. A document is parsed completely before
 anything is written, or :class:`~service.errors.ModelLoadError` names the source, line and column.
@@ -14,14 +15,17 @@ from xml.parsers import expat
 import pyoxigraph as ox
 
 from service.errors import ModelLoadError, UnsupportedFormatError
+from service.graph.namespaces import PREFIXES
 
-__all__ = ["rdf_format", "parse_rdf"]
+__all__ = ["rdf_format", "parse_rdf", "sparql_syntax_message"]
 
 #: What pyoxigraph's syntax error messages start with (the position, given as ``lineno``/``offset``
 #: too): ``Parser error at line 3 between columns 16 and 20: ``, ``… at line 2 column 11: ``,
 #: ``… between line 2 column 11 and line 5 column 1: ``.
 _POSITION_PREFIX = re.compile(r"^Parser error (at|between) line [^:]*: ")
 _BOM = b"\xef\xbb\xbf"
+#: pyoxigraph's SPARQL syntax errors: ``error at 1:31: expected one of Prefix not found, ['%'], …``.
+_SPARQL_POSITION = re.compile(r"^error at (\d+):(\d+): (.*)$", re.DOTALL)
 
 _SUFFIXES = {
     "ttl": ox.RdfFormat.TURTLE, "turtle": ox.RdfFormat.TURTLE, "nt": ox.RdfFormat.N_TRIPLES,
@@ -111,3 +115,25 @@ def _dropped_by_json_ld(lenient: list[ox.Quad], dropped: int, source_name: str) 
                     f"invalid language tag {term.language!r} ({exc}) in the triple {triple} (JSON-LD would drop it)"))
     return ModelLoadError(source_name, f"JSON-LD would drop {dropped} triples holding an invalid term")
 
+
+def sparql_syntax_message(query: str, error: SyntaxError) -> str:
+    """A SPARQL syntax error as a user can act on it: line and column, the query's text there, and
+    for a prefixed name whose prefix the query does not declare, the ``PREFIX`` line to add
+    (graphtwin's usual prefixes named with their IRI) instead of the parser's character classes."""
+    text = error.msg if isinstance(getattr(error, "msg", None), str) else str(error)
+    found = _SPARQL_POSITION.match(text)
+    if not found:
+        return f"SPARQL syntax error: {text}"
+    line, column, detail = int(found[1]), int(found[2]), found[3]
+    lines = query.splitlines() or [""]
+    source = lines[line - 1] if 0 < line <= len(lines) else ""
+    where = f"line {line}, column {column}: {source.strip()!r}"
+    if "Prefix not found" in detail:
+        name = (re.search(r"([A-Za-z][\w.-]*):[\w-]*$", source[:column - 1])
+                or re.search(r"([A-Za-z][\w.-]*):(?!//)", source))
+        prefix = name.group(1) if name else ""
+        known = PREFIXES.get(prefix)
+        add = f"add PREFIX {prefix}: <{known}>" if known else f"declare it with PREFIX {prefix}: <…>"
+        return f"SPARQL syntax error at {where}: the prefix {prefix}: is not declared ({add})"
+    expected = detail if len(detail) <= 120 else detail[:117].rsplit(",", 1)[0] + ", …"
+    return f"SPARQL syntax error at {where}: {expected}"

@@ -21,13 +21,17 @@ from typing import NamedTuple
 import pyoxigraph as ox
 
 from service.errors import InputError, ModelLoadError, NotFoundError
-from service.graph.alignment import alignment_rule_triples, inferred_ntriples, inferred_triples
+from service.graph.alignment import (
+    alignment_rule_triples,
+    inferred_ntriples,
+    inferred_triples,
+)
 from service.graph.backend import EmbeddedBackend, SparqlBackend, Term
 from service.graph.blank_nodes import skolemize
 from service.graph.endpoint import SparqlEndpointBackend
 from service.graph.namespaces import GTR, graph_iri
 from service.graph.ntriples import GraphTriples, ntriples_chunks
-from service.graph.rdf_io import parse_rdf, rdf_format
+from service.graph.rdf_io import parse_rdf, rdf_format, sparql_syntax_message
 from service.resources import ontologies_dir, queries_dir
 
 __all__ = ["ModelLoad", "GraphStore", "ONTOLOGY_GRAPH", "ALIGNMENT_RULES_GRAPH", "SIGNATURE_GRAPH"]
@@ -309,7 +313,7 @@ class GraphStore:
         try:
             return self.backend.query(sparql, substitutions=bound or None, default_graph=default_graph)
         except SyntaxError as exc:
-            raise InputError(f"SPARQL syntax error: {exc}") from None
+            raise InputError(sparql_syntax_message(sparql, exc)) from None
 
     def named_query_text(self, name: str) -> str:
         """The text of ``queries/<name>.rq`` (read once).

@@ -12,6 +12,7 @@ from starlette.concurrency import run_in_threadpool
 
 from service.errors import QueryTimeoutError, ResultTooLargeError, StoreError
 from service.graph.query_answers import GRAPH_TYPES, RESULT_TYPES, SparqlQuery
+from service.graph.rdf_io import sparql_syntax_message
 from service.http.deps import ReadAdmission, Service
 from service.http.errors import ApiError
 
@@ -124,7 +125,9 @@ async def answer_query(service: Service, query: SparqlQuery, request: Request) -
             raise ApiError(422, str(exc)) from None
         except StoreError:
             raise
-        except (SyntaxError, ValueError) as exc:
+        except SyntaxError as exc:
+            raise ApiError(400, sparql_syntax_message(query.text, exc)) from None
+        except ValueError as exc:
             raise ApiError(400, f"SPARQL syntax error: {exc}") from None
         except (OSError, RuntimeError) as exc:  # the store failed on the query
             raise ApiError(503, f"the store did not answer: {exc}") from None

@@ -352,7 +352,11 @@ def test_query_runs_a_select_query_of_ones_own_and_names_the_file_of_a_bad_one(t
     broken = tmp_path / "broken.rq"
     broken.write_text("SELECT ?x WHERE { ?x ?p }")
     code, output = _run(["query", str(broken), "--model", "ventilation_case_study", *store])
-    assert code == 2 and f"{broken}: SPARQL syntax error: error at 1:" in output.replace("\n", "")
+    assert code == 2 and f"{broken}: SPARQL syntax error at line 1, column " in output.replace("\n", "")
+    broken.write_text("SELECT ?run WHERE {\n  ?run prov:used ?data }")  # no PREFIX prov:
+    code, output = _run(["query", str(broken), "--model", "ventilation_case_study", *store])
+    assert code == 2 and ("SPARQL syntax error at line 2, column 17: '?run prov:used ?data }': the prefix prov: is not "
+                          "declared (add PREFIX prov: <http://www.w3.org/ns/prov#>)") in " ".join(output.split()), output
     asked = tmp_path / "ask.rq"
     asked.write_text("ASK { ?s ?p ?o }")
     code, output = _run(["query", str(asked), "--model", "ventilation_case_study", *store])

@@ -317,6 +317,9 @@ def test_bad_sparql_requests_get_their_status_and_change_nothing(client, auth, s
     assert len(before) > settings.max_result_rows
     assert client.get("/sparql", params={"query": "SELECT ?x WHERE { ?x"}).status_code == 400
     assert client.get("/sparql").status_code == 400
+    unprefixed = client.get("/sparql", params={"query": "SELECT ?x WHERE { ?x a s4bldg:Fan }"})
+    assert unprefixed.status_code == 400 and unprefixed.json()["detail"].endswith(
+        "the prefix s4bldg: is not declared (add PREFIX s4bldg: <https://saref.etsi.org/saref4bldg/>)")
     update = "PREFIX ex: <https://example.org/x#>\nINSERT DATA { ex:a ex:b ex:c }"
     assert client.get("/sparql", params={"query": update}).status_code == 403
     assert client.post("/sparql", data={"query": update}, headers=auth).status_code == 403
