@@ -389,3 +389,27 @@ ex:ahu2 a brick:Air_Handling_Unit ; brick:hasPart ex:fan2 . ex:fan2 a brick:Supp
     parts = {(t.subject.value.rsplit("#", 1)[-1], t.object.value.rsplit("#", 1)[-1]) for t in derived
              if t.predicate.value == GT + "partOfUnit"}
     assert parts == {("economizer", "ahu"), ("oad", "ahu"), ("rad", "ahu"), ("actuator", "ahu"), ("fan2", "ahu2")}
+
+
+def test_a_point_of_the_unit_and_of_its_damper_is_placed_at_the_damper_without_an_assumption():
+    """An outside air sensor the model gives to the unit and to its outside damper: the damper says
+    where it reads, so no assumption is recorded about the unit (whose 'state this to remove it'
+    asked for the triple the model already had)."""
+    text = (examples_dir() / "flexlab_ahu_brick" / "model.ttl").read_text(encoding="utf-8")
+    sensor = "https://example.org/flexlab-x3a#outdoor_air_temperature_sensor"
+    assert f"<{sensor}>" not in text and "ex:outdoor_air_temperature_sensor a brick:Outside_Air_Temperature_Sensor" in text
+    store = GraphStore.embedded(None)
+    store.load_model("unit", text.encode())
+    store.load_model("both", (text + "\nex:outdoor_air_temperature_sensor brick:isPointOf ex:outdoor_air_damper .\n").encode())
+
+    def about(model: str) -> set[str]:
+        return {r["about"].value for r in store.query(f"""PREFIX gt: <{GT}>
+            SELECT ?about WHERE {{ ?a a gt:AlignmentAssumption ; gt:assumptionAbout ?about ;
+                                   gt:derivedByRule "56-brick-sensor-placement.rq" }}""", model=model)}
+
+    def feeds(model: str) -> set[str]:
+        return {r["to"].value for r in store.query(f"""PREFIX fso: <https://w3id.org/fso#>
+            SELECT ?to WHERE {{ <{sensor}> fso:suppliesFluidTo ?to }}""", model=model)}
+
+    assert sensor in about("unit") and sensor not in about("both")
+    assert feeds("both") == feeds("unit") == {"https://example.org/flexlab-x3a#outdoor_air_damper"}
