@@ -55,6 +55,13 @@ def _partial(signature: Signature, triples: Sequence[PatternTriple]) -> Signatur
                    modeled_nodes=signature.modeled_nodes[:1], inputs=(), outputs=(), parameters=(), splice=None)
 
 
+def _instances(store: MatchStore, signature: Signature, node_id: str, session: MatchSession) -> list[Match]:
+    """The graph's nodes that pattern node ``node_id`` alone matches (its classes, nothing joined)."""
+    alone = replace(signature, nodes={node_id: signature.nodes[node_id]}, triples=(), modeled_nodes=(node_id,),
+                    inputs=(), outputs=(), parameters=(), splice=None)
+    return match_signature(store, alone, session=session)
+
+
 def _names(matches: Sequence[Match], node_id: str) -> list[str]:
     return sorted({local_name(m[node_id]) for m in matches if m.get(node_id)})
 
@@ -113,7 +120,10 @@ def nearest_miss(store: MatchStore, signature: Signature, *,
             matched = found
             reached |= {triple.subject, triple.object}
         else:
-            missing.append(_missing(signature, triple, matched, reached))
+            absent = [n for n in sorted({triple.subject, triple.object} - reached)
+                      if not signature.nodes[n].iri and not _instances(store, signature, n, session)]
+            nothing = "".join(f"the graph has no {_kind(signature, n)} at all (its ?{n}): " for n in absent)
+            missing.append(nothing + _missing(signature, triple, matched, reached))
             introduced |= {triple.subject, triple.object} - reached
             unreached |= {triple.subject, triple.object} - reached
     if not missing:

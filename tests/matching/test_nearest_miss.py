@@ -38,7 +38,8 @@ def test_a_graph_without_the_modeled_class_is_told_so():
 
 def test_the_first_missing_triple_is_named_with_the_nodes_matched_so_far_and_what_hangs_on_it():
     why = nearest_miss(_store(PLANT), CASING_EXCHANGE)
-    assert why.startswith(f"no `?space <{X}contains> ?component` with ?space a <{X}Room> and ?component coil")
+    assert why.startswith(f"the graph has no <{X}Room> at all (its ?space): no `?space <{X}contains> ?component` "
+                          f"with ?space a <{X}Room> and ?component coil")
     assert f"(add `<space> <{X}contains> coil`)" in why
     assert why.endswith(f"then the triples that hang on it: `?space <{X}hasProperty> ?air`, "
                         f"`?sensor <{X}observes> ?air` (?air a <{X}Temperature>, ?sensor a <{X}Sensor>)")
@@ -48,8 +49,8 @@ def test_the_first_missing_triple_is_named_with_the_nodes_matched_so_far_and_wha
 def test_a_later_missing_triple_is_named_alone_once_the_earlier_ones_hold():
     why = nearest_miss(_store(PLANT + "x:room a x:Room ; x:contains x:coil ; x:hasProperty x:room_air . "
                                       "x:room_air a x:Temperature ."), CASING_EXCHANGE)
-    assert why == (f"no `?sensor <{X}observes> ?air` with ?sensor a <{X}Sensor> and ?air room_air "
-                   f"(add `<sensor> <{X}observes> room_air`)")
+    assert why == (f"the graph has no <{X}Sensor> at all (its ?sensor): no `?sensor <{X}observes> ?air` with "
+                   f"?sensor a <{X}Sensor> and ?air room_air (add `<sensor> <{X}observes> room_air`)")
 
 
 def test_a_pattern_that_matches_has_no_miss():
@@ -63,7 +64,8 @@ def test_the_diagnosis_says_which_triple_would_let_a_catalog_effect_apply():
     store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
     _, reasons = effect_candidates(store, "case", SignatureLibrary.load())
     duct = next(reason for reason in reasons if reason.startswith("DuctHeatExchange"))
-    assert "matches nowhere: no `?space s4bldg:contains ?component`" in duct
+    assert ("matches nowhere: the graph has no s4bldg:BuildingSpace at all (its ?space): "
+            "no `?space s4bldg:contains ?component`") in duct
     # two coil nodes could be its component: the triple to add names neither for the user
     assert "?component heating_coil_air_side or heating_coil_water_side" in duct
     assert "(add `<space> s4bldg:contains <component>`)" in duct
