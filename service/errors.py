@@ -62,11 +62,14 @@ class AssemblyError(InputError):
 
 class IncompleteModelError(AssemblyError):
     """Nodes or inputs the assembly cannot model: ``problems`` lists one sentence each (a class no
-    ontology declares, a missing connection) under ``headline``."""
+    ontology declares, a missing connection) under ``headline``; ``notes`` what else the assembly
+    found that may explain them (a misspelt property, an unknown unit)."""
 
-    def __init__(self, problems: Sequence[str], *, headline: str = "the model is incomplete"):
-        self.problems, self.headline = tuple(problems), headline
-        super().__init__(f"{headline}:\n  - " + "\n  - ".join(self.problems))
+    def __init__(self, problems: Sequence[str], *, headline: str = "the model is incomplete",
+                 notes: Sequence[str] = ()):
+        self.problems, self.headline, self.notes = tuple(problems), headline, tuple(notes)
+        also = "\nthe assembly also notes:\n  - " + "\n  - ".join(self.notes) if self.notes else ""
+        super().__init__(f"{headline}:\n  - " + "\n  - ".join(self.problems) + also)
 
 
 class MeasurementError(InputError):

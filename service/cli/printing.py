@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import shlex
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -115,7 +116,9 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     command (not ``--memory``), so its report can be made later; ``data``: the measurement file the
     run read (the report command then names it); ``model_file``: the building model, for the command
     that adds the answer to it."""
-    from service.diagnosis.drift import drifting_parameter  # scipy: not at the CLI's start
+    from service.diagnosis.drift import (
+        drifting_parameter,  # scipy: not at the CLI's start
+    )
     from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT
 
     print_data_warnings(report.data_warnings)
@@ -162,8 +165,9 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     answer = report.answer
     if answer is not None and model_file is not None and drifting_parameter(answer.effect) is None:
         added = Path(f"{model_file.stem}+{answer.effect}.ttl")
-        console.print(f"add it to the model: graphtwin add-effect {model_file} --effect {answer.effect} "
-                      f"--target {answer.node} -o {added}", markup=False, soft_wrap=True)  # one line to copy
+        command = ["graphtwin", "add-effect", str(model_file), "--effect", answer.effect, "--target", answer.node,
+                   "-o", str(added)]
+        console.print(f"add it to the model: {shlex.join(command)}", markup=False, soft_wrap=True)  # one line to copy
     for lookalike in report.indistinguishable:
         console.print(f"  {lookalike.effect.effect} at {local_name(lookalike.effect.node)} would be told apart by:")
         for text in lookalike.would_separate:

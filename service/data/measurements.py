@@ -164,6 +164,11 @@ def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
     return parsed, False
 
 
+def _stamp_text(stamp: np.datetime64, utc: bool) -> str:
+    """A time stamp of the data to the minute, ``… UTC`` where the file's carried offsets."""
+    return np.datetime_as_string(stamp, unit="m") + (" UTC" if utc else "")
+
+
 def _duration_text(seconds: float) -> str:
     """``7 d``, ``5 h``, ``20 min``, ``30 s``: a spacing in its largest whole unit."""
     for unit, size in (("d", 86400.0), ("h", 3600.0), ("min", 60.0)):
@@ -371,7 +376,7 @@ def read_measurements(
             continue
         try:
             converted[node] = convert(values[node], spec.unit, spec.port_unit,
-                                      where=f"column {header[column]!r}, in the unit device {node} declares")
+                                      where=f"column {header[column]!r}, in the unit that {node} declares")
         except UnitError as exc:
             problems.append(str(exc))
             continue
@@ -397,7 +402,7 @@ def read_measurements(
         warnings.append(
             f"irregular time stamps ({int(np.sum(spacings != step_s))} spacings differ from the median step "
             f"{step_s:g} s, the widest {_duration_text(float(spacings[widest]))} after "
-            f"{np.datetime_as_string(stamps[widest], unit='m')}): resampled linearly to {grid.size} steps, "
+            f"{_stamp_text(stamps[widest], True in first_with_offset)}): resampled linearly to {grid.size} steps, "
             f"the gaps longer than {max_gap_steps} steps left empty"
         )
         # a gap longer than the limit stays a gap: interpolate a grid point only between two of the
@@ -427,19 +432,17 @@ def read_measurements(
         converted = {node: on_grid(series, specs[node].steps) for node, series in converted.items()}
         others = {name: on_grid(series) for name, series in others.items()}
         stamps = grid
-    unfilled = defaultdict(list)  # (runs, where the series is missing) → the columns with those gaps
+    unfilled = defaultdict(list)  # (runs, where the series is missing) → the devices with those gaps
     for node in list(converted):
         converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps, hold=specs[node].steps)
         if long_runs:
-            missing = np.isnan(converted[node])
-            unfilled[(long_runs, missing.tobytes())].append(header[claimed[node]])
-    for (long_runs, _), names in unfilled.items():
-        missing = np.isnan(converted[next(n for n in converted if header[claimed[n]] == names[0])])
-        first = int(np.argmax(missing))
+            unfilled[(long_runs, np.isnan(converted[node]).tobytes())].append(node)
+    for (long_runs, _), nodes in unfilled.items():
+        missing, names = np.isnan(converted[nodes[0]]), [header[claimed[node]] for node in nodes]
         columns = f"column {names[0]!r}" if len(names) == 1 else f"{len(names)} columns ({', '.join(map(repr, names))})"
         warnings.append(
             f"{columns}: {long_runs} gap(s) longer than {max_gap_steps} steps left unfilled ({int(missing.sum())} "
-            f"steps, the first from {np.datetime_as_string(stamps[first], unit='m')})"
+            f"steps, the first from {_stamp_text(stamps[int(np.argmax(missing))], True in first_with_offset)})"
         )
     return MeasuredData(
         timestamps=stamps, step_s=step_s, series=converted,

@@ -129,9 +129,11 @@ def sparql_syntax_message(query: str, error: SyntaxError) -> str:
     source = lines[line - 1] if 0 < line <= len(lines) else ""
     where = f"line {line}, column {column}: {source.strip()!r}"
     if "Prefix not found" in detail:
-        name = (re.search(r"([A-Za-z][\w.-]*):[\w-]*$", source[:column - 1])
-                or re.search(r"([A-Za-z][\w.-]*):(?!//)", source))
-        prefix = name.group(1) if name else ""
+        name = re.search(r"(?<![\w.:-])([A-Za-z][\w.-]*):[\w.%:-]*$", source[:column - 1])
+        declared = set(re.findall(r"PREFIX\s+([\w.-]*):", query, flags=re.IGNORECASE))
+        if name is None or name.group(1) in declared:
+            return f"SPARQL syntax error at {where}: a prefixed name whose prefix the query does not declare"
+        prefix = name.group(1)
         known = PREFIXES.get(prefix)
         add = f"add PREFIX {prefix}: <{known}>" if known else f"declare it with PREFIX {prefix}: <…>"
         return f"SPARQL syntax error at {where}: the prefix {prefix}: is not declared ({add})"

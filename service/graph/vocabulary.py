@@ -17,7 +17,15 @@ from dataclasses import dataclass
 
 import pyoxigraph as ox
 
-from service.graph.namespaces import BRICK, OWL, RDF, RDFS, REF, local_name, namespace_of
+from service.graph.namespaces import (
+    BRICK,
+    OWL,
+    RDF,
+    RDFS,
+    REF,
+    local_name,
+    namespace_of,
+)
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
 __all__ = ["misspelt_terms", "MisspeltTerms", "closest_declared", "CLASS_TYPES", "PROPERTY_TYPES"]
@@ -69,10 +77,6 @@ def closest_declared(term: str, declared: dict[str, list[str]]) -> str | None:
     return namespace_of(term) + close[0] if close else None
 
 
-def _node_name(iri: str) -> str:
-    return iri.replace("#", "/").rsplit("/", 1)[-1]
-
-
 def _nodes(first: str, count: int) -> str:
     return first if count == 1 else f"{count} nodes, e.g. {first}"
 
@@ -108,11 +112,11 @@ def misspelt_terms(store: GraphStore, model_name: str) -> MisspeltTerms:
         if unseen:
             first = row["first_unseen"].value
             (found.dropped if meant else found.notes).append(
-                f"{_node_name(first)}: its class {cls} ({_nodes(first, unseen)}) is declared by no loaded ontology, "
+                f"{local_name(first)}: its class {cls} ({_nodes(first, unseen)}) is declared by no loaded ontology, "
                 f"and the node has no other type a signature matches: no component models it{hint}")
         elif meant:
             first = row["first_node"].value
-            found.notes.append(f"{_node_name(first)}: its class {cls} ({_nodes(first, int(row['nodes'].value))}) is "
+            found.notes.append(f"{local_name(first)}: its class {cls} ({_nodes(first, int(row['nodes'].value))}) is "
                                f"declared by no loaded ontology{hint}; the node is modelled from its other types and "
                                "properties")
     for row in term_rows:
@@ -123,6 +127,6 @@ def misspelt_terms(store: GraphStore, model_name: str) -> MisspeltTerms:
             triples = "1 triple" if uses == 1 else f"{uses} triples"
             role = ("its property", "no signature follows it") if is_property else (
                 "the value", "no signature matches it")
-            found.notes.append(f"{_node_name(first)}: {role[0]} {term} ({triples}, e.g. from {first}) is declared "
+            found.notes.append(f"{local_name(first)}: {role[0]} {term} ({triples}, e.g. from {first}) is declared "
                                f"by no loaded ontology (did you mean {meant}?): {role[1]}")
     return found

@@ -54,7 +54,7 @@ def _error_body(exc: GraphtwinError) -> ErrorBody:
     if isinstance(exc, MeasurementError):
         return ErrorBody(detail=exc.source, problems=list(exc.problems))
     if isinstance(exc, IncompleteModelError):
-        return ErrorBody(detail=exc.headline, problems=list(exc.problems))
+        return ErrorBody(detail=exc.headline, problems=list(exc.problems), notes=list(exc.notes) or None)
     if isinstance(exc, ModelLoadError):
         return ErrorBody(detail=str(exc), line=exc.line, column=exc.column)
     if isinstance(exc, StoreError) and not isinstance(exc, StoreRequestError):

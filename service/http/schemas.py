@@ -20,6 +20,8 @@ class ErrorBody(BaseModel):
 
     detail: str
     problems: list[str] | None = Field(default=None, description="every problem found (measurements, assembly)")
+    notes: list[str] | None = Field(default=None, description=(
+        "what else the assembly found that may explain its problems (a misspelt property, an unknown unit)"))
     line: int | None = Field(default=None, description="1-based line of a syntax error in uploaded RDF")
     column: int | None = Field(default=None, description="1-based column of a syntax error in uploaded RDF")
 

@@ -43,7 +43,8 @@ class MeasurementUploads:
         try:
             model = assemble(store, model_name)
         except IncompleteModelError as exc:
-            raise IncompleteModelError(exc.problems, headline=f"model {model_name} does not assemble") from None
+            raise IncompleteModelError(exc.problems, headline=f"model {model_name} does not assemble",
+                                       notes=exc.notes) from None
         except AssemblyError as exc:
             raise AssemblyError(f"model {model_name} does not assemble: {exc}") from None
         folder = self.root / model_name

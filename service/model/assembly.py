@@ -142,7 +142,7 @@ def assemble(
               for u in unconnected if u.component in devices and u.source_modelled]
     incomplete += _unmatched_anchor_report(store, components, claimed=claimed, lost=lost, session=session)
     if incomplete and not allow_incomplete:
-        raise IncompleteModelError(misspelt.dropped + misspelt.notes + incomplete[len(misspelt.dropped):])
+        raise IncompleteModelError(incomplete, notes=notes)
     notes.extend(incomplete)
 
     fed = {c.target for c in connections}

@@ -401,6 +401,8 @@ def test_a_point_of_the_unit_and_of_its_damper_is_placed_at_the_damper_without_a
     store = GraphStore.embedded(None)
     store.load_model("unit", text.encode())
     store.load_model("both", (text + "\nex:outdoor_air_temperature_sensor brick:isPointOf ex:outdoor_air_damper .\n").encode())
+    store.load_model("weather", (text + "\nex:weather a brick:Weather_Station ; brick:hasPoint "
+                                        "ex:outdoor_air_temperature_sensor .\n").encode())  # no place: still assumed
 
     def about(model: str) -> set[str]:
         return {r["about"].value for r in store.query(f"""PREFIX gt: <{GT}>
@@ -411,5 +413,6 @@ def test_a_point_of_the_unit_and_of_its_damper_is_placed_at_the_damper_without_a
         return {r["to"].value for r in store.query(f"""PREFIX fso: <https://w3id.org/fso#>
             SELECT ?to WHERE {{ <{sensor}> fso:suppliesFluidTo ?to }}""", model=model)}
 
-    assert sensor in about("unit") and sensor not in about("both")
-    assert feeds("both") == feeds("unit") == {"https://example.org/flexlab-x3a#outdoor_air_damper"}
+    assert sensor in about("unit") and sensor not in about("both") and sensor in about("weather")
+    assert feeds("both") == feeds("unit") == feeds("weather") == {"https://example.org/flexlab-x3a#outdoor_air_damper"}
+    assert len(assemble(store, "weather").targets) == len(assemble(store, "unit").targets) == 2

@@ -339,6 +339,26 @@ def test_misspelt_official_terms_are_notes_naming_the_node_and_the_term_meant():
     assert models["own"].notes == right.notes
 
 
+def test_a_misspelt_class_on_a_modelled_node_and_on_one_nothing_else_types_names_the_latter_as_the_problem():
+    """``s4bldg:Sensr`` on the coil's sensor (modelled from its properties) and on a spare sensor
+    nothing else types: the spare one is left out, so the model is incomplete and the problem names
+    it; a misspelt property elsewhere is among the error's notes, not its problems."""
+    text = CASE_STUDY.read_text(encoding="utf-8")
+    sensor = "ex:coil_outlet_air_temperature_sensor a s4bldg:Sensor"
+    feeds = "fso:suppliesFluidTo ex:coil_outlet_air_temperature_sensor"
+    store = GraphStore.embedded(None)
+    store.load_model("mixed", (text.replace(sensor, sensor.replace("Sensor", "Sensr"))
+                               .replace(feeds, feeds.replace("FluidTo", "FluidToo")) + "\nex:spare_sensor a s4bldg:Sensr .\n").encode())
+    with pytest.raises(IncompleteModelError) as info:
+        assemble(store, "mixed")
+    assert info.value.problems == (
+        "spare_sensor: its class https://saref.etsi.org/saref4bldg/Sensr (https://example.org/ventilation-case-study#"
+        "spare_sensor) is declared by no loaded ontology, and the node has no other type a signature matches: no "
+        "component models it (did you mean https://saref.etsi.org/saref4bldg/Sensor?)",)
+    assert any("fso#suppliesFluidToo" in note for note in info.value.notes)
+    assert "the assembly also notes:" in str(info.value)
+
+
 def test_a_sensor_unit_graphtwin_cannot_read_is_a_note_at_assembly():
     """``unit:DEGC`` for ``unit:DEG_C``: said when the model is assembled, naming the sensor and the
     unit it resembles (it had first surfaced at calibration, blamed on the CSV column); so are a

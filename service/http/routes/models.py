@@ -89,9 +89,11 @@ def _assembly_check(store: GraphStore, name: str) -> dict:
     try:
         model = assemble(store, name)
     except IncompleteModelError as exc:
-        return {"complete": False, "problems": list(exc.problems), "notes": []}
+        return {"complete": False, "problems": list(exc.problems), "notes": list(exc.notes)}
     except GraphtwinError as exc:
         return {"complete": False, "problems": [str(exc)], "notes": []}
+    except Exception as exc:  # noqa: BLE001 (the upload is stored: say the assembly failed, not a 500)
+        return {"complete": False, "problems": [f"the assembly failed: {type(exc).__name__}: {exc}"], "notes": []}
     return {"complete": True, "problems": [], "notes": list(model.notes)}
 
 
