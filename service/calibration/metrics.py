@@ -16,11 +16,15 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from service.calibration.problem import (
+    INSTRUMENT_ACCURACY_FLOOR,
+    RELATIVE_ACCURACY_FLOOR,
+)
 from service.errors import CalibrationError
 
 __all__ = [
     "TargetMetrics", "IntervalCoverage", "target_metrics", "effective_sample_fraction", "long_run_variance_factor",
-    "INTERVAL_SCALE_UNITS", "on_interval_scale",
+    "INTERVAL_SCALE_UNITS", "on_interval_scale", "noise_level",
     "GUIDELINE14_HOURLY_CV_RMSE_PERCENT", "GUIDELINE14_HOURLY_NMBE_PERCENT",
 ]
 
@@ -62,12 +66,40 @@ class TargetMetrics:
     guideline14_pass: bool | None
     guideline14_note: str
     coverage: tuple[IntervalCoverage, ...] = ()
+    noise: float = float("nan")  # the measurement noise σ the residual shows (:func:`noise_level`)
 
     def to_dict(self) -> dict:
         """Plain types only (floats, bools, str, lists): ready for JSON."""
         result = asdict(self)
         result["coverage"] = [asdict(c) for c in self.coverage]
         return result
+
+
+def noise_level(values: np.ndarray, unit: str, observed: np.ndarray) -> float:
+    """Measurement noise σ (RMS over the window) of a sensor from the second differences of its
+    residual y − ŷ (``values``), floored at the instrument accuracy of its unit — for a unit without an
+    absolute one (W, m³/s) 1 % of the mean magnitude of the ``observed`` reading
+    (:data:`~service.calibration.problem.RELATIVE_ACCURACY_FLOOR`).
+
+    Δ²e of white noise has standard deviation √6·σ; the first quartile of |Δ²e| is 0.3186·√6·σ for
+    Gaussian noise, and stays a noise measure while model error bends the residual on up to half of
+    the steps (a median would not). A meter without an absolute accuracy (power, flow) reads with
+    noise in proportion to its reading, σₖ = c·|yₖ|: Δ²eₖ is divided by sₖ = √((y²ₖ₋₁ + 4y²ₖ + y²ₖ₊₁)/6)
+    before the quartile gives c, and σ = c·√(mean y²) (one quartile of Δ²e would give the noise of the
+    low readings).
+    """
+    second = np.diff(np.asarray(values, dtype=float), n=2)
+    scale = 1.0  # σ per unit of the quartile: 1, or √(mean y²) for noise in proportion to the reading
+    if unit not in INSTRUMENT_ACCURACY_FLOOR:
+        squares = np.asarray(observed, dtype=float) ** 2
+        local = np.sqrt((squares[:-2] + 4.0 * squares[1:-1] + squares[2:]) / 6.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            second = np.where(local > 0.0, second / local, np.nan)
+        scale = float(np.sqrt(np.nanmean(squares)))
+    second = second[np.isfinite(second)]
+    sigma = scale * float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
+    floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.nanmean(np.abs(observed))))
+    return max(sigma, floor)
 
 
 def on_interval_scale(unit: str) -> bool:
@@ -154,7 +186,7 @@ def target_metrics(
         r2=1.0 - float(np.sum(error**2)) / total if total > 0.0 else np.nan,
         cv_rmse_percent=cv, nmbe_percent=nmbe, lag1_autocorrelation=lag1,
         guideline14_applies=applies, guideline14_pass=passed, guideline14_note=note,
-        coverage=tuple(coverage),
+        coverage=tuple(coverage), noise=noise_level(residual, unit, np.where(measured, y_all, np.nan)),
     )
 
 

@@ -25,7 +25,7 @@ from service.graph.namespaces import GT, GTR, PROV, RDF, RDFS, XSD, distinct_loc
 __all__ = ["run_iri", "calibration_triples", "software_agent", "band_json", "BAND_MAX_POINTS"]
 
 #: Metrics written per sensor and window (attribute of :class:`~service.calibration.metrics.TargetMetrics`).
-METRIC_ATTRIBUTES = ("rmse", "mae", "r2", "cv_rmse_percent", "nmbe_percent", "lag1_autocorrelation")
+METRIC_ATTRIBUTES = ("rmse", "mae", "r2", "cv_rmse_percent", "nmbe_percent", "lag1_autocorrelation", "noise")
 #: Points of a predictive band's series written at most (every ``stride``-th step; a figure is ~1200 px wide).
 BAND_MAX_POINTS = 2000
 

@@ -28,13 +28,14 @@ _PARAMETER_KEY = re.compile(r"\S*/component/[^/\s]+/([^\s/#]+)#(\w+)")
 
 
 def print_metrics(title: str, metrics: dict) -> None:
-    """Per sensor: RMSE, MAE, R², CV(RMSE), NMBE (– for a temperature in °C or °F, whose mean
+    """Per sensor: RMSE, the measurement noise σ its residual shows and RMSE/σ (about 1 for a model
+    right to the noise), MAE, R², CV(RMSE), NMBE (– for a temperature in °C or °F, whose mean
     depends on the scale's zero) and, for a Bayesian run's prediction intervals, the ACE and mean
     width of the 90 % one (every level: ``--json``)."""
     intervals = any(m.coverage for m in metrics.values())
     table = Table(title=title)
-    for column in ("sensor", "RMSE", "MAE", "R²", "CV(RMSE) %", "NMBE %", *(("ACE 90 %", "90 % width") if intervals else ()),
-                   "unit"):
+    for column in ("sensor", "RMSE", "noise σ", "RMSE / σ", "MAE", "R²", "CV(RMSE) %", "NMBE %",
+                   *(("ACE 90 %", "90 % width") if intervals else ()), "unit"):
         table.add_column(column, overflow="fold")
     for node, m in metrics.items():
         interval_cells = []
@@ -42,8 +43,8 @@ def print_metrics(title: str, metrics: dict) -> None:
             at_90 = min(m.coverage, key=lambda c: abs(c.level - 0.9), default=None)
             interval_cells = [f"{100 * at_90.ace:+.1f}", f"{at_90.mean_width:.3g}"] if at_90 else ["–", "–"]
         ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
-        table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells,
-                      unit_label(m.unit))
+        table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.noise:.3g}", f"{m.rmse / m.noise:.1f}" if m.noise > 0 else "–",
+                      f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, unit_label(m.unit))
     console.print(table)
 
 

@@ -3,7 +3,7 @@
 :func:`diagnose` calibrates the base model on the training window (point fit), evaluates it on the
 test window and answers (docs/diagnosis.md): **compare** (RMSE, MAE, CV(RMSE), NMBE per target),
 **where** (a sensor fails when its test RMSE exceeds ``failure_ratio`` × its noise level
-:func:`noise_level`; located on the flow path, in operating regimes and in time), **what is missing**
+:func:`~service.calibration.metrics.noise_level`; located on the flow path, in operating regimes and in time), **what is missing**
 (the effect catalog refitted and ranked, :mod:`service.diagnosis.candidates`) and, when nothing is,
 what the failing sensors' residual follows. The result is a :class:`~service.diagnosis.report.DiagnosisReport`,
 also written to the store as triples. The method in full: ``docs/diagnosis.md``.
@@ -17,17 +17,26 @@ from pathlib import Path
 
 import numpy as np
 
-from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR
+from service.calibration.metrics import noise_level
 from service.calibration.run import calibrate, predict_test
 from service.components.library import SignatureLibrary
 from service.data.windows import Window
 from service.diagnosis.candidates import rank_catalog, split_windows
 from service.diagnosis.drift import drifting_components
 from service.diagnosis.episodes import Episode, find_episodes
-from service.diagnosis.localization import FailureLocation, FlowTopology, localize_failures
+from service.diagnosis.localization import (
+    FailureLocation,
+    FlowTopology,
+    localize_failures,
+)
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
 from service.diagnosis.report import DiagnosisReport, SensorVerdict, diagnosis_triples
-from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
+from service.diagnosis.residual_dependence import (
+    Dependence,
+    distinct_signals,
+    residual_dependence,
+    time_trend,
+)
 from service.diagnosis.separation import indistinguishable
 from service.diagnosis.unit_mixup import unit_mixups
 from service.graph.namespaces import local_name
@@ -35,39 +44,12 @@ from service.graph.store import GraphStore
 from service.graph.units import unit_label
 from service.matching.signature import Signature
 
-__all__ = ["diagnose", "noise_level", "MIN_TEST_STEPS"]
+__all__ = ["diagnose", "MIN_TEST_STEPS"]
 
 
 #: Fewer test steps than this give no verdict (diagnose refuses the window before calibrating): the
 #: noise level comes from second differences and the effects are judged on the window's second half.
 MIN_TEST_STEPS = 12
-
-
-def noise_level(values: np.ndarray, unit: str, observed: np.ndarray) -> float:
-    """Measurement noise σ (RMS over the window) of a sensor from the second differences of its
-    residual y − ŷ (``values``), floored at the instrument accuracy of its unit — for a unit without an
-    absolute one (W, m³/s) 1 % of the mean magnitude of the ``observed`` reading
-    (:data:`~service.calibration.problem.RELATIVE_ACCURACY_FLOOR`).
-
-    Δ²e of white noise has standard deviation √6·σ; the first quartile of |Δ²e| is 0.3186·√6·σ for
-    Gaussian noise, and stays a noise measure while model error bends the residual on up to half of
-    the steps (a median would not). A meter without an absolute accuracy (power, flow) reads with
-    noise in proportion to its reading, σₖ = c·|yₖ|: Δ²eₖ is divided by sₖ = √((y²ₖ₋₁ + 4y²ₖ + y²ₖ₊₁)/6)
-    before the quartile gives c, and σ = c·√(mean y²) (one quartile of Δ²e would give the noise of the
-    low readings).
-    """
-    second = np.diff(np.asarray(values, dtype=float), n=2)
-    scale = 1.0  # σ per unit of the quartile: 1, or √(mean y²) for noise in proportion to the reading
-    if unit not in INSTRUMENT_ACCURACY_FLOOR:
-        squares = np.asarray(observed, dtype=float) ** 2
-        local = np.sqrt((squares[:-2] + 4.0 * squares[1:-1] + squares[2:]) / 6.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            second = np.where(local > 0.0, second / local, np.nan)
-        scale = float(np.sqrt(np.nanmean(squares)))
-    second = second[np.isfinite(second)]
-    sigma = scale * float(np.quantile(np.abs(second), 0.25)) / (0.3186 * np.sqrt(6.0)) if second.size else 0.0
-    floor = INSTRUMENT_ACCURACY_FLOOR.get(unit, RELATIVE_ACCURACY_FLOOR * float(np.nanmean(np.abs(observed))))
-    return max(sigma, floor)
 
 
 def diagnose(

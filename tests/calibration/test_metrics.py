@@ -78,3 +78,17 @@ def test_to_dict_is_json_ready():
     m = target_metrics(OBSERVED, PREDICTED, intervals={0.9: (PREDICTED - 2, PREDICTED + 2)}, unit="W", target="p")
     data = json.loads(json.dumps(m.to_dict()))
     assert data["coverage"][0]["level"] == 0.9 and data["target"] == "p" and data["n"] == 4
+
+
+def test_the_noise_the_residual_shows_is_reported_beside_the_rmse():
+    """White noise of 0.3 K on a slow model error: σ from the residual's second differences (the slow
+    error hardly moves them), while the RMSE carries both; a gap in the data is no noise."""
+    rng = np.random.default_rng(3)
+    t = np.arange(1008)
+    truth = 20.0 + 2.0 * np.sin(2 * np.pi * t / 144)
+    observed = truth + rng.normal(0.0, 0.3, t.size)
+    observed[500:520] = np.nan
+    metrics = target_metrics(observed, truth + 0.5 * np.sin(2 * np.pi * t / 1008), unit="degC")
+    assert metrics.noise == pytest.approx(0.3, rel=0.15) and metrics.rmse > 1.2 * metrics.noise
+    assert target_metrics(truth + 0.01, truth, unit="degC").noise == 0.1  # floored at the sensor's accuracy
+    assert metrics.to_dict()["noise"] == metrics.noise

@@ -440,7 +440,7 @@ def test_a_bayesian_runs_metrics_show_the_90_percent_intervals_ace_and_width(mon
 
     printed = Console(record=True, width=200)
     monkeypatch.setattr(printing, "console", printed)
-    common = dict(rmse=0.1, mae=0.08, r2=0.9, cv_rmse_percent=1.0, nmbe_percent=0.2, unit="degC")
+    common = dict(rmse=0.1, mae=0.08, r2=0.9, cv_rmse_percent=1.0, nmbe_percent=0.2, unit="degC", noise=0.05)
     printing.print_metrics("Metrics, test window", {
         EX + "a_sensor": SimpleNamespace(**common, coverage=(IntervalCoverage(0.5, 0.52, 0.02, 0.1),
                                                              IntervalCoverage(0.9, 0.87, -0.03, 0.33))),
@@ -448,5 +448,7 @@ def test_a_bayesian_runs_metrics_show_the_90_percent_intervals_ace_and_width(mon
     text = printed.export_text()
     assert "ACE 90 %" in text and "90 % width" in text
     assert any("a_sensor" in line and "-3.0" in line and "0.33" in line for line in text.splitlines())
+    assert "RMSE / σ" in text and any("a_sensor" in line and " 0.05 " in line and " 2.0 " in line
+                                       for line in text.splitlines())
     printing.print_metrics("Metrics, train window", {EX + "a_sensor": SimpleNamespace(**common, coverage=())})
     assert "ACE" not in printed.export_text()  # a point fit has no intervals

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from case_study import CASE_STUDY, EX, case_study_data, case_study_with_effect
 
+from service.calibration.metrics import noise_level
 from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
 from service.data.synthetic import NOISE_STD, generate_synthetic_data
-from service.diagnosis.loop import diagnose, noise_level
+from service.diagnosis.loop import diagnose
 from service.graph.store import GraphStore
 from service.model.assembly import assemble
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from case_study import CASE_STUDY, EX
 
+from service.calibration.metrics import noise_level
 from service.calibration.model_data import ModelData
 from service.calibration.run import calibrate
 from service.components.library import SignatureLibrary
@@ -26,7 +27,7 @@ from service.diagnosis.drift import (
     drift_candidates,
     drift_sentence,
 )
-from service.diagnosis.loop import diagnose, noise_level
+from service.diagnosis.loop import diagnose
 from service.graph.store import GraphStore
 from service.graph.units import quantity_text
 from service.model.assembled_model import ParameterDrift
