@@ -113,12 +113,14 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
         verdict = ('<span class="bad">yes</span>' if sensor in failing else "no") if diagnosis else "–"
         ratios = ([None, None] if on_interval_scale(run.units[sensor])  # a mean in °C depends on the zero
                   else [test.get("cv_rmse_percent"), test.get("nmbe_percent")])
-        rows.append([_breakable(sensor), _number(train.get("rmse")), _number(test.get("rmse")),
-                     _number(test.get("mae")), _number(test.get("r2")), *map(_number, ratios),
+        noise, rmse = test.get("noise"), test.get("rmse")
+        over_noise = rmse / noise if noise and rmse is not None else None  # runs stored before have no noise
+        rows.append([_breakable(sensor), _number(train.get("rmse")), _number(rmse), _number(noise),
+                     _number(over_noise), _number(test.get("mae")), _number(test.get("r2")), *map(_number, ratios),
                      html.escape(unit_label(run.units[sensor])), verdict])
     out = ["<h2>Measured against the model, per sensor</h2>",
-           _table(["sensor", "train RMSE", "test RMSE", "test MAE", "test R²", "CV(RMSE) %", "NMBE %", "unit",
-                   "located failure"], rows, "metrics")]
+           _table(["sensor", "train RMSE", "test RMSE", "test noise σ", "test RMSE / σ", "test MAE", "test R²",
+                   "CV(RMSE) %", "NMBE %", "unit", "located failure"], rows, "metrics")]
     if diagnosis:
         out.append("<p>Located failure: the diagnosis located a failure at this sensor (a sensor that only inherits "
                    "a failure from upstream is not located again).</p>")

@@ -162,6 +162,8 @@ def test_every_sensor_has_its_stored_metrics_and_a_measured_vs_model_figure_that
     for sensor, measures in sensors.items():
         row = rows[_short(sensor)]
         assert row[2] == f"{measures.rmse:.3g}", row  # the stored test RMSE
+        assert float(row[4]) == pytest.approx(float(row[2]) / float(row[3]), rel=0.01), row  # RMSE over its noise σ
+        assert row[3] == f"{measures.noise:.3g}", row  # the metric's σ is the diagnosis's
         assert row[-1] == ("yes" if sensor in {loc.failing_sensor for loc in case.report.localization} else "no")
     figures = {i["alt"]: i for i in parsed.images if i["class"] == "series"}
     assert set(figures) == {f"measured vs model: {_short(s)}" for s in sensors}
