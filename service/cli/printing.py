@@ -131,7 +131,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
                    f"[yellow]within {report.failure_ratio:g}× its noise, but the answer removes ≥ "
                    f"{100 * MIN_TEST_IMPROVEMENT:.0f} % of its error[/yellow]" if s.shows_missing_effect else "matches")
         table.add_row(local_name(node), quantity_text(s.rmse, s.unit), f"{s.rmse_over_noise:.1f}",
-                      f"{s.nmbe_percent:+.1f}", verdict)
+                      "–" if on_interval_scale(s.unit) else f"{s.nmbe_percent:+.1f}", verdict)
     console.print(table)
     for location in report.localization:
         console.print(f"• {location.describe()}")

@@ -246,6 +246,9 @@ def test_diagnose_prints_the_command_that_adds_its_answer_and_that_command_works
     result = runner.invoke(app, ["diagnose", str(CASE_STUDY), str(data), "--train", "2026-01-12/2026-01-12T23:59",
                                  "--test", "2026-01-13/", "--memory", "--plots", str(tmp_path / "plots")])
     assert result.exit_code == 0, result.output
+    rows = [t.split("│") for t in result.output.splitlines() if t.startswith("│ ")]
+    nmbe = {row[1].strip(): row[4].strip() for row in rows if len(row) > 5 and row[4].strip()}
+    assert nmbe["coil_outlet_air_tem"] == "–" and nmbe["fan_power_meter"] != "–", nmbe  # a mean in °C has no ratio
     line = next(t for t in result.output.splitlines() if t.startswith("add it to the model: "))
     command = line.removeprefix("add it to the model: ")
     assert shlex.split(command) == ["graphtwin", "add-effect", str(CASE_STUDY), "--effect", "ValveLeakage", "--target",
