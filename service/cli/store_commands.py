@@ -127,7 +127,7 @@ def history_command(
     table.add_row("tested on", *history.tested_on, style="dim")
     console.print(table)
     if not history.comparable:
-        error_console.print("[yellow]warning:[/yellow] the versions were tested on different data or windows: their "
+        error_console.print("[yellow]warning:[/yellow] the versions were tested on different data, windows or operating filters: their "
                             "errors differ by that as much as by the model; calibrate them on the same test window")
     if history.regime_rmse:
         table = Table(title="Test RMSE per operating regime (share of the test window)")

@@ -4,6 +4,7 @@ sees the error fall, and where it fell."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 from service.graph.store import GraphStore
@@ -23,12 +24,12 @@ class ErrorHistory:
     units: dict[str, str]
     regime_rmse: dict[str, dict[str, list[float]]]
     regime_share: dict[str, list[float]]
-    tested_on: list[str]  # per version: the data file and test window of its run
+    tested_on: list[str]  # per version: the data file, test window and operating filter of its run
 
     @property
     def comparable(self) -> bool:
-        """Whether every version was tested on the same data and window (else their errors differ
-        by what they were tested on as much as by the model)."""
+        """Whether every version was tested on the same data, window and operating filter
+        (``--only-when``; else their errors differ by what they were tested on as much as by the model)."""
         return len(set(self.tested_on)) <= 1
 
 
@@ -63,7 +64,9 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
         if found:
             versions.append(name)
             [run] = store.query(_TESTED_ON, substitutions={"run": newest_run})
-            tested_on.append(f"{run['source'].value}, {run['start'].value} – {run['end'].value}")
+            only_when = json.loads(run["settings"].value).get("only_when", []) if "settings" in run else []
+            tested_on.append(f"{run['source'].value}, {run['start'].value} – {run['end'].value}"
+                             + (f", only when {' and '.join(only_when)}" if only_when else ""))
 
     def per_version(values: dict[str, float]) -> list[float]:
         return [values.get(v, float("nan")) for v in versions]
@@ -76,4 +79,6 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
 
 
 _TESTED_ON = """PREFIX gt: <https://w3id.org/graphtwin/ontology#>
-SELECT ?source ?start ?end WHERE { GRAPH ?g { ?run gt:dataSource ?source ; gt:testStart ?start ; gt:testEnd ?end } }"""
+SELECT ?source ?start ?end ?settings WHERE {
+  GRAPH ?g { ?run gt:dataSource ?source ; gt:testStart ?start ; gt:testEnd ?end OPTIONAL { ?run gt:settings ?settings } }
+}"""

@@ -137,7 +137,7 @@ def error_history_figure(history: ErrorHistory) -> Figure:
         handles, labels = axes[1][0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)
     if not history.comparable:
-        fig.suptitle("versions tested on different data or windows: not comparable as they stand", fontsize=9, color="#b23b3b")
+        fig.suptitle("versions tested on different data, windows or filters: not comparable as they stand", fontsize=9, color="#b23b3b")
     fig.tight_layout(rect=(0, 0.06 if rules else 0, 1, 1))
     return fig
 

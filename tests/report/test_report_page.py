@@ -12,6 +12,7 @@ import functools
 import gc
 import html
 import io
+import json
 import re
 from dataclasses import dataclass, replace
 from html.parser import HTMLParser
@@ -265,7 +266,7 @@ def test_the_error_history_compares_the_model_versions(case, page):
     parsed = PageParser(page)
     assert parsed.tables["history"][0] == ["sensor", *versions]
     assert parsed.tables["history"][-1] == ["tested on", *history.tested_on]
-    assert "tested on different data or windows" not in page
+    assert "tested on different data, windows or operating filters" not in page
     assert parsed.tables["history-regimes"][0] == ["regime", "rule", "sensor", *versions]
     assert [row[1] for row in parsed.tables["regimes"][1:]] == [r["rule"] for r in case.report.regimes]
     # a regime keeps the number the page's regime table gives it (they had been numbered 0, 1, … apart)
@@ -405,7 +406,7 @@ def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_version
     assert imread(plot).shape[0] > imread(plot).shape[1] / len(history.rmse)  # two rows of panels
     missing = CliRunner().invoke(cli, ["history", "nothing", "--store", str(folder)])
     assert missing.exit_code == 2 and "no calibration with a test window" in missing.output
-    assert "tested on different data or windows" not in result.output
+    assert "tested on different data, windows or operating filters" not in result.output
     # a version tested on another window (the FLEXLAB history compared 21 September with 12 September)
     run = f"<{run_iri(case.version.run_id).value}>"
     test_start = "<https://w3id.org/graphtwin/ontology#testStart>"
@@ -418,7 +419,24 @@ def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_version
     assert not error_history(disk, "case").comparable
     del disk
     mixed = CliRunner(env={"COLUMNS": "400"}).invoke(cli, ["history", "case", "--store", str(folder)])
-    assert mixed.exit_code == 0 and "the versions were tested on different data or windows" in mixed.output
+    assert mixed.exit_code == 0 and "the versions were tested on different data, windows or operating filters" in mixed.output
+
+
+def test_versions_tested_under_different_operating_filters_are_not_comparable(case):
+    """A version calibrated with ``--only-when`` was scored on part of the test window: the history
+    names its filter and does not call the versions comparable (before: the same "tested on")."""
+    copy = GraphStore.embedded(None)
+    copy.backend.store.extend(case.store.backend.store)
+    assert error_history(copy, "case").comparable
+    run = f"<{run_iri(case.version.run_id).value}>"
+    settings = "<https://w3id.org/graphtwin/ontology#settings>"
+    [row] = copy.query(f"SELECT ?s WHERE {{ GRAPH ?g {{ {run} {settings} ?s }} }}")
+    filtered = json.dumps(json.loads(row["s"].value) | {"only_when": ["supply_fan_power > 200"]})
+    copy.backend.update(f"DELETE {{ GRAPH ?g {{ {run} {settings} ?s }} }} INSERT {{ GRAPH ?g {{ {run} {settings} "
+                        f"{json.dumps(filtered)} }} }} WHERE {{ GRAPH ?g {{ {run} {settings} ?s }} }}")
+    history = error_history(copy, "case")
+    assert not history.comparable and history.tested_on[-1].endswith(", only when supply_fan_power > 200")
+    assert not history.tested_on[0].endswith("> 200")
 
 
 def test_a_run_with_an_operating_filter_says_so_and_reproduces_its_metrics(case):
