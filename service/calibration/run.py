@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import uuid
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
@@ -229,6 +230,10 @@ class PreparedCalibration:
     start_note: str | None = None
 
 
+#: A window's end written as a date alone (``2026-01-14``): read as that day's midnight.
+_DATE_ONLY = re.compile(r"\d{4}-\d{2}-\d{2}")
+
+
 def prepare_calibration(
     store: GraphStore, model_name: str, data_path: Path | str, *, train: Window = (None, None),
     test: Window | None = None, method: str = "point", substeps: int | None = None, only_when: Sequence[str] = (),
@@ -249,7 +254,10 @@ def prepare_calibration(
     md = ModelData(model, data, substeps, operating_mask(data, only_when))
     train_slice = data.window(*train)
     test_slice = data.window(*test) if test is not None else None
-    window_notes = []
+    ends = {"training": train[1], "test": test[1] if test is not None else None}
+    window_notes = [f"the {name} window ends at {end.strip()}T00:00, the first instant of that day (a date alone is "
+                    f"its midnight): write {end.strip()}T23:59 to include the day"
+                    for name, end in ends.items() if isinstance(end, str) and _DATE_ONLY.fullmatch(end.strip())]
     if test_slice is not None:
         if test_slice.stop - test_slice.start < min_test_steps:
             raise CalibrationError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "

@@ -65,8 +65,11 @@ def print_calibration(record: CalibrationRecord) -> None:
         console.print(f"PT-MCMC: {'converged' if found.converged else 'NOT converged'} after {found.n_steps} steps "
                       f"(20 × IAT: IAT {found.iat:.0f} steps; acceptance {found.acceptance:.2f})",
                       markup=False, highlight=False)
+    bounds = {"train": record.train_window, "test": record.test_window}
     for window, metrics in record.metrics.items():
-        print_metrics(f"Metrics, {window} window", metrics)
+        span = bounds.get(window)
+        print_metrics(f"Metrics, {window} window" + (f" ({span[0]:%Y-%m-%d %H:%M} – {span[1]:%Y-%m-%d %H:%M})"
+                                                     if span else ""), metrics)
     print_regimes(record)
     print_data_warnings(record.diagnostics.warnings)
 

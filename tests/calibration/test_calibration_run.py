@@ -449,3 +449,18 @@ def test_a_run_over_a_windows_first_part_is_that_part_run_alone(point_run):
     long, short = md.simulate_targets(whole, theta), md.simulate_targets(part, theta)
     for node, values in short.items():
         np.testing.assert_array_equal(long[node][:, :values.shape[1]], values, err_msg=node)
+
+
+def test_a_window_ending_on_a_date_alone_says_it_ends_at_that_days_midnight(tmp_path):
+    """``--train 2026-01-12/2026-01-13`` fits 12 January and one step of the 13th: said, with how to
+    write the whole day (a user took it for two days)."""
+    from service.calibration.run import prepare_calibration
+
+    path = tmp_path / "data.csv"
+    store, _ = case_study_data(path, n_days=3, seed=0)
+    prepared = prepare_calibration(store, "case", path, train=("2026-01-12", "2026-01-13"), test=("2026-01-13T00:10", None))
+    assert prepared.window_notes[0] == ("the training window ends at 2026-01-13T00:00, the first instant of that day "
+                                        "(a date alone is its midnight): write 2026-01-13T23:59 to include the day")
+    assert prepared.train.stop - prepared.train.start == 24 * 6 + 1
+    explicit = prepare_calibration(store, "case", path, train=("2026-01-12", "2026-01-12T23:59"), test=("2026-01-13", None))
+    assert not any("a date alone" in note for note in explicit.window_notes)
