@@ -66,6 +66,12 @@ def test_compose_file_is_valid_and_demands_the_token():
     assert valid.returncode == 0, valid.stderr
     without_token = subprocess.run(command, capture_output=True, text=True, env={"PATH": TOKEN_ENV["PATH"]})
     assert without_token.returncode != 0 and "GRAPHTWIN_TOKEN" in without_token.stderr
+    shown = [docker_compose, "-f", str(DOCKER / "compose.yaml"), "config"]
+    assert "GRAPHTWIN_EXECUTOR: dask://dask-scheduler:8786" in subprocess.run(
+        shown, capture_output=True, text=True, env=TOKEN_ENV).stdout
+    processes = subprocess.run(shown, capture_output=True, text=True, env=TOKEN_ENV | {
+        "GRAPHTWIN_EXECUTOR": "processes"})  # docker/README.md: the service alone, jobs in its container
+    assert "GRAPHTWIN_EXECUTOR: processes" in processes.stdout, processes.stdout + processes.stderr
 
 
 def test_dockerfile_is_pinned_non_root_and_serves_on_8000():
