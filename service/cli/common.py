@@ -49,8 +49,9 @@ JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of 
 NameOption = Annotated[str | None, typer.Option("--name", help="Model name in the store (default: from the file name).")]
 SeedOption = Annotated[int, typer.Option("--seed", help="Random seed (runs are reproducible).")]
 OnlyWhenOption = Annotated[list[str] | None, typer.Option(
-    "--only-when", help="Compare only at steps where COLUMN OP NUMBER holds, in the column's unit "
-                        "(e.g. 'SF Spd Cmd (%) > 5'); repeat for several (all must hold).")]
+    "--only-when", help="Fit and compare only at steps where COLUMN OP NUMBER [UNIT] holds, in the column's unit "
+                        "(e.g. 'SF Spd Cmd (%) > 5', or a regime rule as printed: 'supply fan speed command ≤ 11 %'); "
+                        "repeat for several (all must hold).")]
 ModelFileArgument = Annotated[Path, typer.Argument(help="Building model file.")]
 MeasurementsArgument = Annotated[Path, typer.Argument(help="Measurement CSV (docs/data.md: the data contract).")]
 TrainWindowOption = Annotated[str, typer.Option(help="Training window START/END (ISO; either side may be empty).")]

@@ -1,8 +1,9 @@
 """Operating filters: compare the model with the measurements only where it is meant to hold.
 
-A condition is ``COLUMN OP VALUE``: a numeric column of the data file (by header or the device's
-local name; also one the model does not read, a fan status), ``>``, ``>=``, ``<`` or ``<=``, and a
-number in that column's own unit (``"SF Spd Cmd (%) > 5"``). The targets are compared where all
+A condition is ``COLUMN OP VALUE [UNIT]``: a numeric column of the data file (by header or the
+device's local name, ``_`` or spaces; also one the model does not read, a fan status), ``>``, ``>=``,
+``<`` or ``<=`` (``≤``, ``≥``), and a number in that column's own unit (``"SF Spd Cmd (%) > 5"``), its
+label after it if wished, checked (``"supply fan speed command ≤ 11 %"``, as a regime rule reads). The targets are compared where all
 conditions hold; elsewhere the model is still simulated, but its targets' measurements enter neither
 the calibration nor the metrics, regimes and episodes. A step where the column holds no number
 fails the condition. Why: ``docs/data.md``, *Operating filters*.
@@ -19,24 +20,28 @@ import numpy as np
 
 from service.data.measurements import MeasuredData
 from service.errors import InputError
-from service.graph.units import convert
+from service.graph.units import convert, unit_label
 
 __all__ = ["OperatingCondition", "parse_condition", "operating_mask"]
 
 _OPERATORS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt}
-_CONDITION = re.compile(r"^\s*(?P<column>.*?[^\s<>=])\s*(?P<op>>=|<=|>|<)\s*(?P<value>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*$")
+_CONDITION = re.compile(r"^\s*(?P<column>.*?[^\s<>=≤≥])\s*(?P<op>>=|<=|>|<|≤|≥)\s*"
+                        r"(?P<value>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>[^\s\d].*?)?\s*$")
+_SYMBOLS = {"≤": "<=", "≥": ">="}  # as the regime rules print them
 
 
 @dataclass(frozen=True)
 class OperatingCondition:
-    """``column op value``, ``value`` in the column's unit as written in the data file."""
+    """``column op value``, ``value`` in the column's unit as written in the data file (``unit``: its
+    label, if the condition states it, checked against the column's)."""
 
     column: str
     op: str
     value: float
+    unit: str = ""
 
     def __str__(self) -> str:
-        return f"{self.column} {self.op} {self.value:g}"
+        return f"{self.column} {self.op} {self.value:g}" + (f" {self.unit}" if self.unit else "")
 
 
 def parse_condition(text: str) -> OperatingCondition:
@@ -46,9 +51,10 @@ def parse_condition(text: str) -> OperatingCondition:
     """
     match = _CONDITION.match(text)
     if match is None:
-        raise InputError(f"operating condition {text!r}: expected COLUMN OP NUMBER with OP one of >, >=, <, <= "
+        raise InputError(f"operating condition {text!r}: expected COLUMN OP NUMBER [UNIT] with OP one of >, >=, <, <= "
                          "(e.g. 'SF Spd Cmd (%) > 5')")
-    return OperatingCondition(match["column"], match["op"], float(match["value"]))
+    op = _SYMBOLS.get(match["op"], match["op"])
+    return OperatingCondition(match["column"], op, float(match["value"]), (match["unit"] or "").strip())
 
 
 def _column_values(data: MeasuredData, condition: OperatingCondition) -> tuple[np.ndarray, float]:
@@ -56,14 +62,21 @@ def _column_values(data: MeasuredData, condition: OperatingCondition) -> tuple[n
     in its port unit (the threshold converted from the file's), another as the file gives it."""
     column = condition.column
     for node, header in data.columns.items():
-        if header.strip() == column or node.replace("#", "/").rsplit("/", 1)[-1] == column:
+        name = node.replace("#", "/").rsplit("/", 1)[-1]
+        if column in (header.strip(), name, name.replace("_", " ")):  # the regime rules write names with spaces
             source_unit = data.source_units.get(node, data.units[node])
+            if condition.unit and condition.unit != (label := unit_label(source_unit) or "1"):
+                raise InputError(f"operating condition {condition}: the column {header.strip()!r} is in {label}, "
+                                 f"not {condition.unit} (give the number in the column's unit)")
             threshold = float(convert([condition.value], source_unit, data.units[node],
                                       where=f"operating condition {condition}")[0])
             return data.series[node], threshold
     if column in data.other_columns:
         if not np.isfinite(data.other_columns[column]).any():
             raise InputError(f"operating condition on {column!r}: that column of {data.source} holds no number")
+        if condition.unit:
+            raise InputError(f"operating condition {condition}: the model reads no unit for the column {column!r}; "
+                             "give the number alone, in the column's unit as written in the file")
         return data.other_columns[column], condition.value
     known = ", ".join(sorted({h.strip() for h in data.columns.values()} | set(data.other_columns)))
     raise InputError(f"operating condition on {column!r}: {data.source} has no numeric column of that name "

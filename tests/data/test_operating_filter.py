@@ -28,6 +28,21 @@ def test_conditions_read_in_the_columns_own_units_and_all_must_hold(tmp_path):
     assert str(parse_condition(" SAT (°F) <= -1.5e1 ")) == "SAT (°F) <= -15"
 
 
+def test_a_regime_rule_as_printed_is_a_condition_its_unit_checked(tmp_path):
+    """The regime rules name a device with spaces, write ≤ and ≥ and end with the column's unit: so
+    taken, they select what the header form selects; a unit that is not the column's is refused."""
+    specs = SPECS | {"https://example.org/x#supply_fan": SeriesSpec("https://example.org/x#supply_fan", "fan",
+                                                                   "http://qudt.org/vocab/unit/PERCENT", "1")}
+    specs.pop("https://example.org/x#fan")
+    path = tmp_path / "data.csv"
+    path.write_text("time,SAT (°F),fan\n" + "".join(f"2026-01-01 00:{m:02d},{50 + 10 * m},{20 * m}\n" for m in range(6)))
+    data = read_measurements(path, specs)
+    assert (operating_mask(data, ["supply fan ≤ 60 %", "SAT (°F) ≥ 55 °F"]).tolist()
+            == operating_mask(data, ["fan <= 60", "SAT (°F) >= 55"]).tolist() == [False, True, True, True, False, False])
+    with pytest.raises(ValueError, match=r"the column 'fan' is in %, not °C"):
+        operating_mask(data, ["supply_fan > 5 °C"])
+
+
 def test_bad_conditions_are_named(tmp_path):
     path = tmp_path / "data.csv"
     path.write_text("time,SAT (°F),fan\n2026-01-01 00:00,50,0\n2026-01-01 00:01,60,10\n")
