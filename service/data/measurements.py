@@ -372,7 +372,8 @@ def read_measurements(
     for node, column in claimed.items():
         spec = specs[node]
         if spec.unit is None:
-            problems.append(f"column {header[column]!r}: device {node} declares no unit (saref:isMeasuredIn)")
+            problems.append(f"column {header[column]!r}: device {node} declares no unit "
+                            "(saref:isMeasuredIn, in Brick brick:hasUnit)")
             continue
         try:
             converted[node] = convert(values[node], spec.unit, spec.port_unit,

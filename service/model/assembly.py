@@ -235,7 +235,8 @@ def _unit_notes(instance: ComponentInstance) -> list[str]:
     device's signature measures (a temperature sensor in percent): each column is refused then."""
     unit, name = instance.measurement.unit, short_name(instance.node)
     if unit is None:
-        return [f"{name}: declares no unit (saref:isMeasuredIn): its column cannot be read"]
+        return [f"{name}: declares no unit (saref:isMeasuredIn, in Brick brick:hasUnit): its column cannot "
+                "be read"]
     try:
         declared = unit_spec(unit)
     except UnitError:
