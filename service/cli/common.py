@@ -26,8 +26,11 @@ __all__ = [
 app = typer.Typer(no_args_is_help=True, add_completion=False, help=(
     "The graphtwin command line: the same work as the HTTP service, run locally.\n\n"
     "Every command that touches the store takes --store DIR (the embedded Oxigraph store on disk, default "
-    "./graphtwin-data) or --memory (a throw-away in-memory store). A model argument is a file (Turtle, "
-    "N-Triples, RDF/XML, JSON-LD), loaded under --name (default: the file name)."))
+    "./graphtwin-data); those that load a model file (assemble, simulate, calibrate, diagnose, compare) "
+    "take --memory instead for a throw-away in-memory store (brick-report too), and those that read what runs stored (history, "
+    "report, query) need the store the runs were written to. A model argument is a file (Turtle, "
+    "N-Triples, RDF/XML, JSON-LD), loaded under --name (default: the file name); add-effect only writes a "
+    "new file."))
 signature_app = typer.Typer(no_args_is_help=True, help="Inspect the signature library.")
 example_app = typer.Typer(no_args_is_help=True, help="Example models and synthetic data.")
 data_app = typer.Typer(no_args_is_help=True, help="Prepare measurement files.")

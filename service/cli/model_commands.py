@@ -108,7 +108,8 @@ def signature_list() -> None:
 @reports_errors
 def signature_explain(name: Annotated[str, typer.Argument(help="Signature id, e.g. Fan.")]) -> None:
     """Print the SPARQL query a signature compiles to (highlighted on a terminal; the text as it is
-    when written to a file or a pipe, so ``explain Fan > fan.rq`` is a query any endpoint runs)."""
+    when written to a file or a pipe, so 'graphtwin signature explain Fan > fan.rq' is a query any
+    endpoint runs)."""
     library = SignatureLibrary.load()
     if name not in library:
         raise NotFoundError(f"no signature {name!r}; known: {', '.join(sorted(library))}")

@@ -199,7 +199,7 @@ def serve_command(
     port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
 ) -> None:
     """Run the HTTP service (OpenAPI at /docs). Writes need the bearer token in GRAPHTWIN_TOKEN; the
-    other settings come from GRAPHTWIN_* variables (service/settings.py)."""
+    other settings come from GRAPHTWIN_* variables (docs/http.md, Settings)."""
     import uvicorn
 
     from service.http.app import create_app
