@@ -119,16 +119,17 @@ def history_command(
     if not history.versions:
         raise NotFoundError(f"no calibration with a test window for model {model!r} or its versions")
     table = Table(title=f"Test RMSE per sensor across versions of {model}")
-    table.add_column("sensor")
+    table.add_column("sensor", overflow="fold")
     for version in history.versions:
-        table.add_column(version)
+        table.add_column(version, overflow="fold")  # names differ at their end: model+Effect
     for sensor, values in history.rmse.items():
         table.add_row(local_name(sensor), *[quantity_text(v, history.units[sensor]) for v in values])
     table.add_row("tested on", *history.tested_on, style="dim")
     console.print(table)
     if not history.comparable:
-        error_console.print("[yellow]warning:[/yellow] the versions were tested on different data, windows or operating filters: their "
-                            "errors differ by that as much as by the model; calibrate them on the same test window")
+        error_console.print("[yellow]warning:[/yellow] the versions were tested on different data, windows or "
+                            "operating filters: their errors differ by that as much as by the model; calibrate them "
+                            "on the same test window")
     if history.regime_rmse:
         table = Table(title="Test RMSE per operating regime (share of the test window)")
         for column in ("regime", "rule", "sensor", *history.versions):

@@ -266,8 +266,8 @@ def _history_section(store: GraphStore, run: StoredRun) -> str:
     out.append('<p class="note">Each version\'s latest calibration with a test window (this run\'s numbers are in the '
                'tables above where it is that calibration).</p>')
     if not history.comparable:
-        out.append('<p class="note bad">The versions were tested on different data, windows or operating filters: their errors differ by '
-                   'that as much as by the model.</p>')
+        out.append('<p class="note bad">The versions were tested on different data, windows or operating filters: '
+                   'their errors differ by that as much as by the model.</p>')
     rows = [[_breakable(s)] + cells(values, s) for s, values in history.rmse.items()]
     rows.append(["tested on"] + [html.escape(t) for t in history.tested_on])
     out.append(_table(["sensor"] + [_breakable(v) for v in versions], rows, "history"))
