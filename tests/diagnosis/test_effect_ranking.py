@@ -272,3 +272,21 @@ def test_delta_bic_sums_each_targets_likelihood_and_counts_every_freed_parameter
     assert delta_bic([100.0, 10.0], [50.0, 10.0], [30.0, 5.0], 1) == pytest.approx(30 * np.log(0.5) + np.log(35))
     assert delta_bic([100.0, 10.0], [50.0, 10.0], [30.0, 5.0], 3) - delta_bic(
         [100.0, 10.0], [50.0, 10.0], [30.0, 5.0], 1) == pytest.approx(2 * np.log(35))
+
+
+def test_the_evidence_sentence_says_how_the_residual_follows_the_effect_or_that_it_adds_nothing():
+    """A fitted effect that moves a sensor as its residual does is described by the cosine and the
+    share it removes; one fitted at its null adds nothing, and says so (it had read "follows what …
+    adds (cosine 0.00)")."""
+    from service.diagnosis.candidates import _explain
+
+    t = np.arange(48.0)
+    observed = {"a": 1.0 + 0.5 * np.sin(t / 5), "b": 2.0 + 0.0 * t}
+    null = {"a": np.ones_like(t), "b": 2.0 + 0.0 * t}
+    evidence = EffectEvidence("E", "urn:E", "urn:n", "E", ("k",), ScoreTest(0.0, 0.0, 1.0, ("k",)), test_improvement=0.4)
+    _explain(evidence, observed, null, {"a": observed["a"], "b": null["b"]}, "E at n", "fit", "", {"a": 1.0, "b": 1.0})
+    assert evidence.explanation.startswith("residual on a follows what E at n adds (cosine 1.00); it removes 100 % of "
+                                           "that sensor's test error")
+    assert evidence.explanation.endswith("against the base model it removes 40 % of the test error over all sensors; fit")
+    _explain(evidence, observed, null, null, "E at n", "fit", "", {"a": 1.0, "b": 1.0})
+    assert evidence.explanation.startswith("E at n, as fitted, adds nothing at any sensor (it sits at its null); ")
