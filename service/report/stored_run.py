@@ -35,9 +35,12 @@ SELECT ?model ?version ?method ?source ?train_start ?train_end ?test_start ?test
   OPTIONAL { ?run gt:testStart ?test_start ; gt:testEnd ?test_end }
 } }"""
 _ESTIMATES_QUERY = _PREFIXES + """SELECT ?component ?name ?node ?unit ?identified ?median ?quantile16 ?quantile84
+       ?lower ?upper
 WHERE { GRAPH ?g {
   ?estimate prov:wasGeneratedBy ?run ; gt:onComponent ?component ; gt:parameterName ?name ; gt:onNode ?node ;
             gt:unit ?unit ; gt:identified ?identified .
+  OPTIONAL { ?estimate gt:lowerBound ?lower }
+  OPTIONAL { ?estimate gt:upperBound ?upper }
   OPTIONAL { ?estimate gt:median ?median }
   OPTIONAL { ?estimate gt:quantile16 ?quantile16 }
   OPTIONAL { ?estimate gt:quantile84 ?quantile84 }
@@ -89,6 +92,18 @@ class StoredEstimate:
     median: float
     quantile16: float
     quantile84: float
+    lower: float = float("nan")  # the parameter's bounds (NaN where not stored)
+    upper: float = float("nan")
+
+    @property
+    def at_bound(self) -> str:
+        """``"lower"`` or ``"upper"`` where the estimate sits at that bound (within 1e-6 of the range),
+        else ``""``: the data pushed it there, and the bound, not the data, set its value."""
+        span = self.upper - self.lower
+        if not (np.isfinite(span) and span > 0 and np.isfinite(self.median)):
+            return ""
+        return ("lower" if self.median - self.lower <= 1e-6 * span else
+                "upper" if self.upper - self.median <= 1e-6 * span else "")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -168,6 +183,7 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
             name=e["name"].value, node=e["node"].value, unit=e["unit"].value,
             identified=e["identified"].value == "true", median=_float(e, "median"),
             quantile16=_float(e, "quantile16"), quantile84=_float(e, "quantile84"),
+            lower=_float(e, "lower"), upper=_float(e, "upper"),
         )
     metrics: dict[str, dict[str, dict[str, float]]] = {}
     units: dict[str, str] = {}

@@ -477,11 +477,15 @@ def test_a_compare_runs_report_says_the_catalog_was_not_tested():
 def test_the_page_lists_the_runs_parameter_estimates(case, page):
     run = read_run(case.store, case.report.run_id)
     table = PageParser(page).tables["estimates"]
-    assert table[0] == ["node", "parameter", "estimate", "16–84 %", "unit", "identified"]
+    assert table[0] == ["node", "parameter", "estimate", "16–84 %", "bounds", "unit", "identified"]
     assert len(table) == 1 + len(run.estimates) and len(run.estimates) >= 14
     leak = next(row for row in table[1:] if row[1] == "valve_flow_coefficient" or row[1] == "loop_pressure_difference")
     estimate = next(e for e in run.estimates.values() if e.name == leak[1])
-    assert leak[2] == f"{estimate.median:.4g}" and leak[5] in ("yes", "no")
+    assert leak[2].split(" at its ")[0] == f"{estimate.median:.4g}" and leak[6] in ("yes", "no")
+    assert all(np.isfinite(e.lower) and e.lower < e.upper for e in run.estimates.values())
+    for row, e in zip(table[1:], run.estimates.values(), strict=True):  # an estimate the bound set is marked
+        assert row[3 + 1] == f"{e.lower:.4g} – {e.upper:.4g}" and row[2].endswith(f"at its {e.at_bound} bound") == bool(
+            e.at_bound), row
 
 
 def test_a_candidate_indistinguishable_from_the_answer_says_what_would_separate_them(case):
@@ -586,3 +590,14 @@ def test_the_cli_says_why_a_catalog_effect_was_not_tried(case):
     flat = "".join(captured.get().split())
     assert any(reason.startswith("DuctHeatExchange") for reason in reasons)
     assert all(f"nottried:{''.join(reason.split())}" in flat for reason in reasons)
+
+
+def test_an_estimate_the_bound_set_is_told_from_one_inside():
+    from service.report.stored_run import StoredEstimate
+
+    def at(median: float, lower: float = 0.5, upper: float = 40.0) -> str:
+        return StoredEstimate(name="k", node="n", unit="1", identified=False, median=median, quantile16=median,
+                              quantile84=median, lower=lower, upper=upper).at_bound
+
+    assert (at(40.0), at(0.5), at(39.9), at(0.5 + 1e-9), at(float("nan"))) == ("upper", "lower", "", "lower", "")
+    assert at(3.0, lower=float("nan")) == ""  # a run stored without bounds
