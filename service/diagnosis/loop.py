@@ -30,7 +30,12 @@ from service.diagnosis.localization import (
     localize_failures,
 )
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
-from service.diagnosis.report import DiagnosisReport, SensorVerdict, diagnosis_triples
+from service.diagnosis.report import (
+    FAILURE_RATIO,
+    DiagnosisReport,
+    SensorVerdict,
+    diagnosis_triples,
+)
 from service.diagnosis.residual_dependence import (
     Dependence,
     distinct_signals,
@@ -62,7 +67,7 @@ def diagnose(
     seed: int = 0,
     substeps: int | None = None,
     library: dict[str, Signature] | None = None,
-    failure_ratio: float = 2.0,
+    failure_ratio: float = FAILURE_RATIO,
     refit_max_nfev: int = 30,
     workers: int | None = None,
     on_progress: Callable[[str], None] | None = None,

@@ -21,10 +21,22 @@ from service.diagnosis.localization import FailureLocation
 from service.diagnosis.ranking import EffectEvidence
 from service.diagnosis.residual_dependence import Dependence, TimeTrend
 from service.diagnosis.separation import Lookalike
-from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
+from service.graph.namespaces import (
+    DCTERMS,
+    GT,
+    PROV,
+    RDF,
+    RDFS,
+    XSD,
+    distinct_local_names,
+    local_name,
+)
 from service.graph.units import unit_label
 
-__all__ = ["SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
+__all__ = ["FAILURE_RATIO", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
+
+#: A sensor fails where its test RMSE exceeds this multiple of its noise σ (``docs/diagnosis.md``).
+FAILURE_RATIO = 2.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -87,7 +99,7 @@ class DiagnosisReport:
     base_test_prediction: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     test_timestamps: np.ndarray | None = field(default=None, repr=False)
     test_observed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-    failure_ratio: float = 2.0
+    failure_ratio: float = FAILURE_RATIO
     data_warnings: list[str] = field(default_factory=list)  # reading the data and assembling: frozen points, gaps
     indistinguishable: list[Lookalike] = field(default_factory=list)  # significant, tied with the answer
     residual_trend: dict[str, TimeTrend] = field(default_factory=dict)

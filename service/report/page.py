@@ -24,11 +24,23 @@ import numpy as np
 from service.calibration.metrics import on_interval_scale
 from service.diagnosis.error_history import error_history
 from service.diagnosis.localization import FlowTopology
+from service.diagnosis.report import FAILURE_RATIO
 from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
 from service.graph.units import quantity_text, unit_label
-from service.report.run_series import INTERVAL_LEVEL, INTERVAL_Z, RunSeries, recompute_series
-from service.report.stored_run import StoredCandidate, StoredDiagnosis, StoredRun, read_diagnosis, read_run
+from service.report.run_series import (
+    INTERVAL_LEVEL,
+    INTERVAL_Z,
+    RunSeries,
+    recompute_series,
+)
+from service.report.stored_run import (
+    StoredCandidate,
+    StoredDiagnosis,
+    StoredRun,
+    read_diagnosis,
+    read_run,
+)
 from service.report.topology_svg import TOPOLOGY_KEY, topology_svg
 
 if TYPE_CHECKING:
@@ -149,6 +161,16 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
     return "".join(out)
 
 
+def _matching_sensors(run: StoredRun, diagnosis: StoredDiagnosis | None) -> set[str]:
+    """The compared sensors within the failure ratio of their noise on the test window (from the
+    stored metrics; a run stored without its noise has only those a failure location names)."""
+    if diagnosis is None:
+        return set()
+    within = {sensor for sensor, m in run.metrics.get("test", {}).items()
+              if m.get("noise", 0.0) > 0.0 and m.get("rmse", np.inf) <= FAILURE_RATIO * m["noise"]}
+    return (within | diagnosis.matching_sensors) - diagnosis.failing_sensors
+
+
 def _topology_section(store: GraphStore, run: StoredRun, diagnosis: StoredDiagnosis | None) -> str:
     out = ["<h2>Where along the flow path the model fails</h2>"]
     if not store.has_model(run.model):
@@ -160,7 +182,7 @@ def _topology_section(store: GraphStore, run: StoredRun, diagnosis: StoredDiagno
     svg = topology_svg(topology, set(run.units) | inputs,
                        suspects=diagnosis.suspects if diagnosis else set(),
                        failing=diagnosis.failing_sensors if diagnosis else set(),
-                       matching=diagnosis.matching_sensors if diagnosis else set(), heat_edges=heat, inputs=inputs)
+                       matching=_matching_sensors(run, diagnosis), heat_edges=heat, inputs=inputs)
     key = "".join(f'<li><span class="swatch" style="{style}"></span>{html.escape(meaning)}</li>'
                   for style, meaning in TOPOLOGY_KEY)
     out.append(f'<figure>{_img(svg.encode("utf-8"), "image/svg+xml", f"flow topology of {run.model}", "topology")}'
