@@ -155,8 +155,15 @@ def _rule_terms() -> frozenset[str]:
 _IRI = re.compile(r"https?://[^\s<>`'\"(),;]+")
 
 
+#: Brick 1.x's own unit namespace, which Brick models state units in and QUDT does not know.
+_BRICK_UNITS = "http://brickschema.org/schema/Brick/units#"
+
+
 def _compact(iri: str) -> str:
-    """A prefixed name where graphtwin knows the namespace (``unit:PERCENT``), else the local name."""
+    """A prefixed name where graphtwin knows the namespace (``unit:PERCENT``, Brick 1.x's units as
+    ``bu:DEG_F``, which would read as the QUDT unit it is taken for), else the local name."""
+    if iri.startswith(_BRICK_UNITS):
+        return "bu:" + iri[len(_BRICK_UNITS):]
     compact = compact_iri(iri)
     return local_name(iri) if compact.startswith("<") else compact
 
@@ -275,10 +282,11 @@ def print_brick_report(report: BrickReport, console: Console | None = None) -> N
         console.print(table)
     if report.assumptions:
         texts = [(a.about, a.assumption, a.resolved_by, a.rule) for a in report.assumptions]
-        namespaces = sorted({namespace_of(iri) for row in texts for text in row for iri in _IRI.findall(text)
-                             if compact_iri(iri).startswith("<")})
-        table = Table(title="Assumptions made where the model is ambiguous",
-                      caption=f"nodes by their local names, in {', '.join(namespaces)}" if namespaces else None)
+        iris = {iri for row in texts for text in row for iri in _IRI.findall(text)}
+        namespaces = sorted({namespace_of(iri) for iri in iris if _compact(iri) == local_name(iri)})
+        caption = ", ".join(([f"nodes by their local names, in {', '.join(namespaces)}"] if namespaces else [])
+                            + ([f"bu: {_BRICK_UNITS}"] if any(i.startswith(_BRICK_UNITS) for i in iris) else []))
+        table = Table(title="Assumptions made where the model is ambiguous", caption=caption or None)
         for column in ("about", "assumed", "state this to remove it", "rule"):
             table.add_column(column, overflow="fold")
         for row in texts:

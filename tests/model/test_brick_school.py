@@ -94,6 +94,9 @@ def test_the_assumptions_read_whole_at_80_columns_nodes_by_their_local_names(sto
     assert AHU7 in caption  # the namespace said once
     assert "http://openfdd.local/ahu7#ahu" not in "".join(text.split())
     assert "<ahu_7>" in text
+    # its units are Brick 1.x's, taken for QUDT's: the two told apart, not both read <DEG_F>
+    assert "<bu:DEG_F>" in text and "<unit:DEG_F>" in text and "<DEG_F>" not in text
+    assert "bu: http://brickschema.org/schema/Brick/units#" in caption
 
 
 def test_with_what_the_report_names_the_unit_assembles_and_links_to_the_csv(store):
