@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
 from service.calibration.model_data import DEFAULT_GP_INPUTS
@@ -30,7 +31,7 @@ from service.cli.common import (
     open_store,
     reports_errors,
 )
-from service.cli.printing import plot_run, print_calibration, print_diagnosis, save_diagnosis_plots
+from service.cli.printing import plot_run, print_calibration, print_data_warnings, print_diagnosis, save_diagnosis_plots
 from service.data.windows import parse_window
 from service.workflows.requests import CalibrateRequest, DiagnoseRequest, checked_request
 
@@ -165,3 +166,41 @@ def block_means_command(
 
     blocks = write_block_means(source, output, minutes, set(day) if day else None)
     console.print(f"wrote {output}: {blocks} blocks of {minutes} min")
+
+
+@data_app.command("check")
+@reports_errors
+def data_check_command(
+    model: ModelFileArgument,
+    data: MeasurementsArgument,
+    name: NameOption = None,
+    store: StoreOption = DEFAULT_STORE,
+    memory: MemoryOption = False,
+) -> None:
+    """Read DATA as MODEL needs it, without simulating: each measured device's column, unit and
+    measured steps, and every problem or note (exit 2 naming each problem, with its line)."""
+    from rich.table import Table
+
+    from service.data.model_series import read_model_data
+    from service.graph.namespaces import local_name
+    from service.graph.units import quantity_text, unit_label
+    from service.model.assembly import assemble
+
+    graph_store = open_store(store, memory)
+    with loaded_model_file(graph_store, model, name) as model_name:
+        assembled = assemble(graph_store, model_name)
+        measured = read_model_data(assembled, data)
+    roles = {assembled.components[c].node: "boundary input" for c in assembled.boundary_inputs}
+    roles |= {assembled.components[c].node: "target" for c in assembled.targets}
+    table = Table(title=f"{data}: {measured.n_steps} steps of {measured.step_s:g} s, "
+                        f"{measured.shown(measured.timestamps[0])} – {measured.shown(measured.timestamps[-1])}")
+    for column in ("device", "role", "column", "unit: file → model", "measured steps", "range"):
+        table.add_column(column, overflow="fold")
+    for node, values in measured.series.items():
+        unit, finite = measured.units[node], values[np.isfinite(values)]
+        span = f"{quantity_text(finite.min(), unit)} – {quantity_text(finite.max(), unit)}" if finite.size else "–"
+        table.add_row(local_name(node), roles.get(node, ""), measured.columns[node],
+                      f"{unit_label(measured.source_units.get(node, unit)) or '1'} → {unit_label(unit) or '1'}",
+                      f"{finite.size} of {values.size}", span)
+    console.print(table)
+    print_data_warnings([*assembled.notes, *measured.warnings])

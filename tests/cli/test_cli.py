@@ -258,6 +258,22 @@ def test_diagnose_prints_the_command_that_adds_its_answer_and_that_command_works
     assert "ValveLeakage" in (tmp_path / "model+ValveLeakage.ttl").read_text()
 
 
+def test_data_check_reads_a_file_as_the_model_needs_it_and_names_what_is_wrong(tmp_path):
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
+    wide = CliRunner(env={"COLUMNS": "200"})
+    result = wide.invoke(app, ["data", "check", str(CASE_STUDY), str(data), "--memory"])
+    assert result.exit_code == 0, result.output
+    rows = {line.split("│")[1].strip(): [c.strip() for c in line.split("│")[2:-1]]
+            for line in result.output.splitlines() if line.startswith("│")}
+    assert rows["fan_power_meter"][:4] == ["target", "supply_fan_power", "W → W", "144 of 144"], rows
+    assert rows["supply_water_temperature_sensor"][0] == "boundary input"
+    header, *lines = data.read_text().splitlines()
+    data.write_text("\n".join([header.replace("supply_fan_power", "supply_fan_pwr"), *lines]) + "\n")
+    broken = wide.invoke(app, ["data", "check", str(CASE_STUDY), str(data), "--memory"])
+    assert broken.exit_code == 2 and "no column for https://example.org/ventilation-case-study#fan_power_meter" in broken.output
+
+
 def test_compare_strategies_prints_both_fits_per_regime_and_their_cross_validation(tmp_path):
     data = tmp_path / "data.csv"
     assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "--seed", "1",
