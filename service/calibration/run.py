@@ -38,6 +38,7 @@ from service.calibration.record import (
 )
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
 from service.calibration.triples import calibration_triples
+from service.data.measurements import MeasuredData
 from service.data.model_series import SETTLING_S, read_model_data
 from service.data.operating_filter import operating_mask
 from service.data.windows import Window
@@ -234,6 +235,15 @@ class PreparedCalibration:
 _DATE_ONLY = re.compile(r"\d{4}-\d{2}-\d{2}")
 
 
+def _ends_on_a_day_the_data_go_into(data: MeasuredData, end: str | None, window: slice | None) -> bool:
+    """Whether a window's ``end`` is a date alone (``2026-01-14``), read as that day's midnight,
+    while the data go on into that day: then the window holds one step of it, which is seldom meant
+    (data that stop before that midnight make the date a fine end)."""
+    if window is None or not isinstance(end, str) or not _DATE_ONLY.fullmatch(end.strip()):
+        return False
+    return window.stop < data.n_steps and data.timestamps[window.stop - 1] == np.datetime64(end.strip(), "s")
+
+
 def prepare_calibration(
     store: GraphStore, model_name: str, data_path: Path | str, *, train: Window = (None, None),
     test: Window | None = None, method: str = "point", substeps: int | None = None, only_when: Sequence[str] = (),
@@ -254,10 +264,11 @@ def prepare_calibration(
     md = ModelData(model, data, substeps, operating_mask(data, only_when))
     train_slice = data.window(*train)
     test_slice = data.window(*test) if test is not None else None
-    ends = {"training": train[1], "test": test[1] if test is not None else None}
     window_notes = [f"the {name} window ends at {end.strip()}T00:00, the first instant of that day (a date alone is "
                     f"its midnight): write {end.strip()}T23:59 to include the day"
-                    for name, end in ends.items() if isinstance(end, str) and _DATE_ONLY.fullmatch(end.strip())]
+                    for name, end, cut in (("training", train[1], train_slice),
+                                           ("test", test[1] if test else None, test_slice))
+                    if _ends_on_a_day_the_data_go_into(data, end, cut)]
     if test_slice is not None:
         if test_slice.stop - test_slice.start < min_test_steps:
             raise CalibrationError(f"the test window {test[0] or ''}/{test[1] or ''} holds {test_slice.stop - test_slice.start} "

@@ -182,6 +182,7 @@ def data_check_command(
     from rich.table import Table
 
     from service.data.model_series import read_model_data
+    from service.errors import MeasurementError
     from service.graph.namespaces import local_name
     from service.graph.units import quantity_text, unit_label
     from service.model.assembly import assemble
@@ -204,3 +205,7 @@ def data_check_command(
                       f"{finite.size} of {values.size}", span)
     console.print(table)
     print_data_warnings([*assembled.notes, *measured.warnings])
+    empty = [f"column {measured.columns[node]!r} ({local_name(node)}, {roles.get(node, 'measured')}) holds no number"
+             for node, values in measured.series.items() if not np.isfinite(values).any()]
+    if empty:
+        raise MeasurementError(str(data), empty)

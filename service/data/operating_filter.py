@@ -20,13 +20,14 @@ import numpy as np
 
 from service.data.measurements import MeasuredData
 from service.errors import InputError
-from service.graph.units import convert, unit_label
+from service.graph.units import UnitError, convert, unit_label, unit_spec
 
 __all__ = ["OperatingCondition", "parse_condition", "operating_mask"]
 
 _OPERATORS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt}
 _CONDITION = re.compile(r"^\s*(?P<column>.*?[^\s<>=≤≥])\s*(?P<op>>=|<=|>|<|≤|≥)\s*"
-                        r"(?P<value>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>[^\s\d].*?)?\s*$")
+                        r"(?P<value>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)(?![\d.,eE])"
+                        r"\s*(?P<unit>[^\s\d.,<>=≤≥][^<>=≤≥]*?)?\s*$")
 _SYMBOLS = {"≤": "<=", "≥": ">="}  # as the regime rules print them
 
 
@@ -49,12 +50,26 @@ def parse_condition(text: str) -> OperatingCondition:
 
     :raises InputError: naming the text and the expected form.
     """
+    if re.search(r"\s(and|or)\s", text) and len(re.findall(r">=|<=|>|<|≤|≥", text)) > 1:
+        raise InputError(f"operating condition {text!r}: one condition per --only-when (a rule joined by 'and' is "
+                         "one each; all must hold)")
     match = _CONDITION.match(text)
     if match is None:
         raise InputError(f"operating condition {text!r}: expected COLUMN OP NUMBER [UNIT] with OP one of >, >=, <, <= "
                          "(e.g. 'SF Spd Cmd (%) > 5')")
     op = _SYMBOLS.get(match["op"], match["op"])
     return OperatingCondition(match["column"], op, float(match["value"]), (match["unit"] or "").strip())
+
+
+def _same_unit(text: str, unit: str) -> bool:
+    """Whether ``text`` (a unit as a condition writes it: its label ``m³/s``, ``%``, or a unit name
+    graphtwin reads, ``m3/s``, ``DEG_F``) is ``unit``."""
+    if text == unit_label(unit) or text == unit.rsplit("/", 1)[-1]:
+        return True
+    try:
+        return unit_spec(text) == unit_spec(unit)
+    except UnitError:
+        return False
 
 
 def _column_values(data: MeasuredData, condition: OperatingCondition) -> tuple[np.ndarray, float]:
@@ -65,9 +80,10 @@ def _column_values(data: MeasuredData, condition: OperatingCondition) -> tuple[n
         name = node.replace("#", "/").rsplit("/", 1)[-1]
         if column in (header.strip(), name, name.replace("_", " ")):  # the regime rules write names with spaces
             source_unit = data.source_units.get(node, data.units[node])
-            if condition.unit and condition.unit != (label := unit_label(source_unit) or "1"):
-                raise InputError(f"operating condition {condition}: the column {header.strip()!r} is in {label}, "
-                                 f"not {condition.unit} (give the number in the column's unit)")
+            if condition.unit and not _same_unit(condition.unit, source_unit):
+                raise InputError(f"operating condition {condition}: the column {header.strip()!r} is in "
+                                 f"{unit_label(source_unit) or 'a fraction'}, not {condition.unit} (give the number in "
+                                 "the column's unit)")
             threshold = float(convert([condition.value], source_unit, data.units[node],
                                       where=f"operating condition {condition}")[0])
             return data.series[node], threshold

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 
-from service.calibration.metrics import noise_level
 from service.calibration.run import calibrate, predict_test
 from service.components.library import SignatureLibrary
 from service.data.windows import Window
@@ -96,7 +95,7 @@ def diagnose(
     residuals = {node: observed[node] - predicted[node] for node in observed}
     sensors: dict[str, SensorVerdict] = {}
     for node, metrics in base.record.metrics["test"].items():
-        sigma = noise_level(residuals[node], md.units[node], observed[node])
+        sigma = metrics.noise  # noise_level of this residual, computed with the metrics
         sensors[node] = SensorVerdict(
             rmse=metrics.rmse, mae=metrics.mae, cv_rmse_percent=metrics.cv_rmse_percent,
             nmbe_percent=metrics.nmbe_percent, r2=metrics.r2, unit=md.units[node], noise=sigma,

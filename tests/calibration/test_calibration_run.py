@@ -464,3 +464,7 @@ def test_a_window_ending_on_a_date_alone_says_it_ends_at_that_days_midnight(tmp_
     assert prepared.train.stop - prepared.train.start == 24 * 6 + 1
     explicit = prepare_calibration(store, "case", path, train=("2026-01-12", "2026-01-12T23:59"), test=("2026-01-13", None))
     assert not any("a date alone" in note for note in explicit.window_notes)
+    # the data stop at 23:50 on the 14th: the 15th as the end is fine, and the note's form would be refused
+    to_the_end = prepare_calibration(store, "case", path, train=("2026-01-12", "2026-01-13T23:59"),
+                                     test=("2026-01-14", "2026-01-15"))
+    assert not any("a date alone" in note for note in to_the_end.window_notes)

@@ -272,6 +272,11 @@ def test_data_check_reads_a_file_as_the_model_needs_it_and_names_what_is_wrong(t
     data.write_text("\n".join([header.replace("supply_fan_power", "supply_fan_pwr"), *lines]) + "\n")
     broken = wide.invoke(app, ["data", "check", str(CASE_STUDY), str(data), "--memory"])
     assert broken.exit_code == 2 and "no column for https://example.org/ventilation-case-study#fan_power_meter" in broken.output
+    column = header.split(",").index("supply_fan_power")  # a target whose column holds no number: calibrate refuses it
+    data.write_text("\n".join([header, *(",".join("" if i == column else c for i, c in enumerate(line.split(",")))
+                                          for line in lines)]) + "\n")
+    empty = wide.invoke(app, ["data", "check", str(CASE_STUDY), str(data), "--memory"])
+    assert empty.exit_code == 2 and "column 'supply_fan_power' (fan_power_meter, target) holds no number" in empty.output
 
 
 def test_compare_strategies_prints_both_fits_per_regime_and_their_cross_validation(tmp_path):

@@ -41,6 +41,14 @@ def test_a_regime_rule_as_printed_is_a_condition_its_unit_checked(tmp_path):
             == operating_mask(data, ["fan <= 60", "SAT (°F) >= 55"]).tolist() == [False, True, True, True, False, False])
     with pytest.raises(ValueError, match=r"the column 'fan' is in %, not °C"):
         operating_mask(data, ["supply_fan > 5 °C"])
+    assert operating_mask(data, ["SAT (°F) ≥ 55 DEG_F"]).tolist() == operating_mask(data, ["SAT (°F) >= 55"]).tolist()
+    with pytest.raises(ValueError, match=r"one condition per --only-when"):
+        operating_mask(data, ["supply fan ≤ 60 % and SAT (°F) ≥ 55 °F"])
+    # a column whose name holds an operator, and numbers no unit may split
+    assert parse_condition("dP > 0 > 0").column == "dP > 0" and parse_condition("temp > 5e-1").value == 0.5
+    for split in ("fan > 5,5", "fan > 1.5.2", "fan ≥ 0.5 1"):
+        with pytest.raises(ValueError, match="expected COLUMN OP NUMBER"):
+            parse_condition(split)
 
 
 def test_bad_conditions_are_named(tmp_path):
