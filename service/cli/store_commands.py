@@ -134,11 +134,12 @@ def history_command(
         table = Table(title="Test RMSE per operating regime (share of the test window)")
         for column in ("regime", "rule", "sensor", *history.versions):
             table.add_column(column, overflow="fold")
-        for number, (rule, sensors) in enumerate(history.regime_rmse.items()):
+        for rule, sensors in history.regime_rmse.items():
             shares = history.regime_share[rule]
             share = next((f" ({100 * s:.0f} %)" for s in shares if s == s), "")
+            number = history.regime_number.get(rule, "–")  # the run's, as the report numbers it
             for i, (sensor, values) in enumerate(sensors.items()):
-                table.add_row(str(number) if i == 0 else "", rule + share if i == 0 else "", local_name(sensor),
+                table.add_row(number if i == 0 else "", rule + share if i == 0 else "", local_name(sensor),
                               *[quantity_text(v, history.units.get(sensor, "")) for v in values])
             table.add_section()
         console.print(table)

@@ -5,7 +5,7 @@ sees the error fall, and where it fell."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from service.graph.store import GraphStore
 
@@ -25,6 +25,7 @@ class ErrorHistory:
     regime_rmse: dict[str, dict[str, list[float]]]
     regime_share: dict[str, list[float]]
     tested_on: list[str]  # per version: the data file, test window and operating filter of its run
+    regime_number: dict[str, str] = field(default_factory=dict)  # rule → its number in the newest run that has it
 
     @property
     def comparable(self) -> bool:
@@ -43,6 +44,7 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
     units: dict[str, str] = {}
     regime_rmse: dict[str, dict[str, dict[str, float]]] = {}
     regime_share: dict[str, dict[str, float]] = {}
+    regime_number: dict[str, str] = {}
     tested_on: list[str] = []
     for name in [m for m in store.models() if m == base or m.startswith(base + "+")]:
         newest_run, found = None, False
@@ -57,6 +59,7 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
                 rule = row["rule"].value
                 regime_rmse.setdefault(rule, {}).setdefault(sensor, {})[name] = value
                 regime_share.setdefault(rule, {})[name] = float(row["share"].value)
+                regime_number.setdefault(rule, row["regime"].value.rsplit("/", 1)[-1])
             else:
                 rmse.setdefault(sensor, {})[name] = value
                 units[sensor] = row["unit"].value
@@ -74,7 +77,7 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
     return ErrorHistory(
         versions, {s: per_version(v) for s, v in rmse.items()}, units,
         {rule: {s: per_version(v) for s, v in sensors.items()} for rule, sensors in regime_rmse.items()},
-        {rule: per_version(v) for rule, v in regime_share.items()}, tested_on,
+        {rule: per_version(v) for rule, v in regime_share.items()}, tested_on, regime_number,
     )
 
 

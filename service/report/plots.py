@@ -110,8 +110,8 @@ def plot_residuals(path: Path, *args, **kwargs) -> Path:
 
 def error_history_figure(history: ErrorHistory) -> Figure:
     """Test-window RMSE per sensor (one column each) across model versions: the error falling; with
-    regimes, a second row with the RMSE per regime (regime i: the i-th rule of the history's
-    table), one bar per version, the versions' legend below every panel."""
+    regimes, a second row with the RMSE per regime (numbered as the runs and the history's table
+    number them), one bar per version, the versions' legend below every panel."""
     sensors, versions = list(history.rmse), history.versions
     rules = list(history.regime_rmse)
     rows = 2 if rules else 1
@@ -131,7 +131,8 @@ def error_history_figure(history: ErrorHistory) -> Figure:
                 values = [history.regime_rmse[rule].get(sensor, [np.nan] * len(versions))[i] for rule in rules]
                 ax.bar(np.arange(len(rules)) + (i - (len(versions) - 1) / 2) * width, values, width,
                        color=colours(i), label=version)
-            ax.set_xticks(range(len(rules)), [str(j) for j in range(len(rules))], fontsize=7)
+            ax.set_xticks(range(len(rules)), [history.regime_number.get(rule, str(j)) for j, rule in enumerate(rules)],
+                          fontsize=7)
             ax.set_xlabel("regime", fontsize=7)
             ax.set_ylabel(f"RMSE per regime {bracketed_unit(history.units.get(sensor, ''))}".strip(), fontsize=8)
         handles, labels = axes[1][0].get_legend_handles_labels()

@@ -403,6 +403,9 @@ def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_version
     assert "Test RMSE per operating regime" in result.output
     for rule in history.regime_rmse:
         assert rule in result.output
+    # numbered as the runs number them (the report's numbers), not 0, 1, 2 … in the table's order
+    newest = read_run(case.store, case.version.run_id)
+    assert history.regime_number == {r["rule"]: str(r["regime"]) for r in newest.regimes if r["rule"] in history.regime_rmse}
     air = f"{history.rmse[EX + 'coil_outlet_air_temperature_sensor'][1]:.3g}"
     assert air in result.output
     assert imread(plot).shape[0] > imread(plot).shape[1] / len(history.rmse)  # two rows of panels
