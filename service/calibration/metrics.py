@@ -16,10 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from service.calibration.problem import (
-    INSTRUMENT_ACCURACY_FLOOR,
-    RELATIVE_ACCURACY_FLOOR,
-)
+from service.calibration.problem import INSTRUMENT_ACCURACY_FLOOR, RELATIVE_ACCURACY_FLOOR
 from service.errors import CalibrationError
 
 __all__ = [

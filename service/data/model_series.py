@@ -40,7 +40,7 @@ def device_unit(model: AssembledModel, component: str) -> str:
     :raises SignatureError: its signature gives that output no known quantity (naming the file).
     """
     instance = model.components[component]
-    quantity = next((o.quantity for o in instance.signature.outputs if o.port == "measured_value"), None)
+    quantity = instance.signature.output_quantity("measured_value")
     if quantity not in QUANTITY_UNITS:
         raise SignatureError(f"{instance.signature.source_file}: measured_value output has no known quantity ({quantity!r})")
     return QUANTITY_UNITS[quantity]

@@ -64,7 +64,7 @@ def parse_condition(text: str) -> OperatingCondition:
 def _same_unit(text: str, unit: str) -> bool:
     """Whether ``text`` (a unit as a condition writes it: its label ``m³/s``, ``%``, or a unit name
     graphtwin reads, ``m3/s``, ``DEG_F``) is ``unit``."""
-    if text == unit_label(unit) or text == unit.rsplit("/", 1)[-1]:
+    if text == unit_label(unit):
         return True
     try:
         return unit_spec(text) == unit_spec(unit)

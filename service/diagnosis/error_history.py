@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
+from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 
 __all__ = ["ErrorHistory", "error_history"]
@@ -59,7 +60,7 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
                 rule = row["rule"].value
                 regime_rmse.setdefault(rule, {}).setdefault(sensor, {})[name] = value
                 regime_share.setdefault(rule, {})[name] = float(row["share"].value)
-                regime_number.setdefault(rule, row["regime"].value.rsplit("/", 1)[-1])
+                regime_number.setdefault(rule, local_name(row["regime"].value))
             else:
                 rmse.setdefault(sensor, {})[name] = value
                 units[sensor] = row["unit"].value

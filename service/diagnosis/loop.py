@@ -23,24 +23,10 @@ from service.data.windows import Window
 from service.diagnosis.candidates import rank_catalog, split_windows
 from service.diagnosis.drift import drifting_components
 from service.diagnosis.episodes import Episode, find_episodes
-from service.diagnosis.localization import (
-    FailureLocation,
-    FlowTopology,
-    localize_failures,
-)
+from service.diagnosis.localization import FailureLocation, FlowTopology, localize_failures
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
-from service.diagnosis.report import (
-    FAILURE_RATIO,
-    DiagnosisReport,
-    SensorVerdict,
-    diagnosis_triples,
-)
-from service.diagnosis.residual_dependence import (
-    Dependence,
-    distinct_signals,
-    residual_dependence,
-    time_trend,
-)
+from service.diagnosis.report import FAILURE_RATIO, DiagnosisReport, SensorVerdict, diagnosis_triples
+from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable
 from service.diagnosis.unit_mixup import unit_mixups
 from service.graph.namespaces import local_name

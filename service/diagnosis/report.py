@@ -21,16 +21,7 @@ from service.diagnosis.localization import FailureLocation
 from service.diagnosis.ranking import EffectEvidence
 from service.diagnosis.residual_dependence import Dependence, TimeTrend
 from service.diagnosis.separation import Lookalike
-from service.graph.namespaces import (
-    DCTERMS,
-    GT,
-    PROV,
-    RDF,
-    RDFS,
-    XSD,
-    distinct_local_names,
-    local_name,
-)
+from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 from service.graph.units import unit_label
 
 __all__ = ["FAILURE_RATIO", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]

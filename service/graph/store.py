@@ -21,11 +21,7 @@ from typing import NamedTuple
 import pyoxigraph as ox
 
 from service.errors import InputError, ModelLoadError, NotFoundError
-from service.graph.alignment import (
-    alignment_rule_triples,
-    inferred_ntriples,
-    inferred_triples,
-)
+from service.graph.alignment import alignment_rule_triples, inferred_ntriples, inferred_triples
 from service.graph.backend import EmbeddedBackend, SparqlBackend, Term
 from service.graph.blank_nodes import skolemize
 from service.graph.endpoint import SparqlEndpointBackend

@@ -13,26 +13,19 @@ from __future__ import annotations
 
 import difflib
 from collections import defaultdict
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import pyoxigraph as ox
 
-from service.graph.namespaces import (
-    BRICK,
-    OWL,
-    RDF,
-    RDFS,
-    REF,
-    local_name,
-    namespace_of,
-)
+from service.graph.namespaces import BRICK, OWL, RDF, RDFS, REF, local_name, namespace_of
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
-__all__ = ["misspelt_terms", "MisspeltTerms", "closest_declared", "CLASS_TYPES", "PROPERTY_TYPES"]
+__all__ = ["misspelt_terms", "MisspeltTerms", "DeclaredTerms", "closest_declared"]
 
 #: The ``rdf:type`` objects that declare a class, and those that declare a property.
-CLASS_TYPES = (OWL.Class, RDFS.Class)
-PROPERTY_TYPES = (OWL.ObjectProperty, OWL.DatatypeProperty, OWL.AnnotationProperty, RDF.Property)
+_CLASS_TYPES = (OWL.Class, RDFS.Class)
+_PROPERTY_TYPES = (OWL.ObjectProperty, OWL.DatatypeProperty, OWL.AnnotationProperty, RDF.Property)
 #: ``difflib`` ratio from which a declared term's name counts as the one meant; the names of Brick
 #: and what it ships (its ``ref:`` and RealEstateCore terms) lie closer to one another (an official
 #: class graphtwin leaves out is up to 0.92 from one it loads), so there only a nearer name counts.
@@ -42,8 +35,8 @@ _BRICK_NAMESPACES = (str(BRICK), str(REF), "https://w3id.org/rec#")
 
 
 @dataclass(frozen=True)
-class _DeclaredTerms:
-    """The local names the loaded ontologies declare, per namespace: classes, properties, and the
+class DeclaredTerms:
+    """The local names ontology triples declare, per namespace: classes, properties, and the
     values a property can point to (every typed term that is not a property: classes, and
     individuals such as SAREF4BLDG's nominal properties)."""
 
@@ -52,15 +45,20 @@ class _DeclaredTerms:
     values: dict[str, list[str]]
 
     @classmethod
-    def of(cls, store: GraphStore) -> _DeclaredTerms:
+    def of(cls, store: GraphStore) -> DeclaredTerms:
+        """The terms the store's loaded ontologies declare."""
+        return cls.from_triples(store.graph_triples(ONTOLOGY_GRAPH))
+
+    @classmethod
+    def from_triples(cls, triples: Iterable[ox.Triple]) -> DeclaredTerms:
         types = defaultdict(set)
-        for t in store.graph_triples(ONTOLOGY_GRAPH):
+        for t in triples:
             if t.predicate == RDF.type and isinstance(t.subject, ox.NamedNode):
                 types[t.subject.value].add(t.object)
         kinds = defaultdict(lambda: defaultdict(list))  # kind → namespace → local names
         for iri, declared_as in sorted(types.items()):
-            is_property = bool(declared_as & set(PROPERTY_TYPES))
-            for kind, member in (("classes", bool(declared_as & set(CLASS_TYPES))), ("properties", is_property),
+            is_property = bool(declared_as & set(_PROPERTY_TYPES))
+            for kind, member in (("classes", bool(declared_as & set(_CLASS_TYPES))), ("properties", is_property),
                                  ("values", not is_property)):
                 if member:
                     kinds[kind][namespace_of(iri)].append(local_name(iri))
@@ -103,7 +101,7 @@ def misspelt_terms(store: GraphStore, model_name: str) -> MisspeltTerms:
     found = MisspeltTerms([], [])
     if not class_rows and not term_rows:
         return found
-    declared = _DeclaredTerms.of(store)
+    declared = DeclaredTerms.of(store)
     for row in class_rows:
         cls, unseen = row["class"].value, int(row["unseen_nodes"].value)
         meant = closest_declared(cls, declared.classes)

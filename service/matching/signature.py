@@ -154,6 +154,10 @@ class Signature:
     def node(self, node_id: str) -> PatternNode:
         return self.nodes[node_id]
 
+    def output_quantity(self, port: str) -> str | None:
+        """The quantity the signature gives its output ``port`` (None: no such output)."""
+        return next((o.quantity for o in self.outputs if o.port == port), None)
+
 
 def signature_iri(signature_id: str) -> str:
     return f"{GTR}signature/{signature_id}"

@@ -20,26 +20,13 @@ import pyoxigraph as ox
 from service.components.library import SignatureLibrary
 from service.components.measuring_device import MeasuringDevice
 from service.errors import AssemblyError, IncompleteModelError, UnitError
-from service.graph.namespaces import (
-    RDFS,
-    distinct_local_names,
-)
+from service.graph.namespaces import RDFS, distinct_local_names
 from service.graph.store import GraphStore
 from service.graph.units import closest_unit_hint, unit_spec
 from service.graph.vocabulary import misspelt_terms
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
-from service.matching.signature import (
-    QUANTITY_UNITS,
-    PatternTriple,
-    Rule,
-    Signature,
-    required_outward,
-)
-from service.model.assembled_model import (
-    AssembledModel,
-    ComponentInstance,
-    mapped_values_outside_bounds,
-)
+from service.matching.signature import QUANTITY_UNITS, PatternTriple, Rule, Signature, required_outward
+from service.model.assembled_model import AssembledModel, ComponentInstance, mapped_values_outside_bounds
 from service.model.effect_splicing import EffectRequest, recorded_effects, splice_effect
 from service.model.wiring import (
     MatchValues,
@@ -242,7 +229,7 @@ def _unit_notes(instance: ComponentInstance) -> list[str]:
     except UnitError:
         return [f"{name}: its unit {unit} is not a unit graphtwin knows{closest_unit_hint(unit)}: its column cannot "
                 "be read"]
-    quantity = next((o.quantity for o in instance.signature.outputs if o.port == "measured_value"), None)
+    quantity = instance.signature.output_quantity("measured_value")
     if quantity in QUANTITY_UNITS and declared.dimension != unit_spec(QUANTITY_UNITS[quantity]).dimension:
         return [f"{name}: its unit {unit} is a unit of {declared.dimension.replace('_', ' ')}, but the device "
                 f"measures a {quantity.replace('_', ' ')}: its column cannot be read"]

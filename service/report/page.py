@@ -28,19 +28,8 @@ from service.diagnosis.report import FAILURE_RATIO
 from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
 from service.graph.units import quantity_text, unit_label
-from service.report.run_series import (
-    INTERVAL_LEVEL,
-    INTERVAL_Z,
-    RunSeries,
-    recompute_series,
-)
-from service.report.stored_run import (
-    StoredCandidate,
-    StoredDiagnosis,
-    StoredRun,
-    read_diagnosis,
-    read_run,
-)
+from service.report.run_series import INTERVAL_LEVEL, INTERVAL_Z, RunSeries, recompute_series
+from service.report.stored_run import StoredCandidate, StoredDiagnosis, StoredRun, read_diagnosis, read_run
 from service.report.topology_svg import TOPOLOGY_KEY, topology_svg
 
 if TYPE_CHECKING:

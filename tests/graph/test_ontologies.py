@@ -139,26 +139,16 @@ def test_no_official_term_outside_the_subsets_is_taken_for_a_misspelling_of_one_
     """The misspelling check (service.graph.vocabulary) sees only the subsets: an official SAREF,
     SAREF4BLDG, SAREF4SYST, FSO or Brick class, property or other term the subsets leave out must not
     be close enough to a subset term of its kind to be called its misspelling."""
-    from service.graph.namespaces import local_name, namespace_of
-    from service.graph.vocabulary import CLASS_TYPES, PROPERTY_TYPES, closest_declared
+    from service.graph.vocabulary import DeclaredTerms, closest_declared
 
-    def of_kind(triples, kind: str) -> set[str]:
-        typed = {(t.subject.value, t.object) for t in triples if t.predicate == RDF.type
-                 and isinstance(t.subject, ox.NamedNode)}
-        properties = {iri for iri, cls in typed if cls in PROPERTY_TYPES}
-        classes = {iri for iri, cls in typed if cls in CLASS_TYPES}
-        return {"class": classes, "property": properties,
-                "value": {iri for iri, _ in typed} - properties}[kind]
-
-    official = _official(V3_FILES + V4_FILES) + [t for name in ALIGNMENT_FILES for t in _triples(
-        _fixed((SHARED / name).read_bytes()))]
+    alignments = [t for name in ALIGNMENT_FILES for t in _triples(_fixed((SHARED / name).read_bytes()))]
+    official = DeclaredTerms.from_triples(_official(V3_FILES + V4_FILES) + alignments)
+    ours = DeclaredTerms.from_triples(_subsets())
     taken = {}
-    for kind in ("class", "property", "value"):
-        ours = of_kind(_subsets(), kind)
-        left_out = of_kind(official, kind) - ours
+    for kind in ("classes", "properties", "values"):
+        loaded, all_of_kind = getattr(ours, kind), getattr(official, kind)
+        left_out = sorted(namespace + name for namespace, names in all_of_kind.items()
+                          for name in set(names) - set(loaded.get(namespace, [])))
         assert len(left_out) > 20, kind
-        declared = defaultdict(list)
-        for iri in ours:
-            declared[namespace_of(iri)].append(local_name(iri))
-        taken |= {(kind, iri): closest_declared(iri, declared) for iri in sorted(left_out)}
+        taken |= {(kind, iri): closest_declared(iri, loaded) for iri in left_out}
     assert {key: meant for key, meant in taken.items() if meant} == {}

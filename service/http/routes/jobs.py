@@ -7,25 +7,12 @@ from fastapi import APIRouter, Response
 
 from service.components.library import SignatureLibrary
 from service.errors import NotFoundError
-from service.http.deps import (
-    ReadAccess,
-    Service,
-    ServiceDep,
-    WriteAccess,
-    require_fit_models,
-    require_model,
-)
+from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, require_fit_models, require_model
 from service.http.errors import error_responses
 from service.http.schemas import JobList, JobPublic
 from service.jobs.records import JobRecord
 from service.workflows.effects import check_effect_version, checked_effect_triples
-from service.workflows.requests import (
-    AddEffectRequest,
-    AssembleRequest,
-    CalibrateRequest,
-    DiagnoseRequest,
-    JobRequest,
-)
+from service.workflows.requests import AddEffectRequest, AssembleRequest, CalibrateRequest, DiagnoseRequest, JobRequest
 from service.workflows.runs import check_fit_request
 
 __all__ = ["router"]

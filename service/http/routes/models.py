@@ -11,13 +11,7 @@ from service.errors import GraphtwinError, IncompleteModelError, UnsupportedForm
 from service.graph.backend import EmbeddedBackend
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
-from service.http.deps import (
-    ReadAccess,
-    Service,
-    ServiceDep,
-    WriteAccess,
-    require_model,
-)
+from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, require_model
 from service.http.errors import ApiError, error_responses
 from service.http.schemas import (
     BrickReportPublic,
