@@ -54,8 +54,7 @@ def query_command(
         raise InputError(f"query {name} reads a building model's graphs: give --model")
     bindings = dict(_binding(p) for p in (param or []))
     if model is not None and not reads_a_model:
-        bindings |= {"model": model} | {var: iri for var, iri in graph_store.graph_variables(model).items()
-                                        if f"?{var}" in text}
+        bindings |= graph_store.result_bindings(model, text)
     try:
         rows = graph_store.query(text, substitutions=bindings, model=model if reads_a_model else None)
     except InputError as exc:

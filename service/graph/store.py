@@ -130,6 +130,11 @@ class GraphStore:
         return {"model_graph": self.model_graph(name), "inferred_graph": self.inferred_graph(name),
                 "ontology_graph": ONTOLOGY_GRAPH}
 
+    def result_bindings(self, name: str, sparql: str) -> dict[str, object]:
+        """What a query about model ``name``'s results binds: ``?model`` to the name, and each of
+        :meth:`graph_variables` the text uses."""
+        return {"model": name} | {var: iri for var, iri in self.graph_variables(name).items() if f"?{var}" in sparql}
+
     def matching_dataset(self, name: str) -> list[ox.NamedNode]:
         """Default graph for signature queries: the model, what alignment inferred, the ontologies."""
         return list(self.graph_variables(name).values())

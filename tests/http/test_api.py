@@ -455,8 +455,22 @@ def test_named_queries_are_listed_and_run_with_bindings(client):
     assert link[0]["series_id"]["value"] == "supply_fan_power"
     assert client.get("/queries/nope").status_code == 404
     assert client.get("/queries/flow-edges", params={"dataset": "nope"}).status_code == 404
+    no_model = client.get("/queries/calibrated-parameters", params={"model": "nope"})
+    assert no_model.status_code == 404 and "no model 'nope'" in no_model.json()["detail"] and "case" in no_model.json()["detail"]
     unknown = client.get("/queries/calibrated-parameters", params={"modle": "case"})
     assert unknown.status_code == 422 and "model" in unknown.json()["detail"]
+
+
+def test_a_query_about_a_models_graphs_binds_them_from_model(client, store):
+    """``model=NAME`` binds ?model_graph, ?inferred_graph and ?ontology_graph as the CLI's --model does:
+    the misspelt class of one model is found there and not in the other's."""
+    store.load_model("typo", (CASE_STUDY.read_text(encoding="utf-8")
+                     + f"\n<{EX}heating_valve> a <https://saref.etsi.org/saref4bldg/Valv> .\n").encode())
+    typo = _rows(client.get("/queries/undeclared-classes", params={"model": "typo"}))
+    assert [row["class"]["value"] for row in typo] == ["https://saref.etsi.org/saref4bldg/Valv"]
+    assert _rows(client.get("/queries/undeclared-classes", params={"model": "case"})) == []
+    refused = client.get("/queries/flow-edges", params={"model": "case"})
+    assert refused.status_code == 422 and "dataset=MODEL" in refused.json()["detail"]
 
 
 # ---------------------------------------------------------------------- jobs

@@ -154,15 +154,23 @@ async def run_named_query(
     dataset: Annotated[str | None, Query(description="model whose graphs are the default graph")] = None,
 ) -> Response:
     """Run ``queries/<name>.rq``; every other query parameter binds the variable of its name (an
-    http(s):// or urn: value as an IRI, anything else as a string literal)."""
+    http(s):// or urn: value as an IRI, anything else as a string literal); ``model`` must name a model
+    in the store, and binds its graphs' variables as the CLI's ``--model`` does."""
     described = _describe_query(_named_query_path(name))
+    variables = described["variables"]
     bindings = {}
     for key, value in request.query_params.items():
-        if key == "dataset":
+        if key in ("dataset", "model"):
             continue
-        if key not in described["variables"]:
-            raise ApiError(422, f"query {name} has no variable {key!r}; its variables: {', '.join(described['variables'])}")
+        if key not in variables:
+            raise ApiError(422, f"query {name} has no variable {key!r}; its variables: {', '.join(variables)}")
         bindings[key] = _binding(key, value)
+    if (model := request.query_params.get("model")) is not None:
+        about = service.store.result_bindings(require_model(service.store, model), described["text"])
+        if not set(about) & set(variables):
+            raise ApiError(422, f"query {name} reads no model's results or graphs (no ?model); its variables: "
+                                f"{', '.join(variables)}; give dataset=MODEL for a query about a building graph")
+        bindings = {k: ox.Literal(v) if k == "model" else v for k, v in about.items() if k in variables} | bindings
     default_graph = None
     if dataset is not None:
         require_model(service.store, dataset)
