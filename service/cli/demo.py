@@ -14,7 +14,7 @@ from service.cli.common import DEFAULT_STORE, SeedOption, StoreOption, app, cons
 from service.cli.printing import print_diagnosis
 from service.components.library import SignatureLibrary
 from service.graph.namespaces import local_name
-from service.graph.units import quantity_text
+from service.graph.units import difference_unit, quantity_text
 from service.resources import examples_dir
 from service.workflows.effects import add_effect_to_file
 from service.workflows.requests import CalibrateRequest, DiagnoseRequest
@@ -75,7 +75,7 @@ def demo_command(
         table.add_column(column, overflow="fold")
     for node, metrics in after_run.record.metrics["test"].items():
         old = before[node].rmse
-        table.add_row(local_name(node), quantity_text(old, metrics.unit), quantity_text(metrics.rmse, metrics.unit),
+        table.add_row(local_name(node), quantity_text(old, difference_unit(metrics.unit)), quantity_text(metrics.rmse, difference_unit(metrics.unit)),
                       f"{100 * (metrics.rmse - old) / old:+.0f} %")
     console.print(table)
     estimate = next((e for e in after_run.record.estimates if f"/{best.effect}/" in e.component), None)

@@ -13,7 +13,7 @@ from rich.text import Text
 from service.calibration.metrics import on_interval_scale
 from service.cli.common import DEFAULT_STORE, console
 from service.graph.namespaces import local_name
-from service.graph.units import quantity_text, unit_label
+from service.graph.units import difference_unit, quantity_text, unit_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
     from service.calibration.record import CalibrationRecord
@@ -44,7 +44,7 @@ def print_metrics(title: str, metrics: dict) -> None:
             interval_cells = [f"{100 * at_90.ace:+.1f}", f"{at_90.mean_width:.3g}"] if at_90 else ["–", "–"]
         ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
         table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.noise:.3g}", f"{m.rmse / m.noise:.1f}" if m.noise > 0 else "–",
-                      f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, unit_label(m.unit))
+                      f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, unit_label(difference_unit(m.unit)))
     console.print(table)
 
 
@@ -87,7 +87,7 @@ def print_regimes(record: CalibrationRecord) -> None:
     entered = [r for r in record.regimes if r["share"] > 0]
     for row in entered:
         table.add_row(row["rule"], f"{100 * row['share']:.0f} %",
-                      *(quantity_text(row["rmse"][n], units.get(n, "")) for n in sensors))
+                      *(quantity_text(row["rmse"][n], difference_unit(units.get(n, ""))) for n in sensors))
     if len(entered) < len(record.regimes):
         table.caption = f"{len(record.regimes) - len(entered)} regime(s) the test window never enters left out"
     console.print(table)
@@ -133,7 +133,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         verdict = ("[red]fails[/red]" if s.fails else
                    f"[yellow]within {report.failure_ratio:g}× its noise, but the answer removes ≥ "
                    f"{100 * MIN_TEST_IMPROVEMENT:.0f} % of its error[/yellow]" if s.shows_missing_effect else "matches")
-        table.add_row(local_name(node), quantity_text(s.rmse, s.unit), f"{s.rmse_over_noise:.1f}",
+        table.add_row(local_name(node), quantity_text(s.rmse, difference_unit(s.unit)), f"{s.rmse_over_noise:.1f}",
                       "–" if on_interval_scale(s.unit) else f"{s.nmbe_percent:+.1f}", verdict)
     console.print(table)
     for location in report.localization:
@@ -201,6 +201,7 @@ def save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
     return [
         plot_measured_vs_model(folder / f"{report.run_id}-test.png", report.test_timestamps, observed,
                                {"model": report.base_test_prediction}, units, title="Test window: measured and model"),
-        plot_residuals(folder / f"{report.run_id}-residuals.png", report.test_timestamps, residuals, units, thresholds,
+        plot_residuals(folder / f"{report.run_id}-residuals.png", report.test_timestamps, residuals,
+                       {n: difference_unit(unit) for n, unit in units.items()}, thresholds,
                        episodes, title="Test window residuals (shaded: episodes beyond their usual spread; a steady bias has none)"),
     ]

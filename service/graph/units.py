@@ -18,7 +18,7 @@ import numpy as np
 from service.errors import UnitError
 
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
-           "quantity_text", "closest_unit_hint"]
+           "quantity_text", "closest_unit_hint", "difference_unit"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -110,6 +110,17 @@ def closest_unit_hint(unit: str) -> str:
 
     close = [name for name in QUDT_UNITS if bare(name) == bare(local)]
     return f" (did you mean {QUDT_UNIT_NAMESPACE}{close[0]}?)" if close else ""
+
+
+def difference_unit(unit: str) -> str:
+    """The unit a difference of two readings in ``unit`` (an error, a residual, a noise σ) is stated
+    in: ``"K"`` for °C (an error of 0.2 °C is one of 0.2 K), the unit itself otherwise (°F keeps its
+    degree)."""
+    try:
+        spec = unit_spec(unit)
+    except UnitError:
+        return unit
+    return "K" if spec.dimension == "temperature" and spec.offset and spec.multiplier == 1.0 else unit
 
 
 def unit_label(unit: str) -> str:

@@ -95,9 +95,9 @@ def test_a_residual_s_trend_in_time_is_its_slope_per_day_with_the_share_it_expla
     days = np.arange(432) / 144.0
     trend = time_trend(0.4 * days + rng.normal(0.0, 0.1, 432), stamps)
     assert abs(trend.per_day - 0.4) < 0.02 and trend.r2 > 0.9  # var of the line 0.4²·0.75 against 0.01 of noise
-    assert trend.describe("°C").startswith("it drifts +0.4 °C a day")
+    assert trend.describe("K").startswith("it drifts +0.4 K a day")
     flat = time_trend(rng.normal(0.0, 0.1, 432), stamps)
-    assert flat.r2 < 0.05 and flat.describe("°C").startswith("it has no trend in time")
+    assert flat.r2 < 0.05 and flat.describe("K").startswith("it has no trend in time")
     assert time_trend(np.full(432, 1.0), stamps) is None
 
 
@@ -117,9 +117,9 @@ def test_when_nothing_explains_a_failure_the_summary_describes_its_residual():
         residual_trend={node: TimeTrend(0.31, 0.64, 400)})
     summary = report.summary
     assert "no effect in the catalog and no drift of a parameter explains it" in summary
-    assert "At coil_outlet_water_temperature_sensor, the worst (RMSE 0.8 °C, 8.0× its noise)" in summary
-    assert "it drifts +0.31 °C a day (the trend explains 64 % of its variance)" in summary
-    assert "its error is largest where fan speed > 0.5 (RMSE 1.1 °C over 60 % of the test window)" in summary
+    assert "At coil_outlet_water_temperature_sensor, the worst (RMSE 0.8 K, 8.0× its noise)" in summary
+    assert "it drifts +0.31 K a day (the trend explains 64 % of its variance)" in summary
+    assert "its error is largest where fan speed > 0.5 (RMSE 1.1 K over 60 % of the test window)" in summary
     assert "it follows measured outdoor_temperature 30 min earlier (ρ = +0.81" in summary
     assert report.to_dict()["residual_trend"][node]["per_day"] == 0.31
 

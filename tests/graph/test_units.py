@@ -92,3 +92,13 @@ def test_a_quantity_in_a_sentence_or_a_table_cell():
     assert quantity_text(0.16234, "degC") == "0.162 °C" and quantity_text(0.0194, "1") == "0.0194"
     assert quantity_text(5000.0, "W", "g") == "5000 W" and quantity_text(5000.0, "W") == "5e+03 W"
     assert quantity_text(float("nan"), "W") == quantity_text(None, "degC") == "–"
+
+
+def test_an_error_of_a_temperature_in_celsius_is_stated_in_kelvin():
+    """An RMSE, a residual or a noise σ is a difference: 0.2 K, not 0.2 °C; other units keep theirs."""
+    from service.graph.units import difference_unit, quantity_text
+
+    assert [unit_label(difference_unit(u)) for u in ("degC", U + "DEG_C", "K", U + "DEG_F", "W", "1")] == [
+        "K", "K", "K", "°F", "W", ""]
+    assert quantity_text(0.2, difference_unit("degC")) == "0.2 K"
+    assert difference_unit(U + "FURLONG") == U + "FURLONG"

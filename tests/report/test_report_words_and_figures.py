@@ -45,7 +45,7 @@ def test_a_plain_number_has_no_unit_and_no_stray_space(tmp_path_factory):
     header, *rows = PageParser(page).tables["regimes"]
     valve, air = header.index("RMSE valve_position_sensor"), header.index("RMSE coil_outlet_air_temperature_sensor")
     assert all(re.fullmatch(r"[0-9.e-]+", row[valve]) for row in rows)  # the valve position is a fraction
-    assert all(re.fullmatch(r"[0-9.e-]+ °C", row[air]) for row in rows)
+    assert all(re.fullmatch(r"[0-9.e-]+ K", row[air]) for row in rows)
 
 
 def _overlaps(a, b) -> bool:
