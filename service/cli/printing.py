@@ -201,7 +201,6 @@ def save_diagnosis_plots(report: DiagnosisReport, folder: Path) -> list[Path]:
     return [
         plot_measured_vs_model(folder / f"{report.run_id}-test.png", report.test_timestamps, observed,
                                {"model": report.base_test_prediction}, units, title="Test window: measured and model"),
-        plot_residuals(folder / f"{report.run_id}-residuals.png", report.test_timestamps, residuals,
-                       {n: difference_unit(unit) for n, unit in units.items()}, thresholds,
+        plot_residuals(folder / f"{report.run_id}-residuals.png", report.test_timestamps, residuals, units, thresholds,
                        episodes, title="Test window residuals (shaded: episodes beyond their usual spread; a steady bias has none)"),
     ]

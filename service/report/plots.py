@@ -98,7 +98,7 @@ def residuals_figure(
         ax.axhline(0.0, color="grey", lw=0.6)
         ax.plot(timestamps, residuals[sensor], color="black", lw=0.8, label="measured − model")
         ax.set_title(local_name(sensor), fontsize=8, loc="left")  # a long name as a y label ran into the next panel's
-        ax.set_ylabel(bracketed_unit(units.get(sensor, '')), fontsize=8)
+        ax.set_ylabel(bracketed_unit(difference_unit(units.get(sensor, ''))), fontsize=8)  # a residual: K for °C
         ax.grid(alpha=0.3)
     return _finish_time_panels(fig, axes, title)
 
