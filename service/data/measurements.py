@@ -128,8 +128,8 @@ class MeasuredData:
         return np.datetime64(stamp, "s")
 
     def shown(self, stamp: np.datetime64) -> str:
-        """A time stamp of the data as text, ``… UTC`` where the file's carried offsets."""
-        return f"{stamp} UTC" if self.utc else str(stamp)
+        """A time stamp of the data as text (:func:`_stamp_text`)."""
+        return _stamp_text(stamp, self.utc)
 
     def select(self, start: datetime | str | None, end: datetime | str | None) -> MeasuredData:
         """The data with ``start ≤ t ≤ end`` (errors as :meth:`window`)."""
@@ -165,8 +165,10 @@ def _parsed_timestamp(text: str) -> tuple[datetime, bool]:
 
 
 def _stamp_text(stamp: np.datetime64, utc: bool) -> str:
-    """A time stamp of the data to the minute, ``… UTC`` where the file's carried offsets."""
-    return np.datetime_as_string(stamp, unit="m") + (" UTC" if utc else "")
+    """A time stamp of the data to the minute (to the second where it has seconds), ``… UTC`` where
+    the file's carried offsets."""
+    seconds = int(stamp.astype("datetime64[s]").astype(np.int64))
+    return np.datetime_as_string(stamp, unit="m" if seconds % 60 == 0 else "s") + (" UTC" if utc else "")
 
 
 def _duration_text(seconds: float) -> str:
@@ -238,7 +240,8 @@ def _check_grid_size(source: str, stamps: np.ndarray, step_s: float) -> None:
     spacings = np.diff(stamps).astype(np.int64)
     i = int(np.argmax(spacings))
     raise MeasurementError(source, [
-        f"line {i + 3}: the time stamps jump from {stamps[i]} to {stamps[i + 1]} ({spacings[i] / step_s:.3g} steps of "
+        f"line {i + 3}: the time stamps jump from {_stamp_text(stamps[i], False)} to "
+        f"{_stamp_text(stamps[i + 1], False)} ({spacings[i] / step_s:.3g} steps of "
         f"{step_s:g} s): on a regular grid the {stamps.size} rows would stand for {n_grid} steps; fix the stamp, "
         "or cut the file at the jump"])
 
@@ -474,6 +477,7 @@ def frozen_spans(stamps: np.ndarray, values: np.ndarray, unit: str, *, min_span_
         first, last = stamps[index[start]], stamps[index[stop - 1]]
         span_s = float((last - first) / np.timedelta64(1, "s"))
         if span_s >= min_span_s and kept[start] != 0.0:
-            found.append(f"holds {f'{kept[start]:g} {unit_label(unit)}'.rstrip()} exactly from {str(first)[:16]} to {str(last)[:16]} "
+            found.append(f"holds {f'{kept[start]:g} {unit_label(unit)}'.rstrip()} exactly from "
+                         f"{_stamp_text(first, False)} to {_stamp_text(last, False)} "
                          f"({span_s / 86400.0:.1f} days): a frozen point? The model takes it as measured")
     return found

@@ -25,7 +25,7 @@ from service.diagnosis.drift import drifting_components
 from service.diagnosis.episodes import Episode, find_episodes
 from service.diagnosis.localization import FailureLocation, FlowTopology, localize_failures
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
-from service.diagnosis.report import FAILURE_RATIO, DiagnosisReport, SensorVerdict, diagnosis_triples
+from service.diagnosis.report import FAILURE_RATIO, DiagnosisReport, SensorVerdict, diagnosis_triples, fails_at
 from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable
 from service.diagnosis.unit_mixup import unit_mixups
@@ -85,7 +85,7 @@ def diagnose(
         sensors[node] = SensorVerdict(
             rmse=metrics.rmse, mae=metrics.mae, cv_rmse_percent=metrics.cv_rmse_percent,
             nmbe_percent=metrics.nmbe_percent, r2=metrics.r2, unit=md.units[node], noise=sigma,
-            fails=bool(metrics.rmse > failure_ratio * sigma),
+            fails=fails_at(metrics.rmse, sigma, failure_ratio),
         )
     topology = FlowTopology.from_store(store, model_name)
     carries = _carried_down(residuals, md.units, {node: s.noise for node, s in sensors.items()}, failure_ratio)

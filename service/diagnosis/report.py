@@ -24,10 +24,16 @@ from service.diagnosis.separation import Lookalike
 from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 from service.graph.units import difference_unit, unit_label
 
-__all__ = ["FAILURE_RATIO", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
+__all__ = ["FAILURE_RATIO", "fails_at", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
 
 #: A sensor fails where its test RMSE exceeds this multiple of its noise σ (``docs/diagnosis.md``).
 FAILURE_RATIO = 2.0
+
+
+def fails_at(rmse: float, noise: float, failure_ratio: float = FAILURE_RATIO) -> bool:
+    """Whether a sensor whose test RMSE is ``rmse`` fails against its noise σ ``noise`` (same unit):
+    RMSE > failure_ratio · σ."""
+    return bool(rmse > failure_ratio * noise)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -24,7 +24,7 @@ import numpy as np
 from service.calibration.metrics import on_interval_scale
 from service.diagnosis.error_history import error_history
 from service.diagnosis.localization import FlowTopology
-from service.diagnosis.report import FAILURE_RATIO
+from service.diagnosis.report import fails_at
 from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
 from service.graph.units import difference_unit, quantity_text, unit_label
@@ -156,7 +156,7 @@ def _matching_sensors(run: StoredRun, diagnosis: StoredDiagnosis | None) -> set[
     if diagnosis is None:
         return set()
     within = {sensor for sensor, m in run.metrics.get("test", {}).items()
-              if m.get("noise", 0.0) > 0.0 and m.get("rmse", np.inf) <= FAILURE_RATIO * m["noise"]}
+              if m.get("noise", 0.0) > 0.0 and not fails_at(m.get("rmse", np.inf), m["noise"])}
     return (within | diagnosis.matching_sensors) - diagnosis.failing_sensors
 
 

@@ -107,11 +107,11 @@ def test_windows_outside_the_data_are_refused(tmp_path):
     with pytest.raises(ValueError, match="outside the data"):
         data.window("2026-01-01", "2026-01-02")
     assert data.window(None, "2025-01-01 00:30") == slice(0, 3)  # one step past the last stamp: a whole period
-    with pytest.raises(ValueError, match=r"ends after the data .*\(2025-01-01T00:00:00 – 2025-01-01T00:20:00\)"):
+    with pytest.raises(ValueError, match=r"ends after the data .*\(2025-01-01T00:00 – 2025-01-01T00:20\)"):
         data.window("2025-01-01 00:10", "2025-01-02")  # a day asked of 20 minutes: not cut silently
     with pytest.raises(ValueError, match="starts before the data"):
         data.window("2024-12-31 23:00", "2025-01-01 00:10")
-    with pytest.raises(ValueError, match=r"lies outside the data .*\(2025-01-01T00:00:00 – 2025-01-01T00:20:00\)"):
+    with pytest.raises(ValueError, match=r"lies outside the data .*\(2025-01-01T00:00 – 2025-01-01T00:20\)"):
         data.window("2026-01-01", None)  # an open end after the data's: outside, not "the end is before the start"
 
 
@@ -124,7 +124,7 @@ def test_valid_mask_and_select_by_time(tmp_path):
     assert part.n_steps == 8 and str(part.timestamps[0]) == "2025-01-01T00:05:00"
     assert part.series["https://example.org/x#valve"] == pytest.approx(np.arange(5, 13) / 100)
     assert part.valid.tolist() == [False] * 5 + [True] * 3
-    with pytest.raises(ValueError, match=r"lies outside the data .*2025-01-01T00:00:00 – 2025-01-01T00:19:00"):
+    with pytest.raises(ValueError, match=r"lies outside the data .*2025-01-01T00:00 – 2025-01-01T00:19"):
         data.select("2024-06-01", "2024-06-02")
     with pytest.raises(ValueError, match="end is before the start"):
         data.select("2025-01-01 00:10", "2025-01-01 00:05")
@@ -337,8 +337,8 @@ def test_a_window_is_given_on_the_datas_clock(tmp_path):
     with pytest.raises(ValueError, match=r"the window's start '2017-09-20T02:00': the data .* give their time stamps with a "
                                          r"UTC offset \(read as UTC\); give it with an offset too"):
         data.window("2017-09-20T02:00", None)
-    with pytest.raises(ValueError, match=r"window 2017-09-21T07:00:00 UTC – 2017-09-21T08:00:00 UTC lies outside the data "
-                                         r".* \(2017-09-20T07:00:00 UTC – 2017-09-20T18:00:00 UTC\)"):
+    with pytest.raises(ValueError, match=r"window 2017-09-21T07:00 UTC – 2017-09-21T08:00 UTC lies outside the data "
+                                         r".* \(2017-09-20T07:00 UTC – 2017-09-20T18:00 UTC\)"):
         data.window("2017-09-21T00:00-07:00", "2017-09-21T01:00-07:00")
     local = read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows.replace("-07:00", "")), SPECS)
     assert not local.utc and local.window("2017-09-20T02:00", "2017-09-20T05:00") == slice(2, 6)
@@ -354,8 +354,8 @@ def test_a_glitched_time_stamp_is_refused_by_line_before_any_grid_is_built(tmp_p
     with pytest.raises(MeasurementError, match=r"line 20, column 'time': time stamp '9999-12-31 23:50' lies outside "
                                                r"the years 1970–2100"):
         read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows + "9999-12-31 23:50,20,50\n"), SPECS)
-    with pytest.raises(MeasurementError, match=r"line 20: the time stamps jump from 2025-01-01T02:50:00 to "
-                                               r"2060-01-01T00:00:00 \(1.84e\+06 steps of 600 s\): on a regular grid the "
+    with pytest.raises(MeasurementError, match=r"line 20: the time stamps jump from 2025-01-01T02:50 to "
+                                               r"2060-01-01T00:00 \(1.84e\+06 steps of 600 s\): on a regular grid the "
                                                r"19 rows would stand for 1840753 steps"):
         read_measurements(_write(tmp_path, "time,SAT,valve\n" + rows + "2060-01-01 00:00,20,50\n"), SPECS)
     typo = rows.replace("2025-01-01 01:20", "2025-01-01 01:2O")  # a letter O: one problem, said once
