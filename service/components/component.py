@@ -18,7 +18,7 @@ import numpy as np
 
 __all__ = [
     "Port", "Parameter", "ComponentModel", "SplicedEffect", "Params", "Signals", "State",
-    "first_order_lag_factor", "AIR_SPECIFIC_HEAT_J_PER_KG_K", "WATER_SPECIFIC_HEAT_J_PER_KG_K",
+    "first_order_lag_factor", "bound_side", "AIR_SPECIFIC_HEAT_J_PER_KG_K", "WATER_SPECIFIC_HEAT_J_PER_KG_K",
     "AIR_DENSITY_KG_PER_M3", "WATER_DENSITY_KG_PER_M3", "DEFAULT_SETTLING_S", "MINIMUM_AIR_MASS_FLOW_KG_PER_S",
 ]
 
@@ -84,6 +84,15 @@ class Parameter:
         if not set(self.attainable) <= {self.lower, self.upper}:
             raise ValueError(f"parameter {self.name}: attainable {self.attainable} are not its bounds "
                              f"[{self.lower}, {self.upper}]")
+
+
+def bound_side(value: float, lower: float, upper: float, share: float) -> str:
+    """``"lower"`` or ``"upper"`` where ``value`` lies within ``share`` of the range ``upper − lower``
+    of that bound, else ``""`` (also where the range or the value is not finite)."""
+    span = upper - lower
+    if not (np.isfinite(span) and span > 0 and np.isfinite(value)):
+        return ""
+    return "lower" if value - lower <= share * span else "upper" if upper - value <= share * span else ""
 
 
 #: Settling time of a component with states that does not state its own [s]: a day, the period of

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from service.components.component import bound_side
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text
 from service.model.assembled_model import AssembledModel
@@ -23,14 +24,12 @@ __all__ = ["BOUND_SHARE", "at_bound", "bound_note", "demotion_reasons"]
 BOUND_SHARE = 0.005
 
 
-def at_bound(value: float, spec) -> str | None:
+def at_bound(value: float, spec) -> str:
     """``"lower"`` or ``"upper"`` when ``value`` lies within :data:`BOUND_SHARE` of the prior range
-    of that bound of ``spec`` (a :class:`~service.components.component.Parameter`), else None; a
-    bound that is the effect's null or ``attainable`` is no limit of the prior: None there."""
-    tolerance = BOUND_SHARE * (spec.upper - spec.lower)
-    meaningful = {spec.null, *spec.attainable}
-    return next((side for side, bound in (("lower", spec.lower), ("upper", spec.upper))
-                 if abs(value - bound) <= tolerance and bound not in meaningful), None)
+    of that bound of ``spec`` (a :class:`~service.components.component.Parameter`), else ``""``; a
+    bound that is the effect's null or ``attainable`` is no limit of the prior: ``""`` there."""
+    side = bound_side(value, spec.lower, spec.upper, BOUND_SHARE)
+    return "" if side and getattr(spec, side) in {spec.null, *spec.attainable} else side
 
 
 def bound_note(value: float, spec) -> str:

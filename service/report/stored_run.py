@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from service.calibration.triples import run_iri
+from service.components.component import bound_side
 from service.errors import NotFoundError
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
@@ -99,11 +100,7 @@ class StoredEstimate:
     def at_bound(self) -> str:
         """``"lower"`` or ``"upper"`` where the estimate sits at that bound (within 1e-6 of the range),
         else ``""``: the data pushed it there, and the bound, not the data, set its value."""
-        span = self.upper - self.lower
-        if not (np.isfinite(span) and span > 0 and np.isfinite(self.median)):
-            return ""
-        return ("lower" if self.median - self.lower <= 1e-6 * span else
-                "upper" if self.upper - self.median <= 1e-6 * span else "")
+        return bound_side(self.median, self.lower, self.upper, 1e-6)
 
 
 @dataclass(frozen=True, kw_only=True)
