@@ -43,7 +43,7 @@ def query_command(
     if output_format not in ("table", "csv", "json"):
         raise InputError(f"--format {output_format!r}: give table, csv or json")
     graph_store = open_store(store, False, reading=True)
-    if model is not None and model not in graph_store.models():
+    if model is not None and model not in graph_store.models() and not graph_store.has_results(model):
         raise NotFoundError(f"no model {model!r} in the store {store}; it holds {', '.join(graph_store.models()) or 'none'}")
     own = name.endswith(".rq") or "/" in name
     if own and not Path(name).is_file():

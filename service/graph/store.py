@@ -25,7 +25,7 @@ from service.graph.alignment import alignment_rule_triples, inferred_ntriples, i
 from service.graph.backend import EmbeddedBackend, SparqlBackend, Term
 from service.graph.blank_nodes import skolemize
 from service.graph.endpoint import SparqlEndpointBackend
-from service.graph.namespaces import GTR, graph_iri
+from service.graph.namespaces import GT, GTR, graph_iri
 from service.graph.ntriples import GraphTriples, ntriples_chunks
 from service.graph.rdf_io import parse_rdf, rdf_format, sparql_syntax_message
 from service.resources import ontologies_dir, queries_dir
@@ -148,6 +148,11 @@ class GraphStore:
 
     def has_model(self, name: str) -> bool:
         return self.model_graph(name) in self.backend.graphs()
+
+    def has_results(self, name: str) -> bool:
+        """Whether a run (calibration or diagnosis) of model ``name`` is stored: a dropped model's
+        results stay queryable."""
+        return bool(self.query(f"ASK {{ GRAPH ?g {{ ?run <{GT}forModel> ?model }} }}", substitutions={"model": name}))
 
     def graph_triples(self, graph: ox.NamedNode) -> list[ox.Triple]:
         """Every triple of ``graph`` (empty when it does not exist)."""

@@ -461,6 +461,15 @@ def test_named_queries_are_listed_and_run_with_bindings(client):
     assert unknown.status_code == 422 and "model" in unknown.json()["detail"]
 
 
+def test_a_dropped_models_results_stay_queryable_by_its_name(client, store):
+    """Only a name with neither a model nor a stored run is unknown: a dropped model's runs are kept."""
+    run = ox.NamedNode("https://w3id.org/graphtwin/resource/run/r1")
+    store.write_graph(store.run_graph("r1"), [ox.Triple(run, ox.NamedNode("https://w3id.org/graphtwin/ontology#forModel"),
+                                                        ox.Literal("gone"))])
+    assert not store.has_model("gone") and store.has_results("gone") and not store.has_results("nope")
+    assert client.get("/queries/calibrated-parameters", params={"model": "gone"}).status_code == 200
+
+
 def test_a_query_about_a_models_graphs_binds_them_from_model(client, store):
     """``model=NAME`` binds ?model_graph, ?inferred_graph and ?ontology_graph as the CLI's --model does:
     the misspelt class of one model is found there and not in the other's."""

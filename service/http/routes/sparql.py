@@ -155,7 +155,7 @@ async def run_named_query(
 ) -> Response:
     """Run ``queries/<name>.rq``; every other query parameter binds the variable of its name (an
     http(s):// or urn: value as an IRI, anything else as a string literal); ``model`` must name a model
-    in the store, and binds its graphs' variables as the CLI's ``--model`` does."""
+    in the store or one whose runs it keeps, and binds its graphs' variables as the CLI's ``--model`` does."""
     described = _describe_query(_named_query_path(name))
     variables = described["variables"]
     bindings = {}
@@ -166,7 +166,9 @@ async def run_named_query(
             raise ApiError(422, f"query {name} has no variable {key!r}; its variables: {', '.join(variables)}")
         bindings[key] = _binding(key, value)
     if (model := request.query_params.get("model")) is not None:
-        about = service.store.result_bindings(require_model(service.store, model), described["text"])
+        if not service.store.has_results(model):  # a dropped model's runs stay: only a name with neither is unknown
+            require_model(service.store, model)
+        about = service.store.result_bindings(model, described["text"])
         if not set(about) & set(variables):
             raise ApiError(422, f"query {name} reads no model's results or graphs (no ?model); its variables: "
                                 f"{', '.join(variables)}; give dataset=MODEL for a query about a building graph")
