@@ -35,7 +35,7 @@ from service.data.model_series import read_model_data
 from service.data.windows import Window
 from service.errors import CalibrationError
 from service.graph.store import GraphStore
-from service.graph.units import difference_unit, unit_label
+from service.graph.units import difference_label
 from service.model.assembly import assemble
 from service.model.simulator import loop_substeps
 
@@ -349,7 +349,7 @@ class StrategyComparison:
                     name = target.replace("#", "/").rsplit("/", 1)[-1]
                     lines.append(f"   {name:<42} {j_row['rmse'][target]:>9.4g} ({j_row['r2'][target]:>6.3f})"
                                  f" | {s_row['rmse'][target]:>9.4g} ({s_row['r2'][target]:>6.3f})"
-                                 f"  {unit_label(difference_unit(self.units[target]))}")
+                                 f"  {difference_label(self.units[target])}")
         lines.append(f"cross-validation on {len(joint.cv)} held-out blocks (weighted RMSE, lower is better)")
         for name in STRATEGIES:
             result = self.strategies[name]

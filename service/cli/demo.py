@@ -75,7 +75,8 @@ def demo_command(
         table.add_column(column, overflow="fold")
     for node, metrics in after_run.record.metrics["test"].items():
         old = before[node].rmse
-        table.add_row(local_name(node), quantity_text(old, difference_unit(metrics.unit)), quantity_text(metrics.rmse, difference_unit(metrics.unit)),
+        error_unit = difference_unit(metrics.unit)
+        table.add_row(local_name(node), quantity_text(old, error_unit), quantity_text(metrics.rmse, error_unit),
                       f"{100 * (metrics.rmse - old) / old:+.0f} %")
     console.print(table)
     estimate = next((e for e in after_run.record.estimates if f"/{best.effect}/" in e.component), None)

@@ -33,7 +33,7 @@ from service.components.library import SignatureLibrary
 from service.errors import GraphtwinError, InputError, NotFoundError
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
-from service.graph.units import difference_unit, unit_label
+from service.graph.units import difference_label
 from service.matching.compiler import compile_signature
 from service.model.summary import assembly_to_dict, print_assembly
 from service.resources import examples_dir
@@ -179,7 +179,7 @@ def simulate_command(
         observed = measured.series[node]
         finite = np.isfinite(observed)
         rmse = float(np.sqrt(np.mean((observed[finite] - values[finite]) ** 2))) if finite.any() else float("nan")
-        table.add_row(local_name(node), f"{rmse:.3g}", unit_label(difference_unit(measured.units[node])))
+        table.add_row(local_name(node), f"{rmse:.3g}", difference_label(measured.units[node]))
     console.print(table)
 
 

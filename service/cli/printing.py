@@ -13,7 +13,7 @@ from rich.text import Text
 from service.calibration.metrics import on_interval_scale
 from service.cli.common import DEFAULT_STORE, console
 from service.graph.namespaces import local_name
-from service.graph.units import difference_unit, quantity_text, unit_label
+from service.graph.units import difference_label, difference_unit, quantity_text, unit_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
     from service.calibration.record import CalibrationRecord
@@ -44,7 +44,7 @@ def print_metrics(title: str, metrics: dict) -> None:
             interval_cells = [f"{100 * at_90.ace:+.1f}", f"{at_90.mean_width:.3g}"] if at_90 else ["–", "–"]
         ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
         table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.noise:.3g}", f"{m.rmse / m.noise:.1f}" if m.noise > 0 else "–",
-                      f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, unit_label(difference_unit(m.unit)))
+                      f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, difference_label(m.unit))
     console.print(table)
 
 

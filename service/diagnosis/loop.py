@@ -31,7 +31,7 @@ from service.diagnosis.separation import indistinguishable
 from service.diagnosis.unit_mixup import unit_mixups
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
-from service.graph.units import difference_unit, unit_label
+from service.graph.units import difference_label
 from service.matching.signature import Signature
 
 __all__ = ["diagnose", "MIN_TEST_STEPS"]
@@ -120,7 +120,7 @@ def diagnose(
     episodes: dict[str, list[Episode]] = {}
     for node in observed:
         found = find_episodes(data.timestamps[test_slice], observed[node], residual=residuals[node],
-                              min_deviation=failure_ratio * sensors[node].noise, unit=unit_label(difference_unit(md.units[node])))
+                              min_deviation=failure_ratio * sensors[node].noise, unit=difference_label(md.units[node]))
         if found:
             episodes[node] = found
 

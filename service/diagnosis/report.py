@@ -22,7 +22,7 @@ from service.diagnosis.ranking import EffectEvidence
 from service.diagnosis.residual_dependence import Dependence, TimeTrend
 from service.diagnosis.separation import Lookalike
 from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
-from service.graph.units import difference_unit, unit_label
+from service.graph.units import difference_label
 
 __all__ = ["FAILURE_RATIO", "fails_at", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
 
@@ -146,7 +146,7 @@ class DiagnosisReport:
             return ""
         node = max(failing, key=lambda n: self.sensors[n].rmse_over_noise)
         verdict = self.sensors[node]
-        unit = unit_label(difference_unit(verdict.unit))
+        unit = difference_label(verdict.unit)
         parts = []
         if node in self.residual_trend:
             parts.append(self.residual_trend[node].describe(unit))
@@ -177,7 +177,8 @@ class DiagnosisReport:
             "residual_dependence": {
                 node: {"signals": [d.to_dict() | {"text": d.describe(self.step_s)} for d in signals]}
                 for node, signals in self.residual_dependence.items()},
-            "residual_trend": {node: trend.to_dict() | {"text": trend.describe(unit_label(difference_unit(self.sensors[node].unit)))}
+            "residual_trend": {node: trend.to_dict()
+                               | {"text": trend.describe(difference_label(self.sensors[node].unit))}
                                for node, trend in self.residual_trend.items()},
             "data_warnings": self.data_warnings,
         }

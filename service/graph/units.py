@@ -18,7 +18,7 @@ import numpy as np
 from service.errors import UnitError
 
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
-           "quantity_text", "closest_unit_hint", "difference_unit"]
+           "quantity_text", "closest_unit_hint", "difference_unit", "difference_label"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -121,6 +121,11 @@ def difference_unit(unit: str) -> str:
     except UnitError:
         return unit
     return "K" if spec.dimension == "temperature" and spec.offset and spec.multiplier == 1.0 else unit
+
+
+def difference_label(unit: str) -> str:
+    """:func:`unit_label` of :func:`difference_unit`: ``K`` for an error of readings in °C."""
+    return unit_label(difference_unit(unit))
 
 
 def unit_label(unit: str) -> str:

@@ -27,7 +27,7 @@ from service.diagnosis.localization import FlowTopology
 from service.diagnosis.report import fails_at
 from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
-from service.graph.units import difference_unit, quantity_text, unit_label
+from service.graph.units import difference_label, difference_unit, quantity_text, unit_label
 from service.report.run_series import INTERVAL_LEVEL, INTERVAL_Z, RunSeries, recompute_series
 from service.report.stored_run import StoredCandidate, StoredDiagnosis, StoredRun, read_diagnosis, read_run
 from service.report.topology_svg import TOPOLOGY_KEY, topology_svg
@@ -118,7 +118,7 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
         over_noise = rmse / noise if noise and rmse is not None else None  # runs stored before have no noise
         rows.append([_breakable(sensor), _number(train.get("rmse")), _number(rmse), _number(noise),
                      _number(over_noise), _number(test.get("mae")), _number(test.get("r2")), *map(_number, ratios),
-                     html.escape(unit_label(difference_unit(run.units[sensor]))), verdict])
+                     html.escape(difference_label(run.units[sensor])), verdict])
     out = ["<h2>Measured against the model, per sensor</h2>",
            _table(["sensor", "train RMSE", "test RMSE", "test noise σ", "test RMSE / σ", "test MAE", "test R²",
                    "CV(RMSE) %", "NMBE %", "unit", "located failure"], rows, "metrics")]
@@ -201,7 +201,8 @@ def _regimes_section(run: StoredRun) -> str:
         return out + '<p class="note">The run has no test window, so no error per regime.</p>'
     sensors = [s for s in run.metrics.get("test", {}) if any(s in r["rmse"] for r in run.regimes)]
     rows = [[html.escape(r["regime"]), _rule(r["rule"]), f"{100 * r['share']:.0f} %"]
-            + [html.escape(quantity_text(r["rmse"][s], difference_unit(run.units.get(s, "")))) if s in r["rmse"] else "–"
+            + [html.escape(quantity_text(r["rmse"][s], difference_unit(run.units.get(s, ""))))
+               if s in r["rmse"] else "–"
                for s in sensors]
             for r in run.regimes]
     header = ["regime", "rule", "share of the test window"] + [f"RMSE {_breakable(s)}" for s in sensors]

@@ -134,7 +134,8 @@ def error_history_figure(history: ErrorHistory) -> Figure:
             ax.set_xticks(range(len(rules)), [history.regime_number.get(rule, str(j)) for j, rule in enumerate(rules)],
                           fontsize=7)
             ax.set_xlabel("regime", fontsize=7)
-            ax.set_ylabel(f"RMSE per regime {bracketed_unit(difference_unit(history.units.get(sensor, '')))}".strip(), fontsize=8)
+            error_axis = bracketed_unit(difference_unit(history.units.get(sensor, '')))
+            ax.set_ylabel(f"RMSE per regime {error_axis}".strip(), fontsize=8)
         handles, labels = axes[1][0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)
     if not history.comparable:

@@ -166,7 +166,7 @@ async def run_named_query(
             raise ApiError(422, f"query {name} has no variable {key!r}; its variables: {', '.join(variables)}")
         bindings[key] = _binding(key, value)
     if (model := request.query_params.get("model")) is not None:
-        if not service.store.has_results(model):  # a dropped model's runs stay: only a name with neither is unknown
+        if not service.store.has_model(model) and not service.store.has_results(model):  # a dropped model's runs stay
             require_model(service.store, model)
         about = service.store.result_bindings(model, described["text"])
         if not set(about) & set(variables):
