@@ -45,6 +45,7 @@ from service.diagnosis.ranking import (
     weighted_test_error,
 )
 from service.diagnosis.refits import (
+    REFIT_CONTINUATIONS,
     CandidateJob,
     Fit,
     fit_of,
@@ -254,7 +255,8 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
         demotion_reasons(job.model, job.node, theta, effect_columns),
         drift_beyond_range(job.model, theta, job.data.step_s, job.evaluation.stop - 1) if drifts else ""]))
     evidence.implausible = bool(physics)
-    stopped = "" if converged else f"its refit stopped at its limit of {job.refit_max_nfev} evaluations twice"
+    stopped = "" if converged else (f"its refit did not converge in {1 + REFIT_CONTINUATIONS} runs of "
+                                    f"{job.refit_max_nfev} evaluations")
     evidence.demoted = "; ".join(filter(None, [physics, stopped]))
     demotion = f"; ranked below the plausible effects: {evidence.demoted}" if evidence.demoted else ""
     if drifts:

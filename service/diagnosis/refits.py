@@ -23,13 +23,17 @@ from service.matching.signature import Signature
 from service.model.assembled_model import AssembledModel
 
 __all__ = [
-    "PROBE_SHARES", "CandidateJob", "Fit", "fit_onset", "host_columns", "mean_squares",
+    "PROBE_SHARES", "REFIT_CONTINUATIONS", "CandidateJob", "Fit", "fit_onset", "host_columns", "mean_squares",
     "null_values", "probe_ensemble", "probe_start", "refit_calibrator", "sample_fractions",
 ]
 
 #: A refit stops where a step lowers its cost by less than this share of it (such a step moves
 #: ΔBIC by about Σn_eff·1e-5 ≈ 0.01, a thousandth of the significance threshold; docs/benchmarks.md).
 REFIT_COST_TOLERANCE = 1e-5
+#: Times a refit that stops at its evaluation limit runs on from where it stopped (an effect with two
+#: nearly exchangeable parameters walks its valley slowly; docs/validation.md). Still short after
+#: these, it is said and not ranked with the converged ones.
+REFIT_CONTINUATIONS = 3
 #: Shares of an effect parameter's prior width probed before the refit (0 is its lower bound).
 PROBE_SHARES = (0.05, 0.15, 0.35, 0.65, 1.0)
 
@@ -108,17 +112,17 @@ def probe_start(problem, theta0: np.ndarray, effect_columns: list[int], theta_tr
 
 
 def refit_calibrator(seed: int, max_nfev: int, *, n_starts: int = 1, n_candidates: int = 8) -> PointCalibrator:
-    """The least squares of the comparison's refits: continued once where it stops at ``max_nfev``,
-    without the jump check (a refit is read for θ, its standard errors and residuals)."""
+    """The least squares of the comparison's refits: continued up to ``REFIT_CONTINUATIONS`` times where
+    it stops at ``max_nfev``, without the jump check (a refit is read for θ, its standard errors and residuals)."""
     return PointCalibrator(n_starts=n_starts, n_candidates=n_candidates, random_state=seed, max_nfev=max_nfev,
-                           continuations=1, check_jumps=False, cost_tolerance=REFIT_COST_TOLERANCE)
+                           continuations=REFIT_CONTINUATIONS, check_jumps=False, cost_tolerance=REFIT_COST_TOLERANCE)
 
 
 class Fit(NamedTuple):
     """One hypothesis's fit: θ (all estimated parameters) and standard errors, the mean squared
     weighted residual and the effective sample fraction n_eff/n of its residuals per target, and
     the number of parameters it frees beyond the base's; whether the least-squares fit converged
-    (continued once where it stopped at its evaluation limit); each fitted step's weighted squared
+    (continued where it stopped at its evaluation limit); each fitted step's weighted squared
     error (:func:`~service.diagnosis.ranking.residual_step_errors`)."""
 
     theta: np.ndarray

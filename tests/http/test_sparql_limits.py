@@ -1,11 +1,11 @@
 """SPARQL reads that cannot starve the service (issue 30), on the default on-disk store: a query past
 the time limit is stopped (503) and the next one answers at once; reads see the writes made before
-them; the per-client and global limits answer 429 with ``Retry-After``; ``/health`` stays fast while
-hostile queries run."""
+them; the per-client and global limits answer 429 with ``Retry-After``; ``/health`` answers while
+hostile queries hold every read worker."""
 
 import time
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 
 import pytest
@@ -29,8 +29,9 @@ SMALL = "ASK { GRAPH ?g { ?s ?p ?o } }"
 @contextmanager
 def _service(tmp_path, **settings) -> Iterator[TestClient]:
     """The service on an on-disk store holding the case study, with these settings."""
+    settings = {"query_timeout_s": LIMIT_S, **settings}
     app = create_app(Settings(data_dir=tmp_path / "service", store_dir=tmp_path / "store", token=TOKEN,
-                              executor="threads", query_timeout_s=LIMIT_S, **settings))
+                              executor="threads", **settings))
     with TestClient(app) as client:
         assert client.put("/models/case", content=CASE_STUDY.read_bytes(), headers=AUTH).status_code == 201
         yield client
@@ -75,13 +76,13 @@ def test_reads_see_the_writes_made_before_them(disk_client):
     assert listed.status_code == 404, listed.text  # neither the model nor a run of it is left
 
 
-def _busy(client: TestClient, n: int) -> ThreadPoolExecutor:
-    """``n`` hostile queries sent, each holding a place until the time limit stops it."""
-    pool = ThreadPoolExecutor(n)
-    for _ in range(n):
-        pool.submit(client.get, "/sparql", params={"query": CARTESIAN})
-    time.sleep(0.5)  # admitted and running
-    return pool
+@contextmanager
+def _busy(client: TestClient, n: int) -> Iterator[list[Future]]:
+    """``n`` hostile queries sent, each holding a place until the time limit stops it; their answers."""
+    with ThreadPoolExecutor(n) as pool:
+        hostile = [pool.submit(client.get, "/sparql", params={"query": CARTESIAN}) for _ in range(n)]
+        time.sleep(0.5)  # admitted and running
+        yield hostile
 
 
 def test_one_client_over_its_limit_gets_429_with_retry_after(tmp_path):
@@ -112,14 +113,14 @@ def test_a_token_counts_across_addresses():
         pass
 
 
-def test_health_answers_fast_while_four_hostile_queries_run(tmp_path):
-    with _service(tmp_path, query_workers=4, query_queue=0, max_queries_per_client=4) as client:
-        with _busy(client, 4):
-            latencies = []
-            while len(latencies) < 10:
-                began = time.monotonic()
+def test_health_answers_while_four_hostile_queries_hold_every_read_worker(tmp_path):
+    # liveness, not speed: every /health answer comes while all four queries still run (a long limit,
+    # so that a loaded machine cannot stop them first); the speed is the benchmark's
+    with _service(tmp_path, query_workers=4, query_queue=0, max_queries_per_client=4, query_timeout_s=8.0) as client:
+        with _busy(client, 4) as hostile:
+            for _ in range(10):
                 assert client.get("/health").status_code == 200
-                latencies.append(time.monotonic() - began)
-        assert max(latencies) < 0.5, latencies
-        began = time.monotonic()
-        assert client.get("/sparql", params={"query": SMALL}).status_code == 200 and time.monotonic() - began < 1.5
+            running = sum(not answer.done() for answer in hostile)
+        assert running == 4, "/health waited for a hostile query"
+        assert all(answer.result().status_code == 503 for answer in hostile)
+        assert client.get("/sparql", params={"query": SMALL}).status_code == 200
