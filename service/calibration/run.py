@@ -50,7 +50,7 @@ from service.model.assembled_model import AssembledModel
 from service.model.assembly import assemble
 from service.model.assembly_triples import assembly_iri, assembly_triples
 from service.model.simulator import loop_substeps
-from service.model.wiring import without_model
+from service.model.wiring import parameter_label, without_model
 
 if TYPE_CHECKING:  # the Bayesian calibrator (emcee) loads with a Bayesian run
     from service.calibration.bayesian import BayesianCalibrator
@@ -204,7 +204,7 @@ def calibrated_start(store: GraphStore, start_from: str, model_name: str,
             theta[j] = min(max(value, ref.spec.lower), ref.spec.upper)
             runs.add(run)
         else:
-            at_default.append(key)
+            at_default.append(parameter_label(ref.key))
     if not runs:
         raise CalibrationError(f"start from {start_from!r}: its calibrated parameters ({', '.join(sorted(latest))}) include "
                                f"none that model {model_name} estimates")
@@ -235,6 +235,26 @@ class PreparedCalibration:
 _DATE_ONLY = re.compile(r"\d{4}-\d{2}-\d{2}")
 
 
+def _operating_filter_notes(md: ModelData, only_when: Sequence[str], train: slice, test: slice | None) -> list[str]:
+    """What ``--only-when`` keeps of each window, as notes.
+
+    :raises CalibrationError: it keeps no step of a window (named with the conditions)."""
+    if md.compared is None or not only_when:
+        return []
+    conditions = " and ".join(only_when)
+    notes = []
+    for name, window in (("training", train), ("test", test)):
+        if window is None:
+            continue
+        kept, steps = int(md.compared[window].sum()), window.stop - window.start
+        if kept == 0:
+            raise CalibrationError(f"--only-when {conditions} holds at none of the {steps} steps of the {name} window: "
+                                   "nothing is left to compare there; choose conditions the window meets, or another "
+                                   "window")
+        notes.append(f"compared only where {conditions}: {kept} of the {name} window's {steps} steps")
+    return notes
+
+
 def _ends_on_a_day_the_data_go_into(data: MeasuredData, end: str | None, window: slice | None) -> bool:
     """Whether a window's ``end`` is a date alone (``2026-01-14``), read as that day's midnight,
     while the data go on into that day: then the window holds one step of it, which is seldom meant
@@ -262,8 +282,9 @@ def prepare_calibration(
     data = read_model_data(model, data_path, source_name=data_name)
     substeps = substeps or loop_substeps(model, data.step_s)
     md = ModelData(model, data, substeps, operating_mask(data, only_when))
-    train_slice = data.window(*train)
-    test_slice = data.window(*test) if test is not None else None
+    train_slice = data.window(*train, label="training window")
+    test_slice = data.window(*test, label="test window") if test is not None else None
+    filter_notes = _operating_filter_notes(md, only_when, train_slice, test_slice)
     window_notes = [f"the {name} window ends at {end.strip()}T00:00, the first instant of that day (a date alone is "
                     f"its midnight): write {end.strip()}T23:59 to include the day"
                     for name, end, cut in (("training", train[1], train_slice),
@@ -279,6 +300,7 @@ def prepare_calibration(
             window_notes.append(f"the test window overlaps the training window by {overlap} {steps} (a window's end is "
                                 "inclusive): its metrics are partly on data the calibration fitted")
         window_notes += inputs_beyond_training(md, train_slice, test_slice)
+    window_notes += filter_notes
     unscored_s = md.unscored_start_s(train_slice)
     train_s = (train_slice.stop - train_slice.start) * data.step_s
     if train_s <= unscored_s:

@@ -469,8 +469,8 @@ def compare_calibration_strategies(
     model = assemble(store, model_name)
     data = read_model_data(model, data_path)
     model_data = ModelData(model, data, substeps or loop_substeps(model, data.step_s))
-    train_slice = data.window(*train)
-    test_slice = data.window(*test) if test is not None else None
+    train_slice = data.window(*train, label="training window")
+    test_slice = data.window(*test, label="test window") if test is not None else None
     regimes, labels = boundary_regimes(model_data, train_slice, seed=seed)
     return compare_strategies(model_data, train_slice, labels, test=test_slice, rules=regimes.rules_,
                               n_folds=n_folds, seed=seed)

@@ -19,8 +19,10 @@ from datetime import datetime
 import pyoxigraph as ox
 
 from service import __version__
+from service.calibration.metrics import on_interval_scale
 from service.calibration.record import CalibrationRecord, PredictiveBand
 from service.graph.namespaces import GT, GTR, PROV, RDF, RDFS, XSD, distinct_local_names
+from service.graph.units import difference_unit
 
 __all__ = ["run_iri", "calibration_triples", "software_agent", "band_json", "BAND_MAX_POINTS"]
 
@@ -101,22 +103,23 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
                                         *(n for row in record.regimes for n in row["rmse"])])
     for window, per_sensor in record.metrics.items():
         for sensor, metrics in per_sensor.items():
+            error_unit = difference_unit(metrics.unit)
             for attribute in METRIC_ATTRIBUTES:
                 value = getattr(metrics, attribute)
-                if not math.isfinite(value):
-                    continue
+                if not math.isfinite(value) or (attribute.endswith("percent") and on_interval_scale(metrics.unit)):
+                    continue  # a ratio to the mean of readings in °C depends on the scale's zero
                 unit = ("%" if attribute.endswith("percent") else
-                        "1" if attribute in ("r2", "lag1_autocorrelation") else metrics.unit)
+                        "1" if attribute in ("r2", "lag1_autocorrelation") else error_unit)
                 t += _metric_triples(ox.NamedNode(f"{run.value}/metric/{window}/{sensor_name[sensor]}/{attribute}"),
                                      run, sensor, window, attribute, value, unit)
             for interval in metrics.coverage:
                 for name, value, unit in (("coverage", interval.coverage, "1"), ("ace", interval.ace, "1"),
-                                          ("mean_interval_width", interval.mean_width, metrics.unit)):
+                                          ("mean_interval_width", interval.mean_width, error_unit)):
                     if math.isfinite(value):
                         node = ox.NamedNode(f"{run.value}/metric/{window}/{sensor_name[sensor]}/{name}/{interval.level:g}")
                         t += _metric_triples(node, run, sensor, window, name, value, unit)
                         t.append(ox.Triple(node, GT.intervalLevel, _double(interval.level)))
-    units = {sensor: m.unit for sensor, m in record.metrics.get("test", {}).items()}
+    units = {sensor: difference_unit(m.unit) for sensor, m in record.metrics.get("test", {}).items()}
     for row in record.regimes:
         regime = ox.NamedNode(f"{run.value}/regime/{row['regime']}")
         t += [ox.Triple(regime, RDF.type, GT.OperatingRegime), ox.Triple(regime, PROV.wasGeneratedBy, run),

@@ -97,15 +97,20 @@ def reports_errors(command: Callable[P, None]) -> Callable[P, None]:
     return run
 
 
-def open_store(store: Path, memory: bool, *, reading: bool = False) -> GraphStore:
+def open_store(store: Path, memory: bool, *, reading: bool = False, start_from: str | None = None) -> GraphStore:
     """The embedded store with the ontology subsets and the signature library loaded. ``reading``:
     the command only reads results, so a folder that holds no store is an error (a mistyped
-    ``--store`` would otherwise be a new, empty store).
+    ``--store`` would otherwise be a new, empty store). ``start_from``: a model whose stored
+    calibration the command starts from, which a throw-away store cannot hold.
 
     :raises StoreInUseError: another process holds the store.
+    :raises InputError: no store at ``store`` (``reading``), or ``start_from`` with ``memory``.
     """
     if reading and not memory and not store.is_dir():
         raise InputError(f"no store at {store}: give --store the folder a calibration or diagnosis wrote")
+    if memory and start_from:
+        raise InputError(f"--start-from {start_from} reads that model's calibration from the store, and --memory "
+                         f"starts an empty one: drop --memory (the store is {store}, or give --store)")
     graph_store = GraphStore.embedded(None if memory else store)
     graph_store.ensure_ontologies()
     ensure_signature_library(graph_store, SignatureLibrary.load())

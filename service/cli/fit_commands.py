@@ -45,7 +45,8 @@ def calibrate_command(
     data: MeasurementsArgument,
     train: TrainWindowOption = "/",
     test: TestWindowOption = None,
-    method: Annotated[str, typer.Option(help="point (least squares) or bayes (KOH, PT-MCMC).")] = "point",
+    method: Annotated[str, typer.Option(help="point (least squares) or bayes (KOH, PT-MCMC: minutes, not seconds; "
+                                             "docs/calibration.md).")] = "point",
     name: NameOption = None,
     seed: SeedOption = 0,
     plots: Annotated[Path | None, typer.Option(help="Folder for measured-vs-model plots.")] = None,
@@ -61,12 +62,14 @@ def calibrate_command(
     """Calibrate MODEL against DATA; estimates, metrics and provenance are written to the store."""
     from service.workflows.runs import calibrate_model  # SciPy and scikit-learn load with the command, not with --help
 
-    graph_store = open_store(store, memory)
+    graph_store = open_store(store, memory, start_from=start_from)
     with loaded_model_file(graph_store, model, name) as model_name:
         request = checked_request(CalibrateRequest, model=model_name, measurements=str(data), train=train, test=test,
                                   method=method, seed=seed, only_when=only_when or [],
                                   gp_inputs=gp_input or list(DEFAULT_GP_INPUTS), start_from=start_from)
-        outcome = calibrate_model(graph_store, request, data, progress=not as_json)
+        # the bar shows on a terminal; written to a file or a pipe, each convergence check is a line
+        said = None if as_json or console.is_terminal else (lambda m: console.print(f"{m}…", markup=False))
+        outcome = calibrate_model(graph_store, request, data, progress=not as_json, on_progress=said)
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
         plot_run(outcome, plots / f"{outcome.record.run_id}.png")
@@ -99,7 +102,7 @@ def _diagnosis_command(rank_effects: bool, doc: str):
     ) -> None:
         from service.workflows.runs import diagnose_model
 
-        graph_store = open_store(store, memory)
+        graph_store = open_store(store, memory, start_from=start_from)
         with loaded_model_file(graph_store, model, name) as model_name:
             request = checked_request(DiagnoseRequest, model=model_name, measurements=str(data), train=train,
                                       test=test, seed=seed, only_when=only_when or [], start_from=start_from)

@@ -14,6 +14,7 @@ from service.calibration.metrics import on_interval_scale
 from service.cli.common import DEFAULT_STORE, console
 from service.graph.namespaces import local_name
 from service.graph.units import difference_label, difference_unit, quantity_text, unit_label
+from service.model.wiring import parameter_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
     from service.calibration.record import CalibrationRecord
@@ -23,8 +24,8 @@ if TYPE_CHECKING:  # the calibration and diagnosis modules load with the command
 __all__ = ["print_metrics", "print_calibration", "print_regimes", "print_data_warnings", "plot_run", "print_diagnosis",
            "save_diagnosis_plots"]
 
-#: A parameter key (``<component IRI>#<name>``) in a sentence, read as ``<component's node>.<name>``.
-_PARAMETER_KEY = re.compile(r"\S*/component/[^/\s]+/([^\s/#]+)#(\w+)")
+#: A parameter key (``<component IRI>#<name>``) in a sentence, read as ``<node>.<name>`` (:func:`parameter_label`).
+_PARAMETER_KEY = re.compile(r"\S*/component/[^\s#]+#\w+")
 
 
 def print_metrics(title: str, metrics: dict) -> None:
@@ -56,7 +57,7 @@ def print_calibration(record: CalibrationRecord) -> None:
         table.add_column(column, overflow="fold")
     for e in record.estimates:
         table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", unit_label(e.unit),
-                      "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(r"\1.\2", "; ".join(e.reasons)))
+                      "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(lambda m: parameter_label(m[0]), "; ".join(e.reasons)))
     console.print(table)
     if record.diagnostics.start is not None:
         console.print(record.diagnostics.start, markup=False, highlight=False)
@@ -172,6 +173,10 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         command = ["graphtwin", "add-effect", str(model_file), "--effect", answer.effect, "--target", answer.node,
                    "-o", str(added)]
         console.print(f"add it to the model: {shlex.join(command)}", markup=False, soft_wrap=True)  # one line to copy
+    if report.told_apart:
+        console.print("  not the answer, though significant:", markup=False)
+        for other in report.told_apart:
+            console.print(f"    – {other.describe()}", markup=False)
     for lookalike in report.indistinguishable:
         console.print(f"  {lookalike.effect.effect} at {local_name(lookalike.effect.node)} would be told apart by:")
         for text in lookalike.would_separate:

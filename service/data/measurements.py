@@ -86,8 +86,9 @@ class MeasuredData:
             mask &= np.isfinite(values)
         return mask
 
-    def window(self, start: datetime | str | None, end: datetime | str | None) -> slice:
-        """Index slice of the steps with ``start ≤ t ≤ end`` (None: the data's first / last).
+    def window(self, start: datetime | str | None, end: datetime | str | None, label: str = "window") -> slice:
+        """Index slice of the steps with ``start ≤ t ≤ end`` (None: the data's first / last); ``label``
+        names the window in errors (``"training window"``).
 
         :raises InputError: a window outside the data or empty, naming the data's range; a window
             reaching more than one step beyond the data's first or last time stamp (``2026-01-14``
@@ -95,9 +96,9 @@ class MeasuredData:
             day is not cut silently).
         """
         first, last = self.timestamps[0], self.timestamps[-1]
-        lo = first if start is None else self._bound(start, "start")
-        hi = last if end is None else self._bound(end, "end")
-        window, data = f"window {self.shown(lo)} – {self.shown(hi)}", f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
+        lo = first if start is None else self._bound(start, f"{label}'s start")
+        hi = last if end is None else self._bound(end, f"{label}'s end")
+        window, data = f"{label} {self.shown(lo)} – {self.shown(hi)}", f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
         if lo > last or hi < first:  # before the order: an open end is the data's, not the user's
             raise InputError(f"{window} lies outside {data}")
         if hi < lo:
@@ -123,7 +124,7 @@ class MeasuredData:
         if with_offset != self.utc:
             stamps = "with a UTC offset (read as UTC)" if self.utc else "without a UTC offset (local time)"
             wanted = "with an offset too (…T06:00-07:00, or …T13:00Z)" if self.utc else "without an offset"
-            raise InputError(f"the window's {which} {text!r}: the data {self.source} give their time stamps {stamps}; "
+            raise InputError(f"the {which} {text!r}: the data {self.source} give their time stamps {stamps}; "
                              f"give it {wanted}")
         return np.datetime64(stamp, "s")
 

@@ -27,7 +27,7 @@ from service.diagnosis.localization import FailureLocation, FlowTopology, locali
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
 from service.diagnosis.report import FAILURE_RATIO, DiagnosisReport, SensorVerdict, diagnosis_triples, fails_at
 from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
-from service.diagnosis.separation import indistinguishable
+from service.diagnosis.separation import indistinguishable, told_apart
 from service.diagnosis.unit_mixup import unit_mixups
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
@@ -106,7 +106,7 @@ def diagnose(
                                     workers=workers, say=say, **drift)
                        if rank_effects else ([], []))
     answer = next((e for e in ranked if e.significant), None)
-    lookalikes = []
+    lookalikes, others = [], []
     if answer is not None:  # one story: where the missing effect shows, a failure is located
         sensors = {node: replace(verdict, shows_missing_effect=answer.error_removed_at(node) >= MIN_TEST_IMPROVEMENT)
                    for node, verdict in sensors.items()}
@@ -114,6 +114,7 @@ def diagnose(
         _, run_window, evaluation = split_windows(base.train, test_slice)
         lookalikes = indistinguishable(answer, ranked, md, run_window, evaluation,
                                        {node: verdict.noise for node, verdict in sensors.items()})
+        others = told_apart(answer, ranked, lookalikes)
     say("locating the failures")
     localization = locate({n: s.located for n, s in sensors.items()})
     regimes = _regimes_with_worst(base.regimes.rows(), sensors, test_slice.stop - test_slice.start)
@@ -138,7 +139,7 @@ def diagnose(
         data_warnings=list(base.record.diagnostics.warnings) + (unit_mixups(
             data, md.units, observed, [predicted, predict_test(md, base.train, test_slice, md.default_theta())],
             failing) if failing else []),
-        indistinguishable=lookalikes, residual_trend=trends,
+        indistinguishable=lookalikes, told_apart=others, residual_trend=trends,
     )
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
     return report

@@ -20,7 +20,7 @@ from service.diagnosis.episodes import Episode
 from service.diagnosis.localization import FailureLocation
 from service.diagnosis.ranking import EffectEvidence
 from service.diagnosis.residual_dependence import Dependence, TimeTrend
-from service.diagnosis.separation import Lookalike
+from service.diagnosis.separation import Lookalike, ToldApart
 from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 from service.graph.units import difference_label
 
@@ -99,6 +99,7 @@ class DiagnosisReport:
     failure_ratio: float = FAILURE_RATIO
     data_warnings: list[str] = field(default_factory=list)  # reading the data and assembling: frozen points, gaps
     indistinguishable: list[Lookalike] = field(default_factory=list)  # significant, tied with the answer
+    told_apart: list[ToldApart] = field(default_factory=list)  # significant, not tied: why not the answer
     residual_trend: dict[str, TimeTrend] = field(default_factory=dict)
 
     @property
@@ -171,6 +172,7 @@ class DiagnosisReport:
             "effects": [e.to_dict() for e in self.effects],
             "answer": self.answer.to_dict() if self.answer is not None else None,
             "indistinguishable": [lookalike.to_dict() for lookalike in self.indistinguishable],
+            "told_apart": [other.to_dict() for other in self.told_apart],
             "effects_tested": self.effects_tested,
             "nothing_significant_missing": not self.significant if self.effects_tested else None,
             "not_applicable": self.not_applicable,
@@ -195,8 +197,12 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
          ox.Triple(run, RDFS.comment, ox.Literal(report.summary))]
     t += [ox.Triple(run, GT.notApplicable, ox.Literal(reason)) for reason in report.not_applicable]
     node_name = distinct_local_names(item.node for item in report.effects)
+
+    def candidate_node(item: EffectEvidence) -> ox.NamedNode:
+        return ox.NamedNode(f"{run.value}/candidate/{item.effect}/{node_name[item.node]}")
+
     for rank, item in enumerate(report.effects, start=1):
-        node = ox.NamedNode(f"{run.value}/candidate/{item.effect}/{node_name[item.node]}")
+        node = candidate_node(item)
         t += [ox.Triple(node, RDF.type, GT.EffectCandidate), ox.Triple(node, PROV.wasGeneratedBy, run),
               ox.Triple(node, GT.candidateEffect, ox.NamedNode(item.effect_iri)),
               ox.Triple(node, GT.onNode, ox.NamedNode(item.node)),
@@ -211,10 +217,15 @@ def diagnosis_triples(report: DiagnosisReport) -> list[ox.Triple]:
                   ox.Triple(drift, RDFS.label, ox.Literal(item.label))]
         tied = next((lookalike for lookalike in report.indistinguishable if lookalike.effect is item), None)
         if tied is not None:
-            answer = report.answer
-            t.append(ox.Triple(node, GT.indistinguishableFrom,
-                               ox.NamedNode(f"{run.value}/candidate/{answer.effect}/{node_name[answer.node]}")))
+            t.append(ox.Triple(node, GT.indistinguishableFrom, candidate_node(report.answer)))
             t += [ox.Triple(node, GT.wouldSeparate, ox.Literal(text)) for text in tied.would_separate]
+        apart = next((other for other in report.told_apart if other.effect is item), None)
+        if apart is not None:
+            t.append(ox.Triple(node, GT.toldApartFrom, candidate_node(report.answer)))
+            distances = ((GT.fitDistance, apart.fit_z), (GT.heldOutDistance, apart.held_out_z))
+            t += [ox.Triple(node, predicate, dbl(z)) for predicate, z in distances if z is not None and np.isfinite(z)]
+            if apart.ruled_out:
+                t.append(ox.Triple(node, RDFS.comment, ox.Literal(f"ruled out by the physics: {apart.ruled_out}")))
         for predicate, value in ((GT.scoreStatistic, item.score.statistic), (GT.pValue, item.score.p_value),
                                  (GT.deltaBic, item.delta_bic), (GT.testImprovement, item.test_improvement)):
             if np.isfinite(value):

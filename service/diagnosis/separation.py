@@ -25,8 +25,10 @@ from service.diagnosis.ranking import EffectEvidence
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text
 
-__all__ = ["Lookalike", "indistinguishable", "errors_tie"]
+__all__ = ["Lookalike", "ToldApart", "errors_tie", "indistinguishable", "paired_z", "told_apart"]
 
+#: Two candidates' errors tie within this many standard errors of their paired difference.
+TIE_STANDARD_ERRORS = 2.0
 #: A difference a sensor would see: this many times its accuracy (RMS over the evaluation half).
 SEPARATING_ACCURACIES = 3.0
 #: How far a boundary input is moved for "operation the data lack": ± this in K for a temperature,
@@ -57,18 +59,60 @@ class Lookalike:
                 "would_separate": list(self.would_separate)}
 
 
-def errors_tie(a: np.ndarray | None, b: np.ndarray | None) -> bool:
-    """True when two candidates' per-step errors over the same steps (:attr:`EffectEvidence.fit_step_errors`
-    or ``evaluation_step_errors``) sum to totals at most 2 standard errors of the sum of their
-    differences d apart (Var Σd ≈ n·var(d) / (n_eff/n), from d's lag-1 autocorrelation); False where
-    either is missing or they cover different steps."""
+def paired_z(a: np.ndarray | None, b: np.ndarray | None) -> float | None:
+    """How far apart two candidates' per-step errors over the same steps (:attr:`EffectEvidence.fit_step_errors`
+    or ``evaluation_step_errors``) are: |Σd| over the standard error of the sum of their differences d
+    (Var Σd ≈ n·var(d) / (n_eff/n), from d's lag-1 autocorrelation); 0 for fewer than 3 steps or no
+    difference; None where either is missing or they cover different steps."""
     if a is None or b is None or a.shape != b.shape:
-        return False
+        return None
     d = a - b
     if d.size < 3 or not np.any(d):
-        return True
+        return 0.0
     standard_error = float(np.sqrt(d.size * np.var(d) / effective_sample_fraction(d)))
-    return abs(float(d.sum())) <= 2.0 * standard_error
+    return abs(float(d.sum())) / standard_error if standard_error > 0.0 else float("inf")
+
+
+def errors_tie(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """True when two candidates' per-step errors are at most :data:`TIE_STANDARD_ERRORS` standard
+    errors apart (:func:`paired_z`); False where either is missing or they cover different steps."""
+    z = paired_z(a, b)
+    return z is not None and z <= TIE_STANDARD_ERRORS
+
+
+@dataclass(frozen=True)
+class ToldApart:
+    """A significant candidate the data do tell from the answer: its errors' distance from the
+    answer's (:func:`paired_z`) on the fit windows and on the held-out half, or the physics that
+    rules it out where the answer's does not."""
+
+    effect: EffectEvidence
+    fit_z: float | None
+    held_out_z: float | None
+    ruled_out: str = ""
+
+    def describe(self) -> str:
+        e = self.effect
+        if self.ruled_out:
+            return f"{e.effect} at {local_name(e.node)}: ruled out by the physics ({self.ruled_out})"
+        distances = [f"{z:.1f} on the {where}" for z, where in ((self.fit_z, "fit windows"),
+                                                                  (self.held_out_z, "held-out half")) if z is not None]
+        return (f"{e.effect} at {local_name(e.node)}: its errors differ from the answer's by {' and '.join(distances)} "
+                f"standard errors (within {TIE_STANDARD_ERRORS:g} they would tie)")
+
+    def to_dict(self) -> dict:
+        e = self.effect
+        return {"effect_id": e.effect, "target": e.node, "fit_z": self.fit_z, "held_out_z": self.held_out_z,
+                "ruled_out": self.ruled_out or None, "text": self.describe()}
+
+
+def told_apart(answer: EffectEvidence, ranked: list[EffectEvidence], lookalikes: list[Lookalike]) -> list[ToldApart]:
+    """The significant candidates other than ``answer`` and its look-alikes: why each is not the answer."""
+    tied = {id(lookalike.effect) for lookalike in lookalikes}
+    return [ToldApart(e, paired_z(answer.fit_step_errors, e.fit_step_errors),
+                      paired_z(answer.evaluation_step_errors, e.evaluation_step_errors),
+                      e.demoted if e.implausible and not answer.implausible else "")
+            for e in ranked if e.significant and e is not answer and id(e) not in tied]
 
 
 def indistinguishable(answer: EffectEvidence, ranked: list[EffectEvidence], md: ModelData, run_window: slice,

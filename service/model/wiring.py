@@ -26,7 +26,7 @@ from service.matching.signature import Signature
 from service.model.assembled_model import ComponentInstance, Connection, MeasurementLink, ParameterRef
 
 __all__ = [
-    "MatchValues", "UnconnectedInput", "component_iri", "without_model", "short_name", "modeled_nodes", "best_match_per_anchor",
+    "MatchValues", "UnconnectedInput", "component_iri", "without_model", "parameter_label", "short_name", "modeled_nodes", "best_match_per_anchor",
     "instantiate", "wire", "measured_outputs", "split_parameters",
 ]
 
@@ -56,6 +56,15 @@ def without_model(key: str) -> str:
     """A component IRI or parameter key without its model: ``…/model/NAME/component/Fan/supply_fan#c1``
     → ``Fan/supply_fan#c1``, the same for every name (or version) the building model is loaded under."""
     return key.rsplit("/component/", 1)[-1]
+
+
+def parameter_label(key: str) -> str:
+    """A parameter key as people read it, ``<node>.<name>``: ``…/component/Fan/supply_fan#c1`` →
+    ``supply_fan.c1``; an effect's (``…/component/ValveLeakage/heating_valve/on/heating_coil_air_side#leakage_fraction``)
+    names the node the effect is at, ``heating_valve.leakage_fraction``."""
+    component, _, name = without_model(key).partition("#")
+    parts = component.split("/")
+    return f"{parts[1] if len(parts) > 1 else parts[0]}.{name}"
 
 
 def short_name(iri: str) -> str:

@@ -70,6 +70,13 @@ def test_results_are_queryable_with_sparql(synthetic, point_run):
     for sensor, m in point_run.record.metrics["test"].items():
         parts = [(float(r["share"].value), float(r["value"].value)) for r in mine if "regime" in r and r["sensor"].value == sensor]
         assert sum(s * v**2 for s, v in parts) == pytest.approx(m.rmse**2, rel=0.1), sensor
+    # an error of readings in °C is stated in K; no ratio to the mean of an interval scale is written
+    air = [r for r in metrics if r["sensor"].value == EX + "coil_outlet_air_temperature_sensor"]
+    assert {r["unit"].value for r in air if r["metric"].value in ("rmse", "mae", "noise")} == {"K"}
+    assert not {r["metric"].value for r in air} & {"cv_rmse_percent", "nmbe_percent"}
+    power = [r for r in metrics if r["sensor"].value == EX + "fan_power_meter" and "regime" not in r]
+    assert {r["metric"].value for r in power} >= {"cv_rmse_percent", "nmbe_percent"}
+    assert {r["unit"].value for r in power if r["metric"].value == "rmse"} == {"W"}
     history = store.run_named_query("parameter-history", model="case", name="integral_time")
     assert len(history) >= 1 and history[0]["unit"].value == "s"
 
@@ -369,7 +376,7 @@ def test_a_model_version_starts_from_the_latest_calibration_of_another(point_run
     for j, ref in enumerate(model.estimated_parameters):
         assert theta[j] == (ref.spec.default if ref.key in effect_keys else pytest.approx(base[ref.key], rel=1e-12))
     assert [run.rsplit("/", 1)[-1] for run in runs] == [point_run.record.run_id]
-    assert f"{len(base)} of {len(theta)} parameters" in note and "motor_heat_fraction" in note
+    assert f"{len(base)} of {len(theta)} parameters" in note and note.endswith("supply_fan.motor_heat_fraction")
 
 
 def test_recalibrating_after_an_effect_from_the_base_fit_finds_the_truths_basin(tmp_path):
@@ -390,7 +397,8 @@ def test_recalibrating_after_an_effect_from_the_base_fit_finds_the_truths_basin(
     theta = np.array([at_truth[without_model(r.key)] for r in after.model.estimated_parameters])
     truth_cost = 0.5 * np.sum(problem.weighted_residuals(problem.run(theta[None, :])) ** 2)
     assert after.record.diagnostics.cost <= 1.01 * truth_cost
-    assert "ValveLeakage" in after.record.diagnostics.start.split("at their defaults: ")[1]
+    defaults = after.record.diagnostics.start.split("at their defaults: ")[1]
+    assert defaults == f"{truth.node.rsplit('#', 1)[-1]}.leakage_fraction", defaults  # read as node.name, not a key
 
 
 def test_a_comparison_of_a_version_starts_its_base_fit_where_told(synthetic, point_run):

@@ -407,6 +407,9 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
     refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--gp-input", "supply_air_flow"])
     assert refused.exit_code == 2 and "a point calibration has no discrepancy" in refused.output
     no_start = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--start-from", "v0"])
+    assert no_start.exit_code == 2 and "--memory starts an empty one: drop --memory" in no_start.output
+    no_start = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--store", str(tmp_path / "store"),
+                                   "--start-from", "v0"])
     assert no_start.exit_code == 2 and "start from 'v0': no such model in the store" in no_start.output
 
 
@@ -478,3 +481,19 @@ def test_a_bayesian_runs_metrics_show_the_90_percent_intervals_ace_and_width(mon
                                        for line in text.splitlines())
     printing.print_metrics("Metrics, train window", {EX + "a_sensor": SimpleNamespace(**common, coverage=())})
     assert "ACE" not in printed.export_text()  # a point fit has no intervals
+
+
+def test_a_calibration_written_to_a_file_says_how_far_sampling_is(tmp_path, monkeypatch):
+    """No terminal, no progress bar: each convergence check the sampler reports is a line."""
+    import service.workflows.runs as runs
+    from service.errors import CalibrationError
+
+    def sampling(store, request, data, *, progress=False, on_progress=None):
+        on_progress("sampling: step 100 of 2000 expected (at most 4000), IAT 12")
+        raise CalibrationError("stopped here")
+
+    monkeypatch.setattr(runs, "calibrate_model", sampling)
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
+    result = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--method", "bayes"])
+    assert result.exit_code == 2 and "sampling: step 100 of 2000 expected (at most 4000), IAT 12…" in result.output

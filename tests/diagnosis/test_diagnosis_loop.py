@@ -150,6 +150,26 @@ def test_an_operating_filter_holds_for_the_base_fit_and_every_candidate_refit(tm
     estimate, standard_error = best.estimates["motor_heat_fraction"], best.standard_errors["motor_heat_fraction"]
     truth = LIBRARY["FanMotorHeat"].extra["synthetic_truth"]["motor_heat_fraction"]
     assert abs(estimate - truth) <= 3.0 * standard_error < 0.15, (estimate, truth, standard_error)
+    # the output says what the filter kept of each window
+    kept = [w for w in report.data_warnings if w.startswith(f"compared only where {condition}: ")]
+    assert [w.split(": ")[1].split(" of the ")[1] for w in kept] == ["training window's 144 steps",
+                                                                     "test window's 144 steps"], kept
+
+
+def test_an_operating_filter_that_keeps_no_step_of_a_window_is_named():
+    from types import SimpleNamespace
+
+    import numpy as np
+    import pytest
+
+    from service.calibration.run import _operating_filter_notes
+
+    md = SimpleNamespace(compared=np.r_[np.zeros(10, bool), np.ones(10, bool)])
+    assert _operating_filter_notes(md, ["valve > 0.9"], slice(10, 20), slice(12, 20)) == [
+        "compared only where valve > 0.9: 10 of the training window's 10 steps",
+        "compared only where valve > 0.9: 8 of the test window's 8 steps"]
+    with pytest.raises(ValueError, match=r"--only-when valve > 0.9 holds at none of the 10 steps of the training window"):
+        _operating_filter_notes(md, ["valve > 0.9"], slice(0, 10), slice(10, 20))
 
 
 def test_the_worst_regime_spans_enough_steps_to_be_a_regime_not_a_spike():

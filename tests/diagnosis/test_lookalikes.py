@@ -17,7 +17,7 @@ from service.calibration.model_data import ModelData
 from service.components.library import SignatureLibrary
 from service.data.model_series import read_model_data
 from service.diagnosis.ranking import EffectEvidence, ScoreTest
-from service.diagnosis.separation import errors_tie, indistinguishable
+from service.diagnosis.separation import errors_tie, indistinguishable, paired_z, told_apart
 from service.model.assembly import assemble
 from service.model.effect_splicing import EffectRequest
 
@@ -54,6 +54,25 @@ def test_a_lookalike_ties_on_the_fit_windows_and_held_out_and_is_as_plausible_as
     doubtful = replace(answer, implausible=True)
     assert [lookalike.effect.effect for lookalike in indistinguishable(
         doubtful, [doubtful, impossible], None, slice(0, 288), slice(144, 288), {})] == ["D"]
+
+
+def test_the_significant_candidates_told_apart_from_the_answer_say_how_far_or_why():
+    rng = np.random.default_rng(2)
+    errors = rng.chisquare(1, 144) / 144
+    answer = _evidence("A", "n", errors)
+    tied = _evidence("B", "n", errors + rng.normal(0, 1e-4, 144))
+    worse = _evidence("C", "n", 1.5 * errors)
+    impossible = replace(_evidence("D", "n", 3.0 * errors), implausible=True, demoted="it fits only at its bound")
+    quiet = replace(_evidence("E", "n", 3.0 * errors), significant=False)
+    lookalikes = indistinguishable(answer, [answer, tied, worse, impossible, quiet], None, slice(0, 288),
+                                   slice(144, 288), {})
+    apart = told_apart(answer, [answer, tied, worse, impossible, quiet], lookalikes)
+    assert [other.effect.effect for other in apart] == ["C", "D"]  # neither the look-alike nor the insignificant
+    z = paired_z(errors, 1.5 * errors)
+    assert z > 2 and apart[0].fit_z == pytest.approx(z) and apart[0].held_out_z == pytest.approx(z)
+    assert f"differ from the answer's by {z:.1f} on the fit windows and {z:.1f} on the held-out half" in apart[0].describe()
+    assert apart[1].describe().endswith("ruled out by the physics (it fits only at its bound)")
+    assert paired_z(errors, errors) == 0.0 and paired_z(errors, None) is None
 
 
 @pytest.fixture(scope="module")

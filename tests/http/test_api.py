@@ -712,7 +712,7 @@ def test_a_bad_setting_is_named_by_its_variable_or_option(monkeypatch):
 
 
 @pytest.mark.parametrize("kind, fields, expected", [
-    ("calibrate", {"train": "2030-01-01/2030-01-02"}, "window 2030-01-01T00:00 – 2030-01-02T00:00 lies outside "
+    ("calibrate", {"train": "2030-01-01/2030-01-02"}, "training window 2030-01-01T00:00 – 2030-01-02T00:00 lies outside "
                                                         "the data upload {upload}"),
     ("calibrate", {"method": "bayes", "gp_inputs": ["time", "supply_air_flw"]}, "supply_air_flw"),
     ("calibrate", {"gp_inputs": ["time", "supply_air_flow"]}, "a point calibration has no discrepancy"),

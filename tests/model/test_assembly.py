@@ -11,7 +11,7 @@ from service.graph.store import GraphStore
 from service.model.assembly import assemble
 from service.model.assembly_triples import assembly_triples
 from service.model.effect_splicing import EffectRequest
-from service.model.wiring import measured_outputs
+from service.model.wiring import measured_outputs, parameter_label
 
 
 def _nodes(model, components):
@@ -60,6 +60,9 @@ def test_a_recorded_effect_is_spliced_on_reassembly(tmp_path):
     into_coil = [c for c in model.connections if (c.target, c.target_port) == (coil, "inlet_air_temperature")]
     assert [model.components[c.source].signature.id for c in into_coil] == ["FanMotorHeat"]
     assert {r.name for r in model.estimated_parameters} >= {"motor_heat_fraction"}
+    # a key read as people read it: the node and the name, for the effect's parameter and a component's
+    labels = {parameter_label(r.key) for r in model.estimated_parameters}
+    assert {"supply_fan.motor_heat_fraction", "supply_fan.c1"} <= labels and not any("/" in label for label in labels)
 
 
 def test_an_effect_where_its_pattern_does_not_match_is_refused(case_store):

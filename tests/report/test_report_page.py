@@ -386,7 +386,15 @@ def test_graphtwin_report_writes_the_page_from_an_on_disk_store(case, tmp_path):
                                        "--store", str(folder)], env={"COLUMNS": "400"})
     assert unknown.exit_code == 2 and "no calibration run 'case-point-00000000'" in unknown.output
     assert f"at {folder} (--store: the folder the run was written to)" in unknown.output  # the store searched
+    assert "the latest runs are" in unknown.output and case.version.run_id in unknown.output
     assert not (tmp_path / "x.html").exists()
+    # a model's name given for a run: its own latest runs, the diagnosed one with its diagnosis's id
+    del unknown  # its exit's traceback holds the store open in this process
+    gc.collect()
+    named = CliRunner().invoke(cli, ["report", "case", "-o", str(tmp_path / "x.html"), "--store", str(folder)],
+                               env={"COLUMNS": "400"})
+    assert named.exit_code == 2 and "'case' is a model, and its latest runs are" in named.output, named.output
+    assert f"{case.report.run_id} (its diagnosis {case.report.run_id}-diagnosis)" in named.output
 
 
 def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_versions(case, tmp_path):
@@ -407,7 +415,7 @@ def test_graphtwin_history_prints_the_error_per_sensor_and_regime_across_version
     newest = read_run(case.store, case.version.run_id)
     assert history.regime_number == {r["rule"]: str(r["regime"]) for r in newest.regimes if r["rule"] in history.regime_rmse}
     air = f"{history.rmse[EX + 'coil_outlet_air_temperature_sensor'][1]:.3g}"
-    assert air in result.output
+    assert f"{air} K" in result.output and "°C" not in result.output.split("Test RMSE per operating regime")[0]
     assert imread(plot).shape[0] > imread(plot).shape[1] / len(history.rmse)  # two rows of panels
     missing = CliRunner().invoke(cli, ["history", "nothing", "--store", str(folder)])
     assert missing.exit_code == 2 and "no calibration with a test window" in missing.output
