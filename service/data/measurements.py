@@ -98,7 +98,8 @@ class MeasuredData:
         first, last = self.timestamps[0], self.timestamps[-1]
         lo = first if start is None else self._bound(start, f"{label}'s start")
         hi = last if end is None else self._bound(end, f"{label}'s end")
-        window, data = f"{label} {self.shown(lo)} – {self.shown(hi)}", f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
+        window = f"{label} {self.shown(lo)} – {self.shown(hi)}"
+        data = f"the data {self.source} ({self.shown(first)} – {self.shown(last)})"
         if lo > last or hi < first:  # before the order: an open end is the data's, not the user's
             raise InputError(f"{window} lies outside {data}")
         if hi < lo:
@@ -439,7 +440,13 @@ def read_measurements(
         stamps = grid
     unfilled = defaultdict(list)  # (runs, where the series is missing) → the devices with those gaps
     for node in list(converted):
+        gaps = np.isnan(converted[node])
         converted[node], long_runs = _fill_short_gaps(converted[node], max_gap_steps, hold=specs[node].steps)
+        filled = gaps & ~np.isnan(converted[node])
+        if filled.any():
+            how = "holding the last value" if specs[node].steps else "interpolating"
+            warnings.append(f"column {header[claimed[node]]!r}: {int(filled.sum())} missing step(s) filled by {how} "
+                            f"(the first at {_stamp_text(stamps[int(np.argmax(filled))], True in first_with_offset)})")
         if long_runs:
             unfilled[(long_runs, np.isnan(converted[node]).tobytes())].append(node)
     for (long_runs, _), nodes in unfilled.items():

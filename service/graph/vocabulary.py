@@ -4,9 +4,10 @@ A class, property or value in an ontology's namespace that the ontology does not
 often a misspelling (``s4bldg:Sensr``, ``fso:suppliesFluidToo``, ``s4bldg:nominalAirflowRate``):
 graphtwin's signatures then see less of the graph than its author wrote. Each such term gets one
 sentence naming a node that uses it and the declared term of its kind (class, property, or a value a
-property points to) its local name is closest to (the same letters apart from case, or ``difflib``
-ratio ≥ 0.85). The loaded ontologies are subsets of the official ones, so a term is only called a
-misspelling where a declared term is that close, or where nothing else lets a signature see the node.
+property points to) its local name is closest to (the same letters apart from case, ``difflib``
+ratio ≥ 0.85, or one edit apart outside Brick). The loaded ontologies are subsets of the official
+ones, so a term is only called a misspelling where a declared term is that close, or where nothing
+else lets a signature see the node.
 """
 
 from __future__ import annotations
@@ -70,9 +71,24 @@ def closest_declared(term: str, declared: dict[str, list[str]]) -> str | None:
     name is closest to, if one is close."""
     names, name = declared.get(namespace_of(term), []), local_name(term)
     cutoff = BRICK_CLOSE_NAME_RATIO if namespace_of(term) in _BRICK_NAMESPACES else CLOSE_NAME_RATIO
+    brick = namespace_of(term) in _BRICK_NAMESPACES
     close = ([n for n in names if n.lower() == name.lower()]
-             or difflib.get_close_matches(name, names, n=1, cutoff=cutoff))
+             or difflib.get_close_matches(name, names, n=1, cutoff=cutoff)
+             or ([] if brick or len(name) < 3 else [n for n in names if _one_edit_apart(name.lower(), n.lower())][:1]))
     return namespace_of(term) + close[0] if close else None
+
+
+def _one_edit_apart(a: str, b: str) -> bool:
+    """One letter replaced, added, dropped, or two neighbours swapped (``Fam``, ``Fna`` for ``Fan``,
+    which a ratio on three letters does not reach)."""
+    if abs(len(a) - len(b)) > 1 or a == b:
+        return False
+    if len(a) == len(b):
+        differ = [i for i, (x, y) in enumerate(zip(a, b)) if x != y]
+        return len(differ) == 1 or (len(differ) == 2 and differ[1] == differ[0] + 1
+                                    and a[differ[0]] == b[differ[1]] and a[differ[1]] == b[differ[0]])
+    short, long = sorted((a, b), key=len)
+    return any(long[:i] + long[i + 1:] == short for i in range(len(long)))
 
 
 def _nodes(first: str, count: int) -> str:

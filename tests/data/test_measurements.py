@@ -94,6 +94,8 @@ def test_schedules_are_held_in_gaps_and_resampling_where_sensors_are_interpolate
     data = read_measurements(_write(tmp_path, gap), specs)
     assert data.series["https://example.org/x#valve"] == pytest.approx([0.0, 0.0, 0.0, 0.6])
     assert data.series["https://example.org/x#sat"] == pytest.approx((np.array([50, 51, 52, 53]) - 32) / 1.8)
+    assert "column 'SAT': 2 missing step(s) filled by interpolating (the first at 2025-01-01T00:01)" in data.warnings
+    assert "column 'valve': 2 missing step(s) filled by holding the last value (the first at 2025-01-01T00:01)" in data.warnings
     # a stamp a minute off the 10-minute grid: the command takes the nearer row's value, the sensor ramps
     irregular = "time,SAT,valve\n2025-01-01 00:00,50,0\n2025-01-01 00:10,50,0\n2025-01-01 00:21,53,60\n2025-01-01 00:30,54,60\n"
     data = read_measurements(_write(tmp_path, irregular), specs)

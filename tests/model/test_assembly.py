@@ -285,16 +285,18 @@ def test_a_loop_without_its_check_valve_is_reported_where_the_connection_is_miss
                     f"{SignatureLibrary.load()['HotWaterLoop'].source_file})"], info.value.problems
 
 
-def test_a_misspelt_class_that_leaves_a_pattern_unmatched_is_named_in_the_error_with_its_spelling():
+@pytest.mark.parametrize("typo", ["fan", "Fam", "Fna", "Fann"])
+def test_a_misspelt_class_that_leaves_a_pattern_unmatched_is_named_in_the_error_with_its_spelling(typo):
     """``s4bldg:fan``: the coil then has no fan, and the error says why first (the class declared
-    nowhere, and the declared class it differs from only in case)."""
+    nowhere, and the declared class it differs from only in case); a short name one letter off
+    (replaced, swapped, added), which a similarity ratio on three letters does not reach, too."""
     text = CASE_STUDY.read_text(encoding="utf-8")
     assert "ex:supply_fan a s4bldg:Fan" in text
     store = GraphStore.embedded(None)
-    store.load_model("typo", text.replace("ex:supply_fan a s4bldg:Fan", "ex:supply_fan a s4bldg:fan").encode())
+    store.load_model("typo", text.replace("ex:supply_fan a s4bldg:Fan", f"ex:supply_fan a s4bldg:{typo}").encode())
     with pytest.raises(IncompleteModelError) as info:
         assemble(store, "typo")
-    assert info.value.problems[0].startswith("supply_fan: its class https://saref.etsi.org/saref4bldg/fan"), info.value.problems
+    assert info.value.problems[0].startswith(f"supply_fan: its class https://saref.etsi.org/saref4bldg/{typo}"), info.value.problems
     assert info.value.problems[0].endswith("(did you mean https://saref.etsi.org/saref4bldg/Fan?)")
 
 
