@@ -47,6 +47,8 @@ __all__ = [
 ]
 
 STRATEGIES = ("joint", "successive")
+#: Two fits whose every parameter agrees within this share (of the two values' mean) are one fit.
+SAME_FIT_SHARE = 1e-3
 #: Mean CV scores closer than this share of the lower are a tie: neither strategy generalises better.
 CV_TIE_SHARE = 0.01
 
@@ -357,6 +359,13 @@ class StrategyComparison:
             lines.append(f" {name:<11} {folds}   mean {result.cv_mean:.4g}   cost {result.cost:.4g}"
                          f"   {result.n_simulate_calls} simulate calls")
         lines.append(f"better on held-out data: {self.better}")
+        if self.better == "tie" and joint.theta.size:
+            apart = float(np.max(2.0 * np.abs(joint.theta - successive.theta)
+                                 / np.maximum(np.abs(joint.theta) + np.abs(successive.theta), 1e-300)))
+            lines.append(f" both ended at the same parameters (at most {100 * apart:.2g} % apart): the regimes' stages "
+                         "reach the joint fit's optimum" if apart < SAME_FIT_SHARE else
+                         f" at different parameters (up to {100 * apart:.0f} % apart) with the same held-out error: "
+                         "these data do not tell the two fits apart")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:

@@ -254,6 +254,13 @@ def test_per_regime_metrics_of_both_strategies_are_computed_on_the_regime_steps(
     successive = comparison.strategies["successive"]
     assert [s.regime for s in successive.stages] == [r for r, _ in comparison.plan] + [None]
     assert "cross-validation on 0 held-out blocks" in comparison.table() and comparison.better == "tie"
+    # a tie says whether the two ended at one fit: here three evaluations leave them apart; the same
+    # parameters on both sides are one fit
+    assert "at different parameters" in comparison.table()
+    same = dataclasses.replace(comparison, strategies={
+        name: dataclasses.replace(result, theta=comparison.strategies["joint"].theta)
+        for name, result in comparison.strategies.items()})
+    assert "both ended at the same parameters (at most 0 % apart)" in same.table()
     json.dumps(comparison.to_dict())
 
 
