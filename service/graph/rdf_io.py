@@ -23,6 +23,8 @@ __all__ = ["rdf_format", "parse_rdf", "sparql_syntax_message"]
 #: too): ``Parser error at line 3 between columns 16 and 20: ``, ``… at line 2 column 11: ``,
 #: ``… between line 2 column 11 and line 5 column 1: ``.
 _POSITION_PREFIX = re.compile(r"^Parser error (at|between) line [^:]*: ")
+#: A Turtle comment: ``#`` at a line's start or after white space (not inside an IRI) to the line's end.
+_COMMENT = re.compile(r"(^|\s)#.*$")
 _BOM = b"\xef\xbb\xbf"
 #: pyoxigraph's SPARQL syntax errors: ``error at 1:31: expected one of Prefix not found, ['%'], …``.
 _SPARQL_POSITION = re.compile(r"^error at (\d+):(\d+): (.*)$", re.DOTALL)
@@ -76,12 +78,26 @@ def _parsed(data: bytes, fmt: ox.RdfFormat, source_name: str, base_iri: str | No
     try:
         return list(ox.parse(data, format=fmt, base_iri=base_iri, lenient=lenient))
     except SyntaxError as exc:
-        message = _POSITION_PREFIX.sub("", exc.msg or str(exc))
+        message = _POSITION_PREFIX.sub("", exc.msg or str(exc)) + _continued_statement_hint(data, fmt, exc.lineno)
         raise ModelLoadError(source_name, message, exc.lineno, exc.offset) from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise ModelLoadError(source_name, str(exc)) from None
     except MemoryError as exc:  # pyoxigraph's bound on one token or comment ("Reached the buffer maximal size")
         raise ModelLoadError(source_name, f"a token or comment too long to parse ({exc})") from None
+
+
+def _continued_statement_hint(data: bytes, fmt: ox.RdfFormat, line: int | None) -> str:
+    """For Turtle and TriG: where the last line with a statement before the error's line ends with
+    ``;`` or ``,``, the parser read the error's line as more of that statement; a hint saying so."""
+    if fmt not in (ox.RdfFormat.TURTLE, ox.RdfFormat.TRIG) or not line:
+        return ""
+    before = [_COMMENT.sub("", text).rstrip() for text in data.decode("utf-8", "replace").splitlines()[: line - 1]]
+    last = next((text for text in reversed(before) if text), "")
+    if not last.endswith((";", ",")):
+        return ""
+    number = len(before) - [bool(text) for text in reversed(before)].index(True)
+    return (f" (line {number} ends with {last[-1]!r}, so the statement goes on here: if it was complete, end it "
+            "with '.')")
 
 
 def _check_well_formed_xml(data: bytes, source_name: str) -> None:

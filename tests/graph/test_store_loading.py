@@ -53,6 +53,20 @@ def test_a_syntax_error_names_its_position_once(store, doc, line, column):
     assert "Parser error" not in str(info.value) and len(re.findall(r"line \d", str(info.value))) == 1
 
 
+def test_a_statement_left_open_by_its_last_line_is_pointed_at(store):
+    """The error is where the next subject is read as a predicate; the mistake, a ';' for a '.', is on
+    the line before (a comment and a blank line between are skipped; an IRI's '#' is no comment)."""
+    doc = (b"@prefix ex: <http://ex.org/> .\nex:a ex:b <http://ex.org/c#d> ;  # the fan\n\n"
+           b"ex:e a ex:Sensor .\n")
+    with pytest.raises(ModelLoadError) as info:
+        store.load_model("m", doc, "ttl")
+    assert info.value.line == 4 and str(info.value).endswith(
+        "(line 2 ends with ';', so the statement goes on here: if it was complete, end it with '.')")
+    with pytest.raises(ModelLoadError) as info:  # nothing left open: no hint
+        store.load_model("m", b"@prefix ex: <http://ex.org/> .\nex:a ex:b ex:c ex:d .\n", "ttl")
+    assert "goes on here" not in str(info.value)
+
+
 _JSON_LD_CONTEXT = {"ex": EX, "feeds": {"@id": EX + "feeds", "@type": "@id"}}
 
 
