@@ -93,7 +93,7 @@ def effect_candidates(store: GraphStore, model_name: str,
                         if m.get(signature.splice.node)})
         if not nodes:
             why = nearest_miss(store, signature, default_graph=dataset)
-            skipped.append(f"{signature.id}: its pattern ({signature.source_file.name}) matches nowhere: {why}")
+            skipped.append(f"{signature.id}: its pattern ({signature.file_name}) matches nowhere: {why}")
         for node in nodes:
             if EffectRequest(signature.id, node) in applied:
                 skipped.append(f"{signature.id} at {local_name(node)}: already in the model (gt:hasEffect)")
@@ -113,7 +113,7 @@ def effect_candidates(store: GraphStore, model_name: str,
             kept.append(candidate)
         else:
             skipped.append(f"{candidate.signature.id} at {local_name(candidate.node)}: {specific} applies there, "
-                           f"which it yields to (yields_to in {candidate.signature.source_file.name})")
+                           f"which it yields to (yields_to in {candidate.signature.file_name})")
     return kept, skipped
 
 

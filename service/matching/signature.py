@@ -148,6 +148,11 @@ class Signature:
     yields_to: tuple[str, ...] = ()
 
     @property
+    def file_name(self) -> str:
+        """The signature file's name for messages (``hot_water_loop.toml``; no server path)."""
+        return self.source_file.name if self.source_file is not None else f"<signature {self.id}>"
+
+    @property
     def iri(self) -> str:
         return signature_iri(self.id)
 

@@ -315,7 +315,7 @@ def _describe_missing(triple: PatternTriple, signature: Signature, *, anchor: st
         side = " or ".join(sides if triple.or_reverse else sides[:1])
         stops = "".join(f"{short_name(c)} instances, " for c in triple.stop_at)
         return (f"no {what} {side} of {node} along {triple.predicate} (the search stops at {stops}building spaces, "
-                f"boilers, chillers and cooling towers; signature {signature.source_file})")
+                f"boilers, chillers and cooling towers; signature {signature.file_name})")
     if triple.subject == anchor:
-        return f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} (signature {signature.source_file})"
-    return f"no triple ?{other} <{triple.predicate}> <{node}> with ?{other} a {what} (signature {signature.source_file})"
+        return f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} (signature {signature.file_name})"
+    return f"no triple ?{other} <{triple.predicate}> <{node}> with ?{other} a {what} (signature {signature.file_name})"

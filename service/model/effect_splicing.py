@@ -82,7 +82,7 @@ def splice_effect(
             raise AssemblyError(f"effect {signature.id} at {request.node}: the model has no node {request.node}{hint}")
         raise AssemblyError(
             f"effect {signature.id} does not apply at {request.node}: its pattern "
-            f"({signature.source_file}) does not match there"
+            f"({signature.file_name}) does not match there"
         )
     match = best_match_per_anchor(matches, signature)[0]
     host = next((i for i in instances.values() if request.node in i.modeled_nodes), None)
@@ -99,7 +99,7 @@ def splice_effect(
         raise AssemblyError(
             f"effect {signature.id} at {request.node}: it splices {signature.splice.side} {signature.splice.port!r}, "
             f"which {host.signature.model} (modelling {request.node}) does not have; its {signature.splice.side}s: "
-            f"{', '.join(ports)} ({signature.source_file})"
+            f"{', '.join(ports)} ({signature.file_name})"
         )
     effect = instantiate(store, model_name, signature, match, node_name=local_name(modeled_nodes(signature, match)[0]))
     effect = dataclasses.replace(effect, iri=f"{effect.iri}/on/{short_name(host.iri)}")
