@@ -67,9 +67,13 @@ class IncompleteModelError(AssemblyError):
 
     def __init__(self, problems: Sequence[str], *, headline: str = "the model is incomplete",
                  notes: Sequence[str] = ()):
-        self.problems, self.headline, self.notes = tuple(problems), headline, tuple(notes)
+        misspelt = [note for note in notes if "(did you mean " in note]  # the likeliest cause: listed first
+        self.problems, self.headline = tuple(problems), headline
+        self.notes = tuple(misspelt + [note for note in notes if note not in misspelt])
+        cause = (f" (a misspelt term may be why: {len(misspelt)} in the notes below)"
+                 if misspelt else "")
         also = "\nthe assembly also notes:\n  - " + "\n  - ".join(self.notes) if self.notes else ""
-        super().__init__(f"{headline}:\n  - " + "\n  - ".join(self.problems) + also)
+        super().__init__(f"{headline}{cause}:\n  - " + "\n  - ".join(self.problems) + also)
 
 
 class MeasurementError(InputError):

@@ -360,7 +360,9 @@ def test_a_misspelt_class_on_a_modelled_node_and_on_one_nothing_else_types_names
         "spare_sensor: its class https://saref.etsi.org/saref4bldg/Sensr (https://example.org/ventilation-case-study#"
         "spare_sensor) is declared by no loaded ontology, and the node has no other type a signature matches: no "
         "component models it (did you mean https://saref.etsi.org/saref4bldg/Sensor?)",)
-    assert any("fso#suppliesFluidToo" in note for note in info.value.notes)
+    assert "fso#suppliesFluidToo" in info.value.notes[0]  # a misspelling first among the notes …
+    assert str(info.value).startswith(  # … and said at the top, where the problems it may cause begin
+        "the model is incomplete (a misspelt term may be why: ")
     assert "the assembly also notes:" in str(info.value)
 
 
