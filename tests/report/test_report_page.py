@@ -242,6 +242,15 @@ def test_the_regimes_and_the_ranked_effects_with_their_evidence_are_listed(case,
     assert page.count("<details><summary>numbers</summary>") == len(effects)
 
 
+def test_a_models_run_graphs_name_each_run_newest_first_with_its_diagnosis(case):
+    rows = case.store.run_named_query("calibration-run-graphs", model="case")
+    ids = [row["run_id"].value for row in rows]
+    assert case.report.run_id in ids and all(row["g"].value.endswith(f"/run/{row['run_id'].value}") for row in rows)
+    assert [row["ended"].value for row in rows] == sorted((row["ended"].value for row in rows), reverse=True)
+    diagnosed = next(row for row in rows if row["run_id"].value == case.report.run_id)
+    assert diagnosed["diagnosis_graph"].value.endswith(f"/run/{case.report.run_id}-diagnosis")
+
+
 def test_the_error_history_compares_the_model_versions(case, page):
     history = error_history(case.store, "case")
     versions, rmse = history.versions, history.rmse
