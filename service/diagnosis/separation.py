@@ -95,10 +95,14 @@ class ToldApart:
         e = self.effect
         if self.ruled_out:
             return f"{e.effect} at {local_name(e.node)}: ruled out by the physics ({self.ruled_out})"
-        distances = [f"{z:.1f} on the {where}" for z, where in ((self.fit_z, "fit windows"),
-                                                                  (self.held_out_z, "held-out half")) if z is not None]
-        return (f"{e.effect} at {local_name(e.node)}: its errors differ from the answer's by {' and '.join(distances)} "
-                f"standard errors (within {TIE_STANDARD_ERRORS:g} they would tie)")
+        distances = [(z, where) for z, where in ((self.fit_z, "fit windows"), (self.held_out_z, "held-out half"))
+                     if z is not None]
+        if not distances:
+            return f"{e.effect} at {local_name(e.node)}: its errors were not paired with the answer's"
+        (z, where), rest = distances[0], distances[1:]
+        more = "".join(f" and {z_more:.1f} on the {where_more}" for z_more, where_more in rest)
+        return (f"{e.effect} at {local_name(e.node)}: its errors lie {z:.1f} standard errors from the answer's on the "
+                f"{where}{more} (within {TIE_STANDARD_ERRORS:g} they would tie)")
 
     def to_dict(self) -> dict:
         e = self.effect

@@ -70,7 +70,8 @@ def test_the_significant_candidates_told_apart_from_the_answer_say_how_far_or_wh
     assert [other.effect.effect for other in apart] == ["C", "D"]  # neither the look-alike nor the insignificant
     z = paired_z(errors, 1.5 * errors)
     assert z > 2 and apart[0].fit_z == pytest.approx(z) and apart[0].held_out_z == pytest.approx(z)
-    assert f"differ from the answer's by {z:.1f} on the fit windows and {z:.1f} on the held-out half" in apart[0].describe()
+    assert (f"its errors lie {z:.1f} standard errors from the answer's on the fit windows and {z:.1f} on the "
+            "held-out half") in apart[0].describe()
     assert apart[1].describe().endswith("ruled out by the physics (it fits only at its bound)")
     assert paired_z(errors, errors) == 0.0 and paired_z(errors, None) is None
 
