@@ -4,6 +4,7 @@ and the one place where graphtwin's errors become a one-line message and exit co
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -40,6 +41,15 @@ app.add_typer(data_app, name="data")
 
 console = Console()
 error_console = Console(stderr=True)
+#: Columns of the tables written to a file or a pipe (no terminal to measure; COLUMNS still decides).
+PIPED_WIDTH = 160
+
+
+@app.callback()
+def _width_of_the_output() -> None:
+    # written to a file or a pipe, rich would fold every table at 80 columns: a log is read wider
+    for each in (console, error_console):
+        each.width = None if each.is_terminal or "COLUMNS" in os.environ else PIPED_WIDTH
 
 #: The exit code of a command refused for its input (a user's error, not a defect).
 USER_ERROR_EXIT_CODE = 2

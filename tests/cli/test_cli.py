@@ -497,3 +497,16 @@ def test_a_calibration_written_to_a_file_says_how_far_sampling_is(tmp_path, monk
     assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
     result = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--method", "bayes"])
     assert result.exit_code == 2 and "sampling: step 100 of 2000 expected (at most 4000), IAT 12…" in result.output
+
+
+def test_output_to_a_file_or_pipe_is_as_wide_as_a_log_is_read_and_columns_still_decides():
+    """No terminal to measure: tables are laid out 160 columns wide (rich would fold them at 80); a
+    COLUMNS the user sets still decides."""
+    from service.cli.common import PIPED_WIDTH
+
+    wide = runner.invoke(app, ["example", "list"], env={"COLUMNS": None})
+    row = next(line for line in wide.output.splitlines() if line.startswith("ventilation_case_study"))
+    assert row.rstrip().endswith("ventilation_case_study/model.ttl") and 80 < len(row) <= PIPED_WIDTH, row
+    narrow = runner.invoke(app, ["example", "list"], env={"COLUMNS": "60"})
+    row = next(line for line in narrow.output.splitlines() if line.startswith("ventilation_case_study"))
+    assert not row.rstrip().endswith("model.ttl")  # folded at 60
