@@ -25,7 +25,7 @@ from service.diagnosis.ranking import EffectEvidence
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text
 
-__all__ = ["Lookalike", "ToldApart", "errors_tie", "indistinguishable", "paired_z", "told_apart"]
+__all__ = ["Lookalike", "ToldApart", "distance_text", "errors_tie", "indistinguishable", "paired_z", "told_apart"]
 
 #: Two candidates' errors tie within this many standard errors of their paired difference.
 TIE_STANDARD_ERRORS = 2.0
@@ -95,19 +95,23 @@ class ToldApart:
         e = self.effect
         if self.ruled_out:
             return f"{e.effect} at {local_name(e.node)}: ruled out by the physics ({self.ruled_out})"
-        distances = [(z, where) for z, where in ((self.fit_z, "fit windows"), (self.held_out_z, "held-out half"))
-                     if z is not None]
-        if not distances:
-            return f"{e.effect} at {local_name(e.node)}: its errors were not paired with the answer's"
-        (z, where), rest = distances[0], distances[1:]
-        more = "".join(f" and {z_more:.1f} on the {where_more}" for z_more, where_more in rest)
-        return (f"{e.effect} at {local_name(e.node)}: its errors lie {z:.1f} standard errors from the answer's on the "
-                f"{where}{more} (within {TIE_STANDARD_ERRORS:g} they would tie)")
+        return f"{e.effect} at {local_name(e.node)}: {distance_text(self.fit_z, self.held_out_z)}"
 
     def to_dict(self) -> dict:
         e = self.effect
         return {"effect_id": e.effect, "target": e.node, "fit_z": self.fit_z, "held_out_z": self.held_out_z,
                 "ruled_out": self.ruled_out or None, "text": self.describe()}
+
+
+def distance_text(fit_z: float | None, held_out_z: float | None) -> str:
+    """How far a candidate's errors lie from the answer's (:func:`paired_z`), as a clause."""
+    distances = [(z, where) for z, where in ((fit_z, "fit windows"), (held_out_z, "held-out half")) if z is not None]
+    if not distances:
+        return "its errors were not paired with the answer's"
+    (z, where), rest = distances[0], distances[1:]
+    more = "".join(f" and {z_more:.1f} on the {where_more}" for z_more, where_more in rest)
+    return (f"its errors lie {z:.1f} standard errors from the answer's on the {where}{more} (within "
+            f"{TIE_STANDARD_ERRORS:g} they would tie)")
 
 
 def told_apart(answer: EffectEvidence, ranked: list[EffectEvidence], lookalikes: list[Lookalike]) -> list[ToldApart]:

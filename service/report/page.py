@@ -25,6 +25,7 @@ from service.calibration.metrics import on_interval_scale
 from service.diagnosis.error_history import error_history
 from service.diagnosis.localization import FlowTopology
 from service.diagnosis.report import fails_at
+from service.diagnosis.separation import distance_text
 from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
 from service.graph.units import difference_label, difference_unit, quantity_text, unit_label
@@ -233,7 +234,12 @@ def _numbers(candidate: StoredCandidate) -> str:
 
 
 def _lookalike_note(candidate) -> str:
-    """For a candidate the data cannot tell from the answer: that, and what would separate them."""
+    """For a candidate the data cannot tell from the answer: that, and what would separate them; for
+    one they tell apart: how far its errors lie from the answer's."""
+    fit_z, held_out_z = (z if np.isfinite(z) else None for z in (candidate.fit_z, candidate.held_out_z))
+    if fit_z is not None or held_out_z is not None:
+        sentence = distance_text(fit_z, held_out_z)
+        return f'<p class="lookalike"><b>Told apart from the answer:</b> {html.escape(sentence)}.</p>'
     if not candidate.indistinguishable:
         return ""
     items = "".join(f"<li>{html.escape(text)}</li>" for text in candidate.would_separate)

@@ -52,11 +52,13 @@ _DIAGNOSIS_QUERY = _PREFIXES + """SELECT ?diagnosis ?summary WHERE { GRAPH ?g {
 } }"""
 _NOT_APPLICABLE_QUERY = _PREFIXES + "SELECT ?reason WHERE { GRAPH ?g { ?diagnosis gt:notApplicable ?reason } }"
 _CANDIDATES_QUERY = _PREFIXES + """
-SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value ?delta_bic ?improvement WHERE {
+SELECT ?effect ?id ?label ?node ?rank ?significant ?explanation ?score ?p_value ?delta_bic ?improvement ?fit_z
+       ?held_out_z WHERE {
   GRAPH ?g { ?candidate prov:wasGeneratedBy ?diagnosis ; gt:candidateEffect ?effect ; gt:onNode ?node ;
                         gt:rank ?rank ; gt:significant ?significant ; gt:explanation ?explanation .
     OPTIONAL { ?candidate gt:scoreStatistic ?score } OPTIONAL { ?candidate gt:pValue ?p_value }
-    OPTIONAL { ?candidate gt:deltaBic ?delta_bic } OPTIONAL { ?candidate gt:testImprovement ?improvement } }
+    OPTIONAL { ?candidate gt:deltaBic ?delta_bic } OPTIONAL { ?candidate gt:testImprovement ?improvement }
+    OPTIONAL { ?candidate gt:fitDistance ?fit_z } OPTIONAL { ?candidate gt:heldOutDistance ?held_out_z } }
   OPTIONAL { GRAPH <https://w3id.org/graphtwin/resource/graph/signatures/library> {
     ?effect dcterms:identifier ?id ; rdfs:label ?label } }
   OPTIONAL { GRAPH ?g { ?effect a gt:ParameterDrift ; dcterms:identifier ?id ; rdfs:label ?label } }
@@ -251,6 +253,8 @@ class StoredCandidate:
     effect_iri: str = ""
     indistinguishable: bool = False  # from the answer, on these data
     would_separate: tuple[str, ...] = ()
+    fit_z: float = float("nan")  # a significant candidate told apart from the answer: how far its errors lie
+    held_out_z: float = float("nan")  # from the answer's, in standard errors (fit windows, held-out half)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -300,7 +304,7 @@ def read_diagnosis(store: GraphStore, run_id: str) -> StoredDiagnosis | None:
         label=r["label"].value if "label" in r else "", node=r["node"].value, rank=int(r["rank"].value),
         significant=r["significant"].value == "true", explanation=r["explanation"].value,
         score=_float(r, "score"), p_value=_float(r, "p_value"), delta_bic=_float(r, "delta_bic"),
-        test_improvement=_float(r, "improvement"),
+        test_improvement=_float(r, "improvement"), fit_z=_float(r, "fit_z"), held_out_z=_float(r, "held_out_z"),
     ) for r in store.query(_CANDIDATES_QUERY, substitutions=bound)]
     lookalikes: dict[tuple[str, str], list[str]] = {}
     for r in store.query(_LOOKALIKES_QUERY, substitutions=bound):

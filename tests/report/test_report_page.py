@@ -623,3 +623,20 @@ def test_an_estimate_the_bound_set_is_told_from_one_inside():
 
     assert (at(40.0), at(0.5), at(39.9), at(0.5 + 1e-9), at(float("nan"))) == ("upper", "lower", "", "lower", "")
     assert at(3.0, lower=float("nan")) == ""  # a run stored without bounds
+
+
+def test_a_significant_candidate_told_apart_from_the_answer_says_how_far(case):
+    """gt:fitDistance and gt:heldOutDistance on a candidate: the page says how far its errors lie from
+    the answer's (the stored triples added here, then taken away)."""
+    marked = (" { GRAPH ?g { ?c gt:toldApartFrom ?a ; gt:fitDistance 7.1e0 ; gt:heldOutDistance 3.0e0 } } "
+              "WHERE { GRAPH ?g { ?c a gt:EffectCandidate ; gt:rank 2 . ?a a gt:EffectCandidate ; gt:rank 1 } }")
+    prefix = "PREFIX gt: <https://w3id.org/graphtwin/ontology#> "
+    case.store.backend.update(prefix + "INSERT" + marked)
+    try:
+        page = report_html(case.store, case.report.run_id, locate_data=data_file_locator(case.data))
+    finally:
+        case.store.backend.update(prefix + "DELETE" + marked)
+    effects = PageParser(page).tables["effects"][1:]
+    assert effects[1][-1].endswith("Told apart from the answer: its errors lie 7.1 standard errors from the answer's "
+                                   "on the fit windows and 3.0 on the held-out half (within 2 they would tie).")
+    assert "Told apart" not in effects[0][-1]
