@@ -57,7 +57,8 @@ def print_calibration(record: CalibrationRecord) -> None:
         table.add_column(column, overflow="fold")
     for e in record.estimates:
         table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", unit_label(e.unit),
-                      "yes" if e.identified else "no: " + _PARAMETER_KEY.sub(lambda m: parameter_label(m[0]), "; ".join(e.reasons)))
+                      "yes" if e.identified
+                      else "no: " + _PARAMETER_KEY.sub(lambda m: parameter_label(m[0]), "; ".join(e.reasons)))
     console.print(table)
     if record.diagnostics.start is not None:
         console.print(record.diagnostics.start, markup=False, highlight=False)

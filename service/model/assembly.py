@@ -317,5 +317,6 @@ def _describe_missing(triple: PatternTriple, signature: Signature, *, anchor: st
         return (f"no {what} {side} of {node} along {triple.predicate} (the search stops at {stops}building spaces, "
                 f"boilers, chillers and cooling towers; signature {signature.file_name})")
     if triple.subject == anchor:
-        return f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} (signature {signature.file_name})"
+        return (f"no triple <{node}> <{triple.predicate}> ?{other} with ?{other} a {what} "
+                f"(signature {signature.file_name})")
     return f"no triple ?{other} <{triple.predicate}> <{node}> with ?{other} a {what} (signature {signature.file_name})"

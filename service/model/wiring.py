@@ -26,7 +26,8 @@ from service.matching.signature import Signature
 from service.model.assembled_model import ComponentInstance, Connection, MeasurementLink, ParameterRef
 
 __all__ = [
-    "MatchValues", "UnconnectedInput", "component_iri", "without_model", "parameter_label", "short_name", "modeled_nodes", "best_match_per_anchor",
+    "MatchValues", "UnconnectedInput", "component_iri", "without_model", "parameter_label", "short_name",
+    "modeled_nodes", "best_match_per_anchor",
     "instantiate", "wire", "measured_outputs", "split_parameters",
 ]
 
@@ -60,8 +61,9 @@ def without_model(key: str) -> str:
 
 def parameter_label(key: str) -> str:
     """A parameter key as people read it, ``<node>.<name>``: ``…/component/Fan/supply_fan#c1`` →
-    ``supply_fan.c1``; an effect's (``…/component/ValveLeakage/heating_valve/on/heating_coil_air_side#leakage_fraction``)
-    names the node the effect is at, ``heating_valve.leakage_fraction``."""
+    ``supply_fan.c1``; an effect's
+    (``…/component/ValveLeakage/heating_valve/on/heating_coil_air_side#leakage_fraction``) names the
+    node the effect is at, ``heating_valve.leakage_fraction``."""
     component, _, name = without_model(key).partition("#")
     parts = component.split("/")
     return f"{parts[1] if len(parts) > 1 else parts[0]}.{name}"

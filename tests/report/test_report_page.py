@@ -510,11 +510,10 @@ def test_the_page_lists_the_runs_parameter_estimates(case, page):
             e.at_bound), row
 
 
-def test_a_candidate_indistinguishable_from_the_answer_says_what_would_separate_them(case):
-    """The diagnosis stores gt:indistinguishableFrom and gt:wouldSeparate on a look-alike; the page
-    shows them in that candidate's row (the stored triples added here, then taken away)."""
-    marked = (" { GRAPH ?g { ?c gt:indistinguishableFrom ?a ; "
-              "gt:wouldSeparate \"a temperature sensor for the inlet air temperature of heating_coil_air_side\" } } "
+def _effects_with_the_second_marked(case, triples: str) -> list[list[str]]:
+    """The page's effect rows with ``triples`` (subject the second-ranked candidate ?c, ?a the answer)
+    added to the stored diagnosis while the page is made, then taken away."""
+    marked = (f" {{ GRAPH ?g {{ ?c {triples} }} }} "
               "WHERE { GRAPH ?g { ?c a gt:EffectCandidate ; gt:rank 2 . ?a a gt:EffectCandidate ; gt:rank 1 } }")
     prefix = "PREFIX gt: <https://w3id.org/graphtwin/ontology#> "
     case.store.backend.update(prefix + "INSERT" + marked)
@@ -522,7 +521,14 @@ def test_a_candidate_indistinguishable_from_the_answer_says_what_would_separate_
         page = report_html(case.store, case.report.run_id, locate_data=data_file_locator(case.data))
     finally:
         case.store.backend.update(prefix + "DELETE" + marked)
-    effects = PageParser(page).tables["effects"][1:]
+    return PageParser(page).tables["effects"][1:]
+
+
+def test_a_candidate_indistinguishable_from_the_answer_says_what_would_separate_them(case):
+    """The diagnosis stores gt:indistinguishableFrom and gt:wouldSeparate on a look-alike; the page
+    shows them in that candidate's row (the stored triples added here, then taken away)."""
+    effects = _effects_with_the_second_marked(case, "gt:indistinguishableFrom ?a ; gt:wouldSeparate \"a temperature "
+                                                    "sensor for the inlet air temperature of heating_coil_air_side\"")
     assert "Indistinguishable from the answer on these data" in effects[1][-1]
     assert effects[1][-1].endswith("a temperature sensor for the inlet air temperature of heating_coil_air_side")
     assert "Indistinguishable" not in effects[0][-1]
@@ -628,15 +634,8 @@ def test_an_estimate_the_bound_set_is_told_from_one_inside():
 def test_a_significant_candidate_told_apart_from_the_answer_says_how_far(case):
     """gt:fitDistance and gt:heldOutDistance on a candidate: the page says how far its errors lie from
     the answer's (the stored triples added here, then taken away)."""
-    marked = (" { GRAPH ?g { ?c gt:toldApartFrom ?a ; gt:fitDistance 7.1e0 ; gt:heldOutDistance 3.0e0 } } "
-              "WHERE { GRAPH ?g { ?c a gt:EffectCandidate ; gt:rank 2 . ?a a gt:EffectCandidate ; gt:rank 1 } }")
-    prefix = "PREFIX gt: <https://w3id.org/graphtwin/ontology#> "
-    case.store.backend.update(prefix + "INSERT" + marked)
-    try:
-        page = report_html(case.store, case.report.run_id, locate_data=data_file_locator(case.data))
-    finally:
-        case.store.backend.update(prefix + "DELETE" + marked)
-    effects = PageParser(page).tables["effects"][1:]
+    effects = _effects_with_the_second_marked(case, "gt:toldApartFrom ?a ; gt:fitDistance 7.1e0 ; "
+                                                    "gt:heldOutDistance 3.0e0")
     assert effects[1][-1].endswith("Told apart from the answer: its errors lie 7.1 standard errors from the answer's "
                                    "on the fit windows and 3.0 on the held-out half (within 2 they would tie).")
     assert "Told apart" not in effects[0][-1]
