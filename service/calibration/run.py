@@ -284,7 +284,6 @@ def prepare_calibration(
     md = ModelData(model, data, substeps, operating_mask(data, only_when))
     train_slice = data.window(*train, label="training window")
     test_slice = data.window(*test, label="test window") if test is not None else None
-    filter_notes = _operating_filter_notes(md, only_when, train_slice, test_slice)
     window_notes = [f"the {name} window ends at {end.strip()}T00:00, the first instant of that day (a date alone is "
                     f"its midnight): write {end.strip()}T23:59 to include the day"
                     for name, end, cut in (("training", train[1], train_slice),
@@ -300,7 +299,7 @@ def prepare_calibration(
             window_notes.append(f"the test window overlaps the training window by {overlap} {steps} (a window's end is "
                                 "inclusive): its metrics are partly on data the calibration fitted")
         window_notes += inputs_beyond_training(md, train_slice, test_slice)
-    window_notes += filter_notes
+    window_notes += _operating_filter_notes(md, only_when, train_slice, test_slice)
     unscored_s = md.unscored_start_s(train_slice)
     train_s = (train_slice.stop - train_slice.start) * data.step_s
     if train_s <= unscored_s:

@@ -17,7 +17,7 @@ from rich.table import Table
 from service.cli.common import DEFAULT_STORE, StoreOption, app, console, error_console, fail, open_store, reports_errors
 from service.errors import InputError, NotFoundError
 from service.graph.namespaces import local_name
-from service.graph.units import difference_unit, quantity_text
+from service.graph.units import quantity_text
 
 __all__ = []
 
@@ -122,7 +122,7 @@ def history_command(
     for version in history.versions:
         table.add_column(version, overflow="fold")  # names differ at their end: model+Effect
     for sensor, values in history.rmse.items():
-        table.add_row(local_name(sensor), *[quantity_text(v, difference_unit(history.units[sensor])) for v in values])
+        table.add_row(local_name(sensor), *[quantity_text(v, history.units[sensor]) for v in values])
     table.add_row("tested on", *history.tested_on, style="dim")
     console.print(table)
     if not history.comparable:
@@ -139,7 +139,7 @@ def history_command(
             number = history.regime_number.get(rule, "–")  # the run's, as the report numbers it
             for i, (sensor, values) in enumerate(sensors.items()):
                 table.add_row(number if i == 0 else "", rule + share if i == 0 else "", local_name(sensor),
-                              *[quantity_text(v, difference_unit(history.units.get(sensor, ""))) for v in values])
+                              *[quantity_text(v, history.units.get(sensor, "")) for v in values])
             table.add_section()
         console.print(table)
     if plot is not None:

@@ -9,13 +9,15 @@ from dataclasses import dataclass, field
 
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
+from service.graph.units import difference_unit
 
 __all__ = ["ErrorHistory", "error_history"]
 
 
 @dataclass
 class ErrorHistory:
-    """``rmse[sensor][i]``: the test RMSE of ``versions[i]`` (NaN: not measured in that version);
+    """``rmse[sensor][i]``: the test RMSE of ``versions[i]`` (NaN: not measured in that version), in
+    ``units[sensor]`` (an error's unit: K for readings in °C);
     ``regime_rmse[rule][sensor][i]`` and ``regime_share[rule][i]`` the same per operating regime,
     regimes identified by their rule (versions calibrated on the same data share their regimes;
     a regime a version does not have is NaN there)."""
@@ -63,7 +65,7 @@ def error_history(store: GraphStore, model: str) -> ErrorHistory:
                 regime_number.setdefault(rule, local_name(row["regime"].value))
             else:
                 rmse.setdefault(sensor, {})[name] = value
-                units[sensor] = row["unit"].value
+                units[sensor] = difference_unit(row["unit"].value)  # K for °C (runs stored before 2026-12-01)
                 found = True
         if found:
             versions.append(name)

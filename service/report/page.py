@@ -281,7 +281,7 @@ def _history_section(store: GraphStore, run: StoredRun) -> str:
         return out[0] + '<p class="note">No calibration of this model with a test window is stored.</p>'
 
     def cells(values: list[float], sensor: str) -> list[str]:
-        return [html.escape(quantity_text(v, difference_unit(units.get(sensor, "")))) for v in values]
+        return [html.escape(quantity_text(v, units.get(sensor, ""))) for v in values]
 
     out.append('<p class="note">Each version\'s latest calibration with a test window (this run\'s numbers are in the '
                'tables above where it is that calibration).</p>')

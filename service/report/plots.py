@@ -123,7 +123,7 @@ def error_history_figure(history: ErrorHistory) -> Figure:
         ax.bar(range(len(versions)), history.rmse[sensor], color=[colours(i) for i in range(len(versions))])
         ax.set_xticks(range(len(versions)), ticks, fontsize=7)
         ax.set_title(local_name(sensor), fontsize=8)
-        ax.set_ylabel(f"test RMSE {bracketed_unit(difference_unit(history.units.get(sensor, '')))}".strip(), fontsize=8)
+        ax.set_ylabel(f"test RMSE {bracketed_unit(history.units.get(sensor, ''))}".strip(), fontsize=8)
     if rules:
         width = 0.8 / len(versions)
         for ax, sensor in zip(axes[1], sensors):
@@ -134,7 +134,7 @@ def error_history_figure(history: ErrorHistory) -> Figure:
             ax.set_xticks(range(len(rules)), [history.regime_number.get(rule, str(j)) for j, rule in enumerate(rules)],
                           fontsize=7)
             ax.set_xlabel("regime", fontsize=7)
-            error_axis = bracketed_unit(difference_unit(history.units.get(sensor, '')))
+            error_axis = bracketed_unit(history.units.get(sensor, ''))
             ax.set_ylabel(f"RMSE per regime {error_axis}".strip(), fontsize=8)
         handles, labels = axes[1][0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(versions), fontsize=8, frameon=False)

@@ -10,7 +10,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import pyoxigraph as ox
 
 from service.calibration.triples import run_iri
 from service.components.component import bound_side
@@ -163,28 +162,20 @@ def _run_id(run_id: str) -> str:
     return run_id[: -len(DIAGNOSIS_SUFFIX)] if run_id.endswith(DIAGNOSIS_SUFFIX) else run_id
 
 
-_LATEST_RUNS_QUERY = _PREFIXES + """SELECT ?run ?model ?ended (BOUND(?diagnosis) AS ?diagnosed) WHERE {
-  GRAPH ?g { ?run a gt:CalibrationRun ; gt:forModel ?model ; prov:endedAtTime ?ended }
-  OPTIONAL { GRAPH ?h { ?diagnosis gt:basedOnCalibration ?run } }
-} ORDER BY DESC(?ended) LIMIT 5"""
-
-
 def _latest_runs_text(store: GraphStore, name: str) -> str:
-    """``: …`` naming the latest runs of model ``name`` (a model's name given for a run id), or the
-    store's latest runs; nothing where the store holds none."""
-    of_model = store.query(_LATEST_RUNS_QUERY, substitutions={"model": ox.Literal(name)})
-    rows = of_model or store.query(_LATEST_RUNS_QUERY)
+    """``; …`` naming the latest runs of model ``name`` (a model's name given for a run id), or the
+    store's latest runs (``queries/calibration-run-graphs.rq``, newest first)."""
+    of_model = store.run_named_query("calibration-run-graphs", model=name)[:5]
+    rows = of_model or store.run_named_query("calibration-run-graphs")[:5]
     if not rows:
         return " (it holds none)"
-    prefix = run_iri("").value
 
     def shown(row) -> str:
-        run_id = row["run"].value.removeprefix(prefix)
-        return f"{run_id} (its diagnosis {run_id}{DIAGNOSIS_SUFFIX})" if row["diagnosed"].value == "true" else run_id
+        run_id = row["run_id"].value
+        return f"{run_id} (its diagnosis {run_id}{DIAGNOSIS_SUFFIX})" if "diagnosis_graph" in row else run_id
 
-    ids = [shown(row) for row in rows]
     whose = f"; {name!r} is a model, and its latest runs are" if of_model else "; the latest runs are"
-    return f"{whose} {', '.join(ids)}"
+    return f"{whose} {', '.join(shown(row) for row in rows)}"
 
 
 def read_run(store: GraphStore, run_id: str) -> StoredRun:
