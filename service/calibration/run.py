@@ -267,7 +267,7 @@ def _ends_on_a_day_the_data_go_into(data: MeasuredData, end: str | None, window:
 def prepare_calibration(
     store: GraphStore, model_name: str, data_path: Path | str, *, train: Window = (None, None),
     test: Window | None = None, method: str = "point", substeps: int | None = None, only_when: Sequence[str] = (),
-    min_test_steps: int = 1, gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS, start_from: str | None = None,
+    min_test_steps: int = 1, gp_inputs: Sequence[str] | None = None, start_from: str | None = None,
     data_name: str | None = None,
 ) -> PreparedCalibration:
     """Everything :func:`calibrate` checks before it fits (parameters as there; ``data_name``: what
@@ -310,10 +310,10 @@ def prepare_calibration(
         window_notes.append(f"the training window's first {unscored_s / 3600:g} h are simulated, not scored: before the "
                             "data's first step the model's start state is a guess, and its slowest loop carries it that "
                             "long; data from before the window would let the fit use them")
-    gp_nodes = md.gp_input_nodes(gp_inputs)
-    if method == "point" and gp_nodes != DEFAULT_GP_INPUTS:
+    if method == "point" and gp_inputs is not None:
         raise CalibrationError("GP inputs choose the discrepancy's inputs of a Bayesian calibration (--method bayes); "
                                "a point calibration has no discrepancy")
+    gp_nodes = md.gp_input_nodes(DEFAULT_GP_INPUTS if gp_inputs is None else gp_inputs)
     start = start_runs = start_note = None
     if start_from is not None:
         start, start_runs, start_note = calibrated_start(store, start_from, model_name, model)
@@ -337,7 +337,7 @@ def calibrate(
     on_progress: Callable[[str], None] | None = None,
     only_when: Sequence[str] = (),
     min_test_steps: int = 1,
-    gp_inputs: Sequence[str] = DEFAULT_GP_INPUTS,
+    gp_inputs: Sequence[str] | None = None,
     start_from: str | None = None,
     on_prepared: Callable[[], None] | None = None,
 ) -> CalibrationOutcome:
@@ -348,8 +348,8 @@ def calibrate(
     :param only_when: operating conditions (``"SF Spd Cmd (%) > 5"``, :mod:`service.data.operating_filter`):
         the targets are compared only at the steps where all hold.
     :param min_test_steps: a test window with fewer steps of data is refused.
-    :param gp_inputs: the inputs of the discrepancy GP (``method="bayes"``): ``"time"`` and boundary
-        inputs by node IRI, local name or CSV column (:meth:`ModelData.gp_input_nodes`).
+    :param gp_inputs: the inputs of the discrepancy GP (``method="bayes"`` only; None: the time alone):
+        ``"time"`` and boundary inputs by node IRI, local name or CSV column (:meth:`ModelData.gp_input_nodes`).
     :param start_from: a model in the store whose latest calibrated values start this fit
         (:func:`calibrated_start`); None: the component defaults.
     :param on_progress: hears how far a Bayesian run's sampling is after each convergence check.

@@ -10,7 +10,6 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from service.calibration.model_data import DEFAULT_GP_INPUTS
 from service.cli.common import (
     DEFAULT_STORE,
     JsonOption,
@@ -66,7 +65,7 @@ def calibrate_command(
     with loaded_model_file(graph_store, model, name) as model_name:
         request = checked_request(CalibrateRequest, model=model_name, measurements=str(data), train=train, test=test,
                                   method=method, seed=seed, only_when=only_when or [],
-                                  gp_inputs=gp_input or list(DEFAULT_GP_INPUTS), start_from=start_from)
+                                  gp_inputs=gp_input or None, start_from=start_from)
         # the bar shows on a terminal; written to a file or a pipe, each convergence check is a line
         said = None if as_json or console.is_terminal else (lambda m: console.print(f"{m}…", markup=False))
         outcome = calibrate_model(graph_store, request, data, progress=not as_json, on_progress=said)

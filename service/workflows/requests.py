@@ -102,9 +102,9 @@ class CalibrateRequest(FitRequest):
     train: str = Field(default="/", description="training window START/END (ISO; either side may be empty)")
     test: str | None = Field(default=None, description="test window START/END")
     method: Literal["point", "bayes"] = "point"
-    gp_inputs: list[str] = Field(default=list(DEFAULT_GP_INPUTS), min_length=1, description=(
-        "inputs of the discrepancy GP (method bayes): 'time' and boundary inputs by node IRI, local name or "
-        "CSV column"))
+    gp_inputs: list[str] | None = Field(default=None, min_length=1, description=(
+        f"inputs of the discrepancy GP, method bayes only (default {list(DEFAULT_GP_INPUTS)}): 'time' and boundary "
+        "inputs by node IRI, local name or CSV column"))
 
     _windows = field_validator("train", "test")(_check_window)
 

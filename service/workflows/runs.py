@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from service.calibration.model_data import DEFAULT_GP_INPUTS
 from service.calibration.run import CalibrationOutcome, calibrate, prepare_calibration
 from service.data.windows import parse_window
 from service.graph.store import GraphStore
@@ -71,7 +70,7 @@ def check_fit_request(store: GraphStore, request: CalibrateRequest | DiagnoseReq
                         test=parse_window(request.test) if request.test else None,
                         method="point" if diagnosis else request.method, only_when=request.only_when,
                         min_test_steps=MIN_TEST_STEPS if diagnosis else 1,
-                        gp_inputs=DEFAULT_GP_INPUTS if diagnosis else request.gp_inputs,
+                        gp_inputs=None if diagnosis else request.gp_inputs,
                         start_from=request.start_from, data_name=data_name)
 
 

@@ -716,6 +716,7 @@ def test_a_bad_setting_is_named_by_its_variable_or_option(monkeypatch):
                                                         "the data upload {upload}"),
     ("calibrate", {"method": "bayes", "gp_inputs": ["time", "supply_air_flw"]}, "supply_air_flw"),
     ("calibrate", {"gp_inputs": ["time", "supply_air_flow"]}, "a point calibration has no discrepancy"),
+    ("calibrate", {"gp_inputs": ["time"]}, "a point calibration has no discrepancy"),
     ("calibrate", {"only_when": ["no_such_column > 1"]}, "no_such_column"),
     ("diagnose", {"train": "/2026-01-12T15:50", "test": "2026-01-12T16:00/2026-01-12T16:30"}, "at least 12 are needed"),
 ])

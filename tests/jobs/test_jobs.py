@@ -313,6 +313,8 @@ def test_calibrate_job_fails_clearly_when_the_upload_is_gone(records, runners):
     runner = runners(GraphStore.embedded(None), records, {"calibrate": JOB_KINDS["calibrate"]}, locate_measurements=locate)
     done = _wait(runner, runner.submit("calibrate", CalibrateRequest(model="m", measurements="0123456789abcdef")).id)
     assert done.status == "failed" and done.error == "no measurement upload '0123456789abcdef'"
+    # a point job's record shows no discrepancy inputs it never used (it echoed the Bayesian default)
+    assert done.params["method"] == "point" and done.params["gp_inputs"] is None
 
 
 def test_work_that_raises_job_cancelled_ends_cancelled(records, runners):
