@@ -13,7 +13,7 @@ from rich.text import Text
 from service.calibration.metrics import on_interval_scale
 from service.cli.common import DEFAULT_STORE, console
 from service.graph.namespaces import local_name
-from service.graph.units import difference_label, difference_unit, quantity_text, unit_label
+from service.graph.units import difference_label, difference_text, difference_unit, quantity_text, unit_label
 from service.model.wiring import parameter_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
@@ -135,7 +135,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         verdict = ("[red]fails[/red]" if s.fails else
                    f"[yellow]within {report.failure_ratio:g}× its noise, but the answer removes ≥ "
                    f"{100 * MIN_TEST_IMPROVEMENT:.0f} % of its error[/yellow]" if s.shows_missing_effect else "matches")
-        table.add_row(local_name(node), quantity_text(s.rmse, difference_unit(s.unit)), f"{s.rmse_over_noise:.1f}",
+        table.add_row(local_name(node), difference_text(s.rmse, s.unit, s.logged_unit), f"{s.rmse_over_noise:.1f}",
                       "–" if on_interval_scale(s.unit) else f"{s.nmbe_percent:+.1f}", verdict)
     console.print(table)
     for location in report.localization:

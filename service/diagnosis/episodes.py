@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from service.graph.units import difference_text
+
 __all__ = ["Episode", "find_episodes", "MAD_TO_SIGMA"]
 
 #: σ of a normal variable per unit of median absolute deviation.
@@ -51,6 +53,7 @@ class Episode:
     both_sides: bool
     reference: str
     unit: str = ""
+    logged_unit: str = ""
 
     @property
     def duration_h(self) -> float:
@@ -65,13 +68,14 @@ class Episode:
             side = f"on both sides of {self.reference}, by up to"
         else:
             side = f"{'above' if self.peak_deviation > 0 else 'below'} {self.reference} by up to"
-        size = f"{_significant(abs(self.peak_deviation))} {self.unit}".rstrip()
+        size = difference_text(abs(self.peak_deviation), self.unit, self.logged_unit, _significant)
         return f"{start} – {end} ({_significant(self.duration_h)} h): measured {side} {size}"
 
     def to_dict(self) -> dict:
         return {"start": str(self.start), "end": str(self.end), "duration_h": self.duration_h,
                 "n_steps": self.n_steps, "n_failing": self.n_failing, "peak_deviation": self.peak_deviation,
-                "mean_deviation": self.mean_deviation, "unit": self.unit, "text": self.describe()}
+                "mean_deviation": self.mean_deviation, "unit": self.unit,
+                **({"logged_unit": self.logged_unit} if self.logged_unit else {}), "text": self.describe()}
 
 
 def _as_series(name: str, values: np.ndarray | None, n: int) -> np.ndarray | None:
@@ -95,6 +99,7 @@ def find_episodes(
     robust_threshold: float = 3.0,
     min_deviation: float = 0.0,
     unit: str = "",
+    logged_unit: str = "",
 ) -> list[Episode]:
     """Episodes where ``measured`` leaves ``[lower, upper]`` or, for a point fit, where ``residual``
     (= measured − predicted) is large (module docstring), in time order.
@@ -104,7 +109,8 @@ def find_episodes(
     :param lower, upper: ``ndarray[n_t]`` prediction interval (give both), or None.
     :param residual: ``ndarray[n_t]`` measured − predicted, used when no interval is given.
     :param min_deviation: smallest |residual| that can fail (point fits), in ``unit``.
-    :param unit: unit label of the measurement for the text ("°F").
+    :param unit: unit label of the measurement for the text ("°F", "K").
+    :param logged_unit: the unit its column was logged in, where it differs: the text gives the size in both.
     """
     timestamps = np.asarray(timestamps, dtype="datetime64[s]")
     n = len(timestamps)
@@ -154,5 +160,6 @@ def find_episodes(
             start=timestamps[first], end=timestamps[last] + step, n_steps=int(last - first + 1),
             n_failing=int(fails[first:last + 1].sum()), peak_deviation=peak, mean_deviation=float(span.mean()),
             both_sides=bool((failing_span > 0).any() and (failing_span < 0).any()), reference=reference, unit=unit,
+            logged_unit=logged_unit,
         ))
     return episodes

@@ -85,7 +85,7 @@ def diagnose(
         sensors[node] = SensorVerdict(
             rmse=metrics.rmse, mae=metrics.mae, cv_rmse_percent=metrics.cv_rmse_percent,
             nmbe_percent=metrics.nmbe_percent, r2=metrics.r2, unit=md.units[node], noise=sigma,
-            fails=fails_at(metrics.rmse, sigma, failure_ratio),
+            fails=fails_at(metrics.rmse, sigma, failure_ratio), logged_unit=md.data.source_units.get(node, ""),
         )
     topology = FlowTopology.from_store(store, model_name)
     carries = _carried_down(residuals, md.units, {node: s.noise for node, s in sensors.items()}, failure_ratio)
@@ -121,7 +121,8 @@ def diagnose(
     episodes: dict[str, list[Episode]] = {}
     for node in observed:
         found = find_episodes(data.timestamps[test_slice], observed[node], residual=residuals[node],
-                              min_deviation=failure_ratio * sensors[node].noise, unit=difference_label(md.units[node]))
+                              min_deviation=failure_ratio * sensors[node].noise, unit=difference_label(md.units[node]),
+                              logged_unit=sensors[node].logged_unit)
         if found:
             episodes[node] = found
 

@@ -54,6 +54,7 @@ class SensorVerdict:
     noise: float
     fails: bool
     shows_missing_effect: bool = False
+    logged_unit: str = ""  # the unit its column was logged in, where it is not ``unit`` (°F for a port in °C)
 
     @property
     def located(self) -> bool:
@@ -66,7 +67,8 @@ class SensorVerdict:
     def to_dict(self) -> dict:
         return {"rmse": self.rmse, "mae": self.mae, "cv_rmse": self.cv_rmse_percent, "nmbe": self.nmbe_percent,
                 "r2": self.r2, "unit": self.unit, "noise": self.noise, "rmse_over_noise": self.rmse_over_noise,
-                "fails": self.fails, "shows_missing_effect": self.shows_missing_effect}
+                "fails": self.fails, "shows_missing_effect": self.shows_missing_effect,
+                **({"logged_unit": self.logged_unit} if self.logged_unit else {})}
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -10,7 +10,7 @@ to the SI unit of the dimension (K for temperatures); percent becomes the 0–1 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +18,7 @@ import numpy as np
 from service.errors import UnitError
 
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
-           "quantity_text", "closest_unit_hint", "difference_unit", "difference_label"]
+           "quantity_text", "closest_unit_hint", "difference_unit", "difference_label", "difference_text"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -126,6 +126,26 @@ def difference_unit(unit: str) -> str:
 def difference_label(unit: str) -> str:
     """:func:`unit_label` of :func:`difference_unit`: ``K`` for an error of readings in °C."""
     return unit_label(difference_unit(unit))
+
+
+def difference_text(value: float | None, unit: str, logged_unit: str = "",
+                    number: Callable[[float], str] = lambda v: format(v, ".3g")) -> str:
+    """An error, residual or noise σ of readings in ``unit``, in its :func:`difference_unit`, and after it
+    in the unit the readings were logged in (``logged_unit``, a column's) where their degrees differ:
+    ``14.5 K (26.1 °F)``; a difference scales by the units' multipliers alone. ``number`` formats each
+    value; a missing value (None, NaN) is ``–``."""
+    if value is None or not np.isfinite(value):
+        return "–"
+    own = difference_unit(unit)
+    text = f"{number(value)} {unit_label(own)}".rstrip()
+    try:
+        spec, logged = unit_spec(own), unit_spec(logged_unit) if logged_unit else None
+    except UnitError:
+        return text
+    if logged is None or logged.dimension != spec.dimension or logged.multiplier == spec.multiplier:
+        return text
+    restated = f"{number(value * spec.multiplier / logged.multiplier)} {unit_label(difference_unit(logged_unit))}"
+    return f"{text} ({restated.rstrip()})"
 
 
 def unit_label(unit: str) -> str:

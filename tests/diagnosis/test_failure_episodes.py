@@ -31,6 +31,12 @@ def test_point_fit_excursions_are_found_with_their_spans():
     assert first.describe() == (f"2017-09-12 06:10 – 18:40 (12.5 h): measured above the model by up to "
                                 f"{abs(first.peak_deviation):.3g} °F")
     assert second.peak_deviation < 0 and "below the model" in second.describe()
+    # a column logged in °F, the model in °C: the size in K and, after it, in °F
+    [logged, _] = find_episodes(TIMESTAMPS, measured, residual=residual / 1.8, unit="K",
+                                logged_unit="http://qudt.org/vocab/unit/DEG_F")
+    assert logged.describe().endswith(f"by up to {abs(first.peak_deviation) / 1.8:.3g} K "
+                                      f"({abs(first.peak_deviation):.3g} °F)")
+    assert logged.to_dict()["logged_unit"].endswith("DEG_F")
     assert second.describe().startswith("2017-09-13 09:20 – 11:00 (1.67 h)")
 
 

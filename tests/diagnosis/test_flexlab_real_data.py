@@ -72,6 +72,10 @@ def test_the_model_fails_on_the_supply_air_temperature(reports, fault):
     supply, mixed = sensors[SUPPLY], sensors[EX + "mixed_air_temperature_sensor"]
     assert supply.fails and supply.rmse > 5.0, supply
     assert supply.rmse > 10.0 * mixed.rmse, (supply.rmse, mixed.rmse)
+    # the columns are logged in °F, the model in °C: each error is said in K and in °F
+    assert supply.logged_unit.endswith("DEG_F")
+    episode = reports[fault]["report"].episodes[SUPPLY][0]
+    assert episode.describe().endswith(f"K ({abs(episode.peak_deviation) * 1.8:.3g} °F)"), episode.describe()
 
 
 @pytest.mark.parametrize("fault", sorted(FAULT_DAYS))

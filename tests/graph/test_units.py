@@ -40,6 +40,19 @@ def test_temperature_differences_drop_the_offset():
     assert convert([273.15], U + "K", "degC") == pytest.approx([0.0], abs=1e-12)
 
 
+def test_an_error_of_readings_logged_in_another_unit_is_stated_in_both():
+    """A diagnosis of °F data states its errors in K, the model's unit, and in °F, the column's: the
+    difference scales by the multipliers alone (14.5 K is 26.1 °F, not 58.1 °F)."""
+    from service.graph.units import difference_text
+
+    assert difference_text(14.5, "degC", U + "DEG_F") == "14.5 K (26.1 °F)"
+    assert difference_text(14.5, "degC") == difference_text(14.5, "degC", U + "DEG_C") == "14.5 K"
+    assert difference_text(250.0, "W", U + "KiloW") == "250 W (0.25 kW)"
+    assert difference_text(0.02, "1", U + "PERCENT") == "0.02 (2 %)"
+    assert difference_text(float("nan"), "degC", U + "DEG_F") == "–"
+    assert difference_text(2.0, "degC", U + "KiloGM-PER-SEC") == "2 K"  # another dimension: not restated
+
+
 def test_conversion_is_affine_keeps_shape_and_round_trips():
     values = np.array([[14.0, 68.0], [95.0, np.nan]])
     celsius = convert(values, U + "DEG_F", "degC")
