@@ -15,8 +15,9 @@ from rich.console import Console
 from rich.text import Text
 
 from service.components.library import SignatureLibrary
-from service.errors import GraphtwinError, InputError
+from service.errors import GraphtwinError, IncompleteModelError, InputError
 from service.graph.store import GraphStore
+from service.graph.vocabulary import with_term_locations
 from service.matching.library_triples import ensure_signature_library
 
 __all__ = [
@@ -152,6 +153,11 @@ def loaded_model_file(store: GraphStore, model: Path, name: str | None) -> Itera
     load = store.load_model(model_name, model, keep_previous=True)
     try:
         yield model_name
+    except IncompleteModelError as exc:  # a misspelling among its causes is said with its line in the file
+        store.undo_load(model_name, load)
+        text = model.read_text(encoding="utf-8", errors="replace")
+        raise IncompleteModelError(with_term_locations(exc.problems, text, model.name), headline=exc.headline,
+                                   notes=with_term_locations(exc.notes, text, model.name)) from None
     except BaseException:
         store.undo_load(model_name, load)
         raise

@@ -34,6 +34,7 @@ from service.errors import GraphtwinError, InputError, NotFoundError
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.graph.units import difference_label
+from service.graph.vocabulary import with_term_locations
 from service.matching.compiler import compile_signature
 from service.model.summary import assembly_to_dict, print_assembly
 from service.resources import examples_dir
@@ -65,6 +66,8 @@ def assemble_command(
                 raise
             raise InputError(f"{exc}\n{model} is a Brick model: graphtwin brick-report {model} lists what the "
                              "alignment could not use") from None
+    assembled.notes = tuple(with_term_locations(assembled.notes, model.read_text(encoding="utf-8", errors="replace"),
+                                                model.name))  # a misspelt term: where the file uses it
     if as_json:
         console.print_json(json.dumps(assembly_to_dict(assembled)))
     else:

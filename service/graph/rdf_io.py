@@ -17,7 +17,7 @@ import pyoxigraph as ox
 from service.errors import ModelLoadError, UnsupportedFormatError
 from service.graph.namespaces import PREFIXES
 
-__all__ = ["rdf_format", "parse_rdf", "sparql_syntax_message"]
+__all__ = ["rdf_format", "parse_rdf", "sparql_syntax_message", "first_use"]
 
 #: What pyoxigraph's syntax error messages start with (the position, given as ``lineno``/``offset``
 #: too): ``Parser error at line 3 between columns 16 and 20: ``, ``… at line 2 column 11: ``,
@@ -155,3 +155,22 @@ def sparql_syntax_message(query: str, error: SyntaxError) -> str:
         return f"SPARQL syntax error at {where}: the prefix {prefix}: is not declared ({add})"
     expected = detail if len(detail) <= 120 else detail[:117].rsplit(",", 1)[0] + ", …"
     return f"SPARQL syntax error at {where}: {expected}"
+
+
+#: A prefix declaration of Turtle, TriG or N3 (``@prefix``) or in SPARQL style (``PREFIX``).
+_PREFIX_DECLARATION = re.compile(r"(?:@prefix|\bPREFIX)\s+([A-Za-z][\w.-]*)?:\s*<([^>]*)>", re.IGNORECASE)
+
+
+def first_use(text: str, iri: str) -> tuple[int, int] | None:
+    """Where the RDF source ``text`` first uses ``iri``, as (line, column), both from 1: written whole
+    (``<iri>``, or quoted in RDF/XML and JSON-LD) or as a prefixed name whose prefix the text
+    declares; None where it does not."""
+    spellings = [re.escape(iri) + r"(?![\w/#-])"]
+    for prefix, namespace in _PREFIX_DECLARATION.findall(text):
+        if namespace and iri.startswith(namespace) and len(iri) > len(namespace):
+            spellings.append(rf"(?<![\w:-]){re.escape(prefix)}:{re.escape(iri[len(namespace):])}(?![\w-])")
+    found = re.search("|".join(spellings), text)
+    if found is None:
+        return None
+    position = found.start()
+    return text.count("\n", 0, position) + 1, position - text.rfind("\n", 0, position)

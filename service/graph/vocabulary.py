@@ -13,16 +13,18 @@ else lets a signature see the node.
 from __future__ import annotations
 
 import difflib
+import re
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import pyoxigraph as ox
 
 from service.graph.namespaces import BRICK, OWL, RDF, RDFS, REF, local_name, namespace_of
+from service.graph.rdf_io import first_use
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
-__all__ = ["misspelt_terms", "MisspeltTerms", "DeclaredTerms", "closest_declared"]
+__all__ = ["misspelt_terms", "MisspeltTerms", "DeclaredTerms", "closest_declared", "with_term_locations"]
 
 #: The ``rdf:type`` objects that declare a class, and those that declare a property.
 _CLASS_TYPES = (OWL.Class, RDFS.Class)
@@ -144,3 +146,15 @@ def misspelt_terms(store: GraphStore, model_name: str) -> MisspeltTerms:
             found.notes.append(f"{local_name(first)}: {role[0]} {term} ({triples}, e.g. from {first}) is declared "
                                f"by no loaded ontology (did you mean {meant}?): {role[1]}")
     return found
+
+
+def with_term_locations(sentences: Sequence[str], text: str, source_name: str) -> list[str]:
+    """``sentences`` (an incomplete model's problems or notes), each misspelling among them (one that
+    asks "did you mean") followed by where the model's source ``text`` first uses the term it is about,
+    the first IRI it names whole: ``(model.ttl, line 12, column 5)``. The store keeps no positions."""
+    located = []
+    for sentence in sentences:
+        term = re.search(r"\w+://[^\s()]+", sentence) if "(did you mean " in sentence else None
+        where = first_use(text, term.group(0)) if term else None
+        located.append(f"{sentence} ({source_name}, line {where[0]}, column {where[1]})" if where else sentence)
+    return located

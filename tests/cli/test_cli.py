@@ -54,6 +54,31 @@ def test_a_broken_model_fails_with_line_and_column(tmp_path):
     assert "line 3" in result.output and "zz:" in result.output
 
 
+def test_an_incomplete_models_misspellings_are_said_with_their_line_and_column_in_the_file(tmp_path):
+    """A misspelt class that leaves the fan unmodelled (a problem) and a misspelt property (a note):
+    each sentence ends with where the file first uses the term, as the store keeps no positions."""
+    text = CASE_STUDY.read_text(encoding="utf-8")
+    feeds = "fso:suppliesFluidTo ex:coil_outlet_air_temperature_sensor"
+    typo = tmp_path / "typo.ttl"
+    typo.write_text(text.replace("ex:supply_fan a s4bldg:Fan", "ex:supply_fan a s4bldg:Fam")
+                    .replace(feeds, feeds.replace("FluidTo", "FluidToo")), encoding="utf-8")
+    lines = typo.read_text(encoding="utf-8").splitlines()
+    fan_line = next(i for i, line in enumerate(lines, 1) if "s4bldg:Fam" in line)
+    feeds_line = next(i for i, line in enumerate(lines, 1) if "fso:suppliesFluidToo" in line)
+    result = runner.invoke(app, ["assemble", str(typo), "--memory"], env={"COLUMNS": "400"})
+    assert result.exit_code == 2
+    flat = " ".join(result.output.split())
+    fan_column = lines[fan_line - 1].index("s4bldg:Fam") + 1
+    feeds_column = lines[feeds_line - 1].index("fso:suppliesFluidToo") + 1
+    assert f"(did you mean https://saref.etsi.org/saref4bldg/Fan?) (typo.ttl, line {fan_line}, column {fan_column})" in flat
+    assert f"(typo.ttl, line {feeds_line}, column {feeds_column})" in flat and "suppliesFluidToo" in flat
+    # a model that assembles with a misspelt property: its note says where, as the assembly's table shows it
+    typo.write_text(text.replace(feeds, feeds.replace("FluidTo", "FluidToo")), encoding="utf-8")
+    result = runner.invoke(app, ["assemble", str(typo), "--memory"], env={"COLUMNS": "400"})
+    assert result.exit_code == 0, result.output
+    assert f"(typo.ttl, line {feeds_line}, column {feeds_column})" in " ".join(result.output.split())
+
+
 @pytest.mark.parametrize("command", ["calibrate", "assemble"])
 def test_a_command_that_fails_leaves_the_stored_model_as_it_was(tmp_path, command):
     """The same model name, a changed file, and a command that fails after loading it (measurements

@@ -114,7 +114,11 @@ def test_an_upload_that_does_not_assemble_is_stored_and_says_why(client, auth, s
     assert created.status_code == 201 and store.has_model("fann")
     check = created.json()["assembly"]
     assert not check["complete"] and check["problems"][0].startswith("supply_fan: its class https://saref.etsi.org/saref4bldg/Fann")
-    assert check["problems"][0].endswith("(did you mean https://saref.etsi.org/saref4bldg/Fan?)")
+    lines = body.splitlines()
+    line = next(i for i, text in enumerate(lines, 1) if "s4bldg:Fann" in text)
+    column = lines[line - 1].index("s4bldg:Fann") + 1
+    assert check["problems"][0].endswith(f"(did you mean https://saref.etsi.org/saref4bldg/Fan?) "
+                                         f"(model fann, line {line}, column {column})")
 
 
 def test_malformed_rdf_is_refused_with_line_and_column_and_changes_nothing(client, auth, store, snapshot):

@@ -11,6 +11,7 @@ from service.errors import GraphtwinError, IncompleteModelError, UnsupportedForm
 from service.graph.backend import EmbeddedBackend
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
+from service.graph.vocabulary import with_term_locations
 from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, require_model
 from service.http.errors import ApiError, error_responses
 from service.http.schemas import (
@@ -74,21 +75,24 @@ def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | N
     fmt = rdf_format(content_type or "text/turtle")
     loaded = store.load_model(name, data, fmt.media_type, source_name=f"model {name}")
     return {"name": name, "graph": store.model_graph(name).value, "triples": loaded.triples, "replaced": loaded.replaced,
-            "changed": loaded.changed, "assembly": _assembly_check(store, name)}
+            "changed": loaded.changed,
+            "assembly": _assembly_check(store, name, data.decode("utf-8", errors="replace"))}
 
 
-def _assembly_check(store: GraphStore, name: str) -> dict:
+def _assembly_check(store: GraphStore, name: str, text: str) -> dict:
     """Assemble model ``name`` without writing: complete or not, why not, and its notes (an upload is
-    stored either way; the answer says what the model is worth before any data are sent)."""
+    stored either way; the answer says what the model is worth before any data are sent); a misspelt
+    term's sentence says where the uploaded ``text`` first uses it."""
     try:
         model = assemble(store, name)
     except IncompleteModelError as exc:
-        return {"complete": False, "problems": list(exc.problems), "notes": list(exc.notes)}
+        return {"complete": False, "problems": with_term_locations(exc.problems, text, f"model {name}"),
+                "notes": with_term_locations(exc.notes, text, f"model {name}")}
     except GraphtwinError as exc:
         return {"complete": False, "problems": [str(exc)], "notes": []}
     except Exception as exc:  # noqa: BLE001 (the upload is stored: say the assembly failed, not a 500)
         return {"complete": False, "problems": [f"the assembly failed: {type(exc).__name__}: {exc}"], "notes": []}
-    return {"complete": True, "problems": [], "notes": list(model.notes)}
+    return {"complete": True, "problems": [], "notes": with_term_locations(model.notes, text, f"model {name}")}
 
 
 @router.delete("/models/{name}", status_code=204, tags=["models"], dependencies=[WriteAccess],
