@@ -106,6 +106,11 @@ class UnknownEffectError(InputError):
         super().__init__(f"no effect {effect!r}; the catalog has {', '.join(self.catalog)}")
 
 
+class MaintainedGraphError(InputError):
+    """A write to a graph graphtwin maintains from its own files (the ontologies, the alignment
+    rules, the signature library): every model's matching reads them."""
+
+
 class ResultTooLargeError(InputError):
     """A query's answer has more rows or triples than the service's limit."""
 

@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import pyoxigraph as ox
 
-from service.errors import InputError, ModelLoadError, NotFoundError
+from service.errors import InputError, MaintainedGraphError, ModelLoadError, NotFoundError
 from service.graph.alignment import alignment_rule_triples, inferred_ntriples, inferred_triples
 from service.graph.backend import EmbeddedBackend, SparqlBackend, Term
 from service.graph.blank_nodes import skolemize
@@ -30,11 +30,13 @@ from service.graph.ntriples import GraphTriples, ntriples_chunks
 from service.graph.rdf_io import parse_rdf, rdf_format, sparql_syntax_message
 from service.resources import ontologies_dir, queries_dir
 
-__all__ = ["ModelLoad", "GraphStore", "ONTOLOGY_GRAPH", "ALIGNMENT_RULES_GRAPH", "SIGNATURE_GRAPH"]
+__all__ = ["ModelLoad", "GraphStore", "ONTOLOGY_GRAPH", "ALIGNMENT_RULES_GRAPH", "SIGNATURE_GRAPH", "MAINTAINED_GRAPHS"]
 
 ONTOLOGY_GRAPH = graph_iri("ontology", "core")
 ALIGNMENT_RULES_GRAPH = graph_iri("alignment", "rules")
 SIGNATURE_GRAPH = graph_iri("signatures", "library")
+#: The graphs graphtwin writes from its own files; an update may not write them (:meth:`GraphStore.update_models`).
+MAINTAINED_GRAPHS = frozenset(g.value for g in (ONTOLOGY_GRAPH, ALIGNMENT_RULES_GRAPH, SIGNATURE_GRAPH))
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-+]{0,127}")  # 128 at most: a name is a file name too (uploads)
 
 
@@ -282,16 +284,28 @@ class GraphStore:
         a model whose graph it can have written (``written``: graph IRIs, None for any;
         :func:`service.graph.sparql_writes.written_graphs`) gets its inferences derived again and loses its
         assembly (which described the model before), as a load does; a model whose graph it removed
-        leaves neither behind. The update and those writes hold the model lock: a load of the same
-        model waits. Returns the names of the models brought in step.
+        leaves neither behind. An update that names a graph graphtwin maintains (:data:`MAINTAINED_GRAPHS`)
+        is refused; one that can write any named graph (``CLEAR ALL``, ``GRAPH ?g``) runs, and the
+        ontologies and alignment rules are written again where it changed them. The update and those
+        writes hold the model lock: a load of the same model waits. Returns the names of the models
+        brought in step.
 
+        :raises MaintainedGraphError: the update names a maintained graph (nothing was changed).
         :raises SyntaxError, ValueError, RuntimeError, OSError: the backend's refusal of the update
             (nothing was changed).
         """
+        if written is not None and (maintained := sorted(MAINTAINED_GRAPHS.intersection(written))):
+            raise MaintainedGraphError(
+                f"the update writes {', '.join(f'<{g}>' for g in maintained)}, which graphtwin maintains from its own "
+                "files (the ontologies, the alignment rules, the signature library: every model's matching reads "
+                "them); write a model's graph, or a graph of your own")
         self.ensure_ontologies()
         with self._model_lock:
             before = self.models()
             self.backend.update(sparql)
+            if written is None:  # it may have changed the maintained graphs: the ontologies are checked again
+                self._ontology_triples = None
+                self.ensure_ontologies()
             after = self.models()
             changed = [name for name in after if written is None or self.model_graph(name).value in written]
             dropped = sorted(set(before) - set(after))

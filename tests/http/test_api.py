@@ -412,6 +412,26 @@ def test_a_model_graph_dropped_by_an_update_takes_its_inferences_and_a_graph_no_
     assert client.post("/sparql/update", data={"update": again}, headers=auth).status_code == 204  # was a 500 after it
 
 
+def test_an_update_of_a_graph_graphtwin_maintains_is_refused_and_one_of_every_graph_leaves_them_whole(client, auth, store):
+    """``DROP GRAPH`` of the ontologies had left every model unassemblable until a restart (204); now
+    a maintained graph named is 403 with nothing changed, and an update that can write any graph
+    (``DROP ALL``) runs, after which the ontologies and alignment rules are written again."""
+    from service.graph.store import ALIGNMENT_RULES_GRAPH, ONTOLOGY_GRAPH
+
+    held = {g: set(store.graph_triples(g)) for g in (ONTOLOGY_GRAPH, ALIGNMENT_RULES_GRAPH)}
+    for update in (f"DROP GRAPH {ONTOLOGY_GRAPH}",
+                   f"DELETE WHERE {{ GRAPH {ALIGNMENT_RULES_GRAPH} {{ ?s ?p ?o }} }}"):
+        refused = client.post("/sparql/update", data={"update": update}, headers=auth)
+        assert refused.status_code == 403 and "graphtwin maintains" in refused.json()["detail"], refused.json()
+    assert {g: set(store.graph_triples(g)) for g in held} == held and store.models() == ["case"]
+    assert client.post("/sparql/update", data={"update": "DROP ALL"}, headers=auth).status_code == 204
+    assert {g: set(store.graph_triples(g)) for g in held} == held and store.models() == []
+    assert client.put("/models/again", content=CASE_STUDY.read_bytes(), headers=auth).json()["assembly"]["complete"]
+    # a syntax error says where, not the parser's character classes
+    broken = client.post("/sparql/update", data={"update": "INSERT DATA { <a> <b> }"}, headers=auth)
+    assert broken.status_code == 400 and broken.json()["detail"].startswith("SPARQL Update syntax error at line 1, column")
+
+
 def test_a_model_name_longer_than_a_file_name_can_be_is_refused(client, auth):
     response = client.put("/models/" + "m" * 129, content=CASE_STUDY.read_bytes(), headers=auth)
     assert response.status_code == 422 and "128 characters at most" in response.json()["detail"]

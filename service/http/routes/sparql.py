@@ -13,6 +13,8 @@ import pyoxigraph as ox
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
+from service.errors import GraphtwinError
+from service.graph.rdf_io import sparql_syntax_message
 from service.graph.sparql_writes import written_graphs
 from service.graph.store import GraphStore
 from service.http.deps import ReadAccess, ServiceDep, WriteAccess, require_model
@@ -79,7 +81,12 @@ def _update(store: GraphStore, text: str) -> None:
                             "load data with PUT /models/NAME")
     try:
         store.update_models(text, written_graphs(text))
-    except (SyntaxError, ValueError) as exc:
+    except GraphtwinError:  # a maintained graph named: 403 (nothing was changed)
+        raise
+    except SyntaxError as exc:
+        raise ApiError(400, sparql_syntax_message(text, exc).replace("SPARQL syntax error", "SPARQL Update syntax error",
+                                                                     1)) from None
+    except ValueError as exc:
         raise ApiError(400, f"SPARQL Update syntax error: {exc}") from None
     except (RuntimeError, OSError) as exc:  # the store refused it as it ran (DROP of a graph that does not exist)
         raise ApiError(400, f"the update failed, nothing was changed: {exc}") from None
