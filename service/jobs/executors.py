@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import tempfile
 import threading
@@ -46,7 +47,7 @@ class ProcessJobExecutor:
 
     @staticmethod
     def _new_pool() -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn"), initializer=exit_with_parent)
+        return ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn"), initializer=_start_job_worker)
 
     def submit(self, function, *args) -> Future:
         with self._lock:
@@ -83,6 +84,15 @@ class ProcessJobExecutor:
             for pool in self._slots:
                 _stop_pool(pool)
         shutil.rmtree(self._progress_folder, ignore_errors=True)
+
+
+def _start_job_worker() -> None:
+    """Pool initializer of a job's process: a process group of its own, so a stop sent to the service's
+    group (Ctrl-C in its terminal, ``kill -- -PGID``) reaches the service alone, which then marks the
+    running job interrupted and stops this process (it had died first, and the job was recorded as
+    failed); and it ends with the service (:func:`~service.runtime.exit_with_parent`)."""
+    os.setpgrp()
+    exit_with_parent()
 
 
 def _stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 10.0) -> None:

@@ -3,6 +3,7 @@ distributed cluster (a ``LocalCluster`` on loopback TCP, reached as ``GRAPHTWIN_
 like a real scheduler), with the results written to the service's store on return. (The fault test,
 test_service_faults.py, runs the process pool inside a real ``graphtwin serve``.)"""
 
+import os
 import pickle
 import time
 
@@ -127,8 +128,12 @@ def _sleep(seconds: float) -> float:
 
 
 def test_shutting_the_pool_down_stops_a_worker_still_running_a_job():
-    """A service stopped while a job runs leaves no orphaned worker computing on."""
+    """A service stopped while a job runs leaves no orphaned worker computing on. The worker is in a
+    process group of its own: a stop sent to the service's group (Ctrl-C) reaches the service, which
+    marks the job interrupted, and not the worker first (the job had been recorded as failed)."""
     executor = ProcessJobExecutor(1)
+    worker_group = executor.submit(os.getpgrp).result(timeout=60)
+    assert worker_group != os.getpgrp() and worker_group in [w.pid for w in executor._slots[0]._processes.values()]
     future = executor.submit(_sleep, 120.0)
     deadline = time.monotonic() + 60
     while not future.running() and time.monotonic() < deadline:
