@@ -38,6 +38,7 @@ from service.calibration.record import (
 )
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
 from service.calibration.triples import calibration_triples
+from service.calibration.unit_mixup import unit_mixups
 from service.data.measurements import MeasuredData
 from service.data.model_series import SETTLING_S, read_model_data
 from service.data.operating_filter import operating_mask
@@ -444,6 +445,15 @@ def calibrate(
             for node in observed_test
         }
         regimes = regime_breakdown(md, test_slice, observed_test, median, seed=seed)
+    # a column in another unit than the graph declares (°F under °C): the last window against the fit
+    # and against the defaults, which a fit bent towards the misread column has not moved
+    if test_slice is not None:
+        at_defaults = predict_test(md, train_slice, test_slice, md.default_theta())
+        compared = observed_test, [predictions["test"], at_defaults]
+    else:
+        at_defaults = {k: v[0] for k, v in problem.run(md.default_theta()[None, :]).items()}
+        compared = problem.observed, [predictions["train"], at_defaults]
+    diagnostics.warnings += unit_mixups(data, md.units, *compared, list(compared[0]))
     finished = datetime.now(timezone.utc)
     times = data.timestamps
     as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime).replace(  # noqa: E731

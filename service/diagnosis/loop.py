@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.calibration.run import calibrate, predict_test
+from service.calibration.run import calibrate
 from service.components.library import SignatureLibrary
 from service.data.windows import Window
 from service.diagnosis.candidates import rank_catalog, split_windows
@@ -28,7 +28,6 @@ from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
 from service.diagnosis.report import FAILURE_RATIO, DiagnosisReport, SensorVerdict, diagnosis_triples, fails_at
 from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable, told_apart
-from service.diagnosis.unit_mixup import unit_mixups
 from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.graph.units import difference_label
@@ -137,9 +136,7 @@ def diagnose(
         effects=ranked, not_applicable=skipped, residual_dependence=dependence, step_s=data.step_s,
         base_test_prediction=predicted, effects_tested=rank_effects, test_timestamps=data.timestamps[test_slice],
         test_observed=observed, failure_ratio=failure_ratio,
-        data_warnings=list(base.record.diagnostics.warnings) + (unit_mixups(
-            data, md.units, observed, [predicted, predict_test(md, base.train, test_slice, md.default_theta())],
-            failing) if failing else []),
+        data_warnings=list(base.record.diagnostics.warnings),
         indistinguishable=lookalikes, told_apart=others, residual_trend=trends,
     )
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))

@@ -48,6 +48,18 @@ def test_a_column_in_another_unit_is_named_with_the_unit_it_reads_right_in(gener
     assert f"is it in {unit}?" in warnings[0], warnings
 
 
+def test_a_calibration_alone_warns_of_the_column_too(generated, tmp_path):
+    """Found by the calibration (its last window, here the training one), not only by a diagnosis: a
+    user who only calibrates had a 46 K misfit and no word of the unit."""
+    from service.calibration.run import calibrate
+
+    store, path = generated
+    mixed = _rewritten(path, tmp_path / "mixed.csv", "coil_outlet_air_temperature", lambda c: 32.0 + 1.8 * c)
+    outcome = calibrate(store, "case", mixed, train=TRAIN, seed=0)
+    said = [w for w in outcome.record.diagnostics.warnings if "the model declares" in w]
+    assert len(said) == 1 and said[0].startswith("column 'coil_outlet_air_temperature'") and "is it in °F?" in said[0]
+
+
 def test_the_data_as_generated_raise_no_unit_warning(generated):
     store, path = generated
     assert _warnings(store, path) == []
@@ -61,7 +73,7 @@ def test_readings_shrunk_towards_a_prediction_near_zero_are_not_a_unit_mixup():
 
     import numpy as np
 
-    from service.diagnosis.unit_mixup import unit_mixups
+    from service.calibration.unit_mixup import unit_mixups
 
     u = "http://qudt.org/vocab/unit/"
     rng = np.random.default_rng(0)

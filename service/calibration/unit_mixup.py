@@ -4,7 +4,7 @@ prediction of the test window. Where one such reading misses the prediction by a
 the RMSE as declared, and by at most a fifth of its own magnitude (readings shrunk towards a
 prediction near zero are not met), the column is probably in that unit (read in the wrong one of °C, °F and K a
 temperature moves by tens of kelvin at least, a power or a flow by a factor of 2 or more): said as
-a warning of the comparison (a BMS export in °F under a model that
+a warning of the calibration, and so of every diagnosis (a BMS export in °F under a model that
 says °C had been calibrated and diagnosed as a 46 K misfit no effect explains). The calibration has
 bent the model towards the misread column, so the model at its parameters' defaults is asked too;
 a meter the model has a free curve for can still hide it (fitted, it does not fail). A fraction
@@ -31,7 +31,7 @@ TRACKING_SHARE = 0.2
 
 def unit_mixups(data: MeasuredData, port_units: Mapping[str, str], observed: Mapping[str, np.ndarray],
                 predictions: Sequence[Mapping[str, np.ndarray]], failing: Sequence[str]) -> list[str]:
-    """One warning per failing sensor (``failing``; readings and predictions in its simulator unit
+    """One warning per sensor of ``failing`` (readings and predictions in its simulator unit
     ``port_units[node]``) whose test readings ``observed`` meet one of ``predictions`` (the calibrated
     model's, and the model's at its parameters' defaults, which a fit to the misread column has not
     bent) in another unit of its column's dimension (:data:`MIXUP_IMPROVEMENT`)."""
