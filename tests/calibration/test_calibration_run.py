@@ -266,6 +266,23 @@ def test_gp_inputs_that_are_no_boundary_input_or_go_to_a_point_fit_are_refused(s
     assert set(store.backend.graphs()) == graphs_before
 
 
+def test_a_window_a_gap_covers_is_refused_before_the_fit_naming_the_window_and_the_target(synthetic, tmp_path):
+    """A test window whose only readings of a target are missing (a gap longer than is filled) had
+    been fitted on and failed afterwards with "no measured step in the window", naming neither."""
+    store, path, _ = synthetic
+    lines = path.read_text().splitlines()
+    column = lines[0].split(",").index("coil_outlet_air_temperature")
+    rows = [lines[0]] + [",".join("" if i == column and line.startswith("2026-01-14 1") else cell
+                                  for i, cell in enumerate(line.split(","))) for line in lines[1:]]
+    gappy = tmp_path / "gappy.csv"
+    gappy.write_text("\n".join(rows) + "\n")
+    graphs_before = set(store.backend.graphs())
+    with pytest.raises(ValueError, match=r"the test window 2026-01-14T11:00 – 2026-01-14T15:00 holds no measurement "
+                                         r"of coil_outlet_air_temperature_sensor \(a gap in the data covers it"):
+        calibrate(store, "case", gappy, train=TRAIN, test=("2026-01-14T11:00", "2026-01-14T15:00"))
+    assert set(store.backend.graphs()) == graphs_before
+
+
 def test_a_point_run_is_plotted_as_measured_against_predicted_only(point_run, tmp_path):
     (path,) = plot_calibration(point_run, tmp_path)
     assert path.name == f"{point_run.record.run_id}-fit.png"
