@@ -25,7 +25,14 @@ from service.diagnosis.drift import drifting_components
 from service.diagnosis.episodes import Episode, find_episodes
 from service.diagnosis.localization import FailureLocation, FlowTopology, localize_failures
 from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
-from service.diagnosis.report import FAILURE_RATIO, DiagnosisReport, SensorVerdict, diagnosis_triples, fails_at
+from service.diagnosis.report import (
+    FAILURE_RATIO,
+    MIN_TEST_STEPS,
+    DiagnosisReport,
+    SensorVerdict,
+    diagnosis_triples,
+    fails_at,
+)
 from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable, told_apart
 from service.graph.namespaces import local_name
@@ -34,11 +41,6 @@ from service.graph.units import difference_label
 from service.matching.signature import Signature
 
 __all__ = ["diagnose", "MIN_TEST_STEPS"]
-
-
-#: Fewer test steps than this give no verdict (diagnose refuses the window before calibrating): the
-#: noise level comes from second differences and the effects are judged on the window's second half.
-MIN_TEST_STEPS = 12
 
 
 def diagnose(

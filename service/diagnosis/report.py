@@ -24,7 +24,7 @@ from service.diagnosis.separation import Lookalike, ToldApart
 from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 from service.graph.units import difference_label
 
-__all__ = ["FAILURE_RATIO", "fails_at", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
+__all__ = ["FAILURE_RATIO", "MIN_TEST_STEPS", "fails_at", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
 
 #: A sensor fails where its test RMSE exceeds this multiple of its noise σ (``docs/diagnosis.md``).
 FAILURE_RATIO = 2.0
@@ -35,6 +35,11 @@ def fails_at(rmse: float, noise: float, failure_ratio: float = FAILURE_RATIO) ->
     RMSE > failure_ratio · σ."""
     return bool(rmse > failure_ratio * noise)
 
+
+#: Fewer test steps than this give no verdict (diagnose refuses the window before calibrating): the
+#: noise level comes from second differences and the effects are judged on the window's second half;
+#: a regime over fewer is a spike's, not one to name worst.
+MIN_TEST_STEPS = 12
 
 @dataclass(frozen=True, kw_only=True)
 class SensorVerdict:
@@ -154,6 +159,8 @@ class DiagnosisReport:
         if node in self.residual_trend:
             parts.append(self.residual_trend[node].describe(unit))
         regimes = [r for r in self.regimes if r["share"] > 0 and np.isfinite(r["rmse"].get(node, np.nan))]
+        steps = len(self.test_timestamps) if self.test_timestamps is not None else 0
+        regimes = [r for r in regimes if r["share"] * steps >= MIN_TEST_STEPS] or regimes  # as the worst regime's
         if len(regimes) > 1:
             worst = max(regimes, key=lambda r: r["rmse"][node])
             parts.append(f"its error is largest where {worst['rule']} (RMSE {worst['rmse'][node]:.3g} {unit} over "

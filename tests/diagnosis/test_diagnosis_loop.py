@@ -189,6 +189,14 @@ def test_the_worst_regime_spans_enough_steps_to_be_a_regime_not_a_spike():
     assert rows[0]["share"] * 96 < MIN_TEST_STEPS <= rows[1]["share"] * 96  # one step against 48
     short = [dict(r, share=r["share"] / 10) for r in rows]  # no regime spans enough: the largest RMSE
     assert [r["worst"] for r in _regimes_with_worst(short, {node: verdict}, 96)] == [True, False, False]
+    # the summary's sentence on the worst sensor names the same regime (it had named the one-step spike)
+    from service.diagnosis.report import DiagnosisReport
+
+    report = DiagnosisReport(model_name="m", run_id="r", sensors={node: verdict}, localization=[],
+                             regimes=_regimes_with_worst([dict(r) for r in rows], {node: verdict}, 96),
+                             regime_rule_accuracy=1.0, episodes={}, effects=[], not_applicable=[],
+                             test_timestamps=np.arange(96))
+    assert "its error is largest where fan on (RMSE 2.5 K over 50 %" in report.residual_structure()
 
 
 def test_the_noise_floor_of_a_power_meter_is_its_accuracy_of_reading():
