@@ -24,7 +24,7 @@ import numpy as np
 from service.data.csv_table import read_csv_table
 from service.errors import InputError, MeasurementError
 from service.graph.namespaces import local_name
-from service.graph.units import UnitError, convert, unit_label
+from service.graph.units import KNOWN_UNITS, UnitError, convert, unit_label
 
 __all__ = ["MeasurementError", "MeasuredData", "SeriesSpec", "read_measurements", "parse_timestamp", "frozen_spans"]
 
@@ -389,6 +389,8 @@ def read_measurements(
         if spec.port_unit == "1":
             _check_fraction(converted[node], f"column {header[column]!r}", spec.unit, problems, warnings)
     if problems:
+        unknown = [i for i, p in enumerate(problems) if p.endswith(KNOWN_UNITS)]  # the known units said once
+        problems = [p.removesuffix(KNOWN_UNITS) if i in unknown[:-1] else p for i, p in enumerate(problems)]
         raise MeasurementError(source, problems)
     step_s = float(round(np.median(np.diff(stamps).astype(np.int64))))  # whole seconds, as the grid
     _check_grid_size(source, stamps, step_s)

@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.errors import UnitError
+from service.graph.spelling import one_edit_apart
 
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
-           "quantity_text", "closest_unit_hint", "difference_unit", "difference_label", "difference_text"]
+           "quantity_text", "closest_unit_hint", "KNOWN_UNITS", "difference_unit", "difference_label", "difference_text"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -92,24 +93,28 @@ def unit_spec(unit: str, *, where: str = "") -> UnitSpec:
     local = unit[len(QUDT_UNIT_NAMESPACE):] if unit.startswith(QUDT_UNIT_NAMESPACE) else unit
     if local in QUDT_UNITS:
         return QUDT_UNITS[local]
-    raise UnitError(
-        f"unknown unit {unit!r}{f' for {where}' if where else ''}{closest_unit_hint(unit)}: graphtwin knows the QUDT "
-        f"units {', '.join(sorted(QUDT_UNITS))} (as {QUDT_UNIT_NAMESPACE}<name>) and the port units "
-        f"{', '.join(sorted(PORT_UNITS))}"
-    )
+    raise UnitError(f"unknown unit {unit!r}{f' for {where}' if where else ''}{closest_unit_hint(unit)}{KNOWN_UNITS}")
+
+
+#: What an unknown unit's message ends with (a list of several such problems says it once).
+KNOWN_UNITS = (f": graphtwin knows the QUDT units {', '.join(sorted(QUDT_UNITS))} (as {QUDT_UNIT_NAMESPACE}<name>) "
+               f"and the port units {', '.join(sorted(PORT_UNITS))}")
 
 
 def closest_unit_hint(unit: str) -> str:
     """`` (did you mean …/DEG_C?)`` for an unknown unit whose local name is a known QUDT unit's but
-    for case, ``_`` and ``-`` (``DEGC``, ``deg_c``); nothing otherwise (a name merely close to one,
-    ``L-PER-HR`` to ``M3-PER-HR``, is often another scale: no guess)."""
+    for case, ``_`` and ``-`` (``DEGC``, ``deg_c``), else one with a letter added, dropped or two
+    swapped (``DEG_CC``, ``KiloWW``; from four letters, where one slip reaches few); nothing
+    otherwise (a letter replaced, ``DEG_K``, or a name merely close to one, ``L-PER-HR`` to
+    ``M3-PER-HR``, is often another scale: no guess)."""
     local = unit.rsplit("/", 1)[-1]
 
     def bare(name: str) -> str:
         return name.replace("_", "").replace("-", "").lower()
 
-    close = [name for name in QUDT_UNITS if bare(name) == bare(local)]
-    return f" (did you mean {QUDT_UNIT_NAMESPACE}{close[0]}?)" if close else ""
+    close = ([name for name in QUDT_UNITS if bare(name) == bare(local)][:1]
+             or [name for name in QUDT_UNITS if len(local) >= 4 and one_edit_apart(bare(name), bare(local), replaced=False)])
+    return f" (did you mean {' or '.join(QUDT_UNIT_NAMESPACE + name for name in close)}?)" if close else ""
 
 
 def difference_unit(unit: str) -> str:

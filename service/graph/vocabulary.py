@@ -22,6 +22,7 @@ import pyoxigraph as ox
 
 from service.graph.namespaces import BRICK, OWL, RDF, RDFS, REF, local_name, namespace_of
 from service.graph.rdf_io import first_use
+from service.graph.spelling import one_edit_apart
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
 __all__ = ["misspelt_terms", "MisspeltTerms", "DeclaredTerms", "closest_declared", "with_term_locations"]
@@ -76,21 +77,8 @@ def closest_declared(term: str, declared: dict[str, list[str]]) -> str | None:
     brick = namespace_of(term) in _BRICK_NAMESPACES
     close = ([n for n in names if n.lower() == name.lower()]
              or difflib.get_close_matches(name, names, n=1, cutoff=cutoff)
-             or ([] if brick or len(name) < 3 else [n for n in names if _one_edit_apart(name.lower(), n.lower())][:1]))
+             or ([] if brick or len(name) < 3 else [n for n in names if one_edit_apart(name.lower(), n.lower())][:1]))
     return namespace_of(term) + close[0] if close else None
-
-
-def _one_edit_apart(a: str, b: str) -> bool:
-    """One letter replaced, added, dropped, or two neighbours swapped (``Fam``, ``Fna`` for ``Fan``,
-    which a ratio on three letters does not reach)."""
-    if abs(len(a) - len(b)) > 1 or a == b:
-        return False
-    if len(a) == len(b):
-        differ = [i for i, (x, y) in enumerate(zip(a, b)) if x != y]
-        return len(differ) == 1 or (len(differ) == 2 and differ[1] == differ[0] + 1
-                                    and a[differ[0]] == b[differ[1]] and a[differ[1]] == b[differ[0]])
-    short, long = sorted((a, b), key=len)
-    return any(long[:i] + long[i + 1:] == short for i in range(len(long)))
 
 
 def _nodes(first: str, count: int) -> str:

@@ -144,6 +144,15 @@ def test_unit_problems_and_spreadsheet_errors_are_reported_by_column(tmp_path):
         read_measurements(_write(tmp_path, text), wrong)
     with pytest.raises(MeasurementError, match=r"column 'SAT': device https://example.org/x#sat declares no unit"):
         read_measurements(_write(tmp_path, text), no_unit)
+    # two columns of unknown units: each named with its hint, the known units listed once, at the end
+    unknown = {node: replace(spec, unit=spec.unit.replace("DEG_F", "DEG_FF").replace("PERCENT", "PERCNT"))
+               for node, spec in SPECS.items()}
+    with pytest.raises(MeasurementError) as both:
+        read_measurements(_write(tmp_path, text), unknown)
+    problems = both.value.problems
+    assert len(problems) == 2 and "did you mean http://qudt.org/vocab/unit/DEG_F?" in problems[0]
+    assert "did you mean http://qudt.org/vocab/unit/PERCENT?" in problems[1]
+    assert "graphtwin knows the QUDT units" not in problems[0] and "graphtwin knows the QUDT units" in problems[1]
     extra = read_measurements(_write(tmp_path, "time,SAT,valve,extra\n2025-01-01 00:00,1,2,3\n2025-01-01 00:10,1,2,3\n"), SPECS)
     assert "columns no device of the model claims: extra (an operating filter may read them)" in extra.warnings
     assert extra.other_columns["extra"] == pytest.approx([3.0, 3.0])

@@ -78,6 +78,10 @@ def test_an_unknown_unit_is_matched_to_a_known_one_only_up_to_case_and_separator
     dimension (litres an hour, a kilowatt hour): no guess."""
     assert closest_unit_hint(U + "DEGC") == closest_unit_hint(U + "deg_c") == f" (did you mean {U}DEG_C?)"
     assert closest_unit_hint(U + "kilow") == f" (did you mean {U}KiloW?)"
+    # a letter added or two swapped is a slip; a letter replaced is often another scale
+    assert closest_unit_hint(U + "DEG_CC") == f" (did you mean {U}DEG_C?)"
+    assert closest_unit_hint(U + "M3-PER-SCE") == f" (did you mean {U}M3-PER-SEC?)"
+    assert closest_unit_hint(U + "DEG_G") == closest_unit_hint(U + "WW") == ""
     for unknown in ("L-PER-HR", "KiloW-HR", "M3-PER-MIN", "KiloGM-PER-MIN", "DEG_K", "FURLONG"):
         assert closest_unit_hint(U + unknown) == "", unknown
     with pytest.raises(UnitError, match=r"unknown unit '.*DEGC' for column 'T' \(did you mean .*DEG_C\?\)"):
