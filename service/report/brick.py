@@ -20,7 +20,7 @@ from rich.table import Table
 
 from service.errors import InputError, NotFoundError
 from service.graph.alignment_derivation import rule_terms
-from service.graph.namespaces import compact_iri, local_name, namespace_of
+from service.graph.namespaces import PREFIXES, compact_iri, local_name, namespace_of
 from service.graph.rdf_io import parse_rdf, rdf_format
 from service.graph.store import ONTOLOGY_GRAPH, GraphStore
 
@@ -168,6 +168,16 @@ def _compact(iri: str) -> str:
     return local_name(iri) if compact.startswith("<") else compact
 
 
+def _turtle(text: str, own: dict[str, str]) -> str:
+    """Triples as Turtle to paste: an IRI in a namespace graphtwin knows as its prefixed name
+    (``unit:DEG_F``, QUDT's), one in the model's namespaces by ``own``'s prefix (``:mat_sensor``)."""
+    def name(iri: str) -> str:
+        known = compact_iri(iri)
+        return known if known[0] != "<" or namespace_of(iri) not in own else f"{own[namespace_of(iri)]}:{local_name(iri)}"
+
+    return re.sub(r"<(https?://[^\s<>]+)>", lambda m: name(m.group(1)), text)
+
+
 def _short(iri: str) -> str:
     for prefix, namespace in (("brick:", BRICK), ("rec:", REC), ("ref:", REF)):
         if iri.startswith(namespace):
@@ -286,11 +296,19 @@ def print_brick_report(report: BrickReport, console: Console | None = None) -> N
         namespaces = sorted({namespace_of(iri) for iri in iris if _compact(iri) == local_name(iri)})
         caption = ", ".join(([f"nodes by their local names, in {', '.join(namespaces)}"] if namespaces else [])
                             + ([f"bu: {_BRICK_UNITS}"] if any(i.startswith(_BRICK_UNITS) for i in iris) else []))
+        # to paste: prefixed names, the model's own namespaces as ":" (then ns2:, …), declared below
+        own = dict.fromkeys(namespace_of(i) for row in texts for i in _IRI.findall(row[2]) if compact_iri(i)[0] == "<")
+        own = {namespace: "" if n == 0 else f"ns{n + 1}" for n, namespace in enumerate(own)}
+        fixes = [_turtle(row[2], own) for row in texts]
+        used = sorted({p for fix in fixes for p in re.findall(r"(?<![\w<#/:])([a-z]+):\w", fix) if p in PREFIXES})
+        declared = [f"@prefix {p}: <{PREFIXES[p]}> ." for p in used] + [f"@prefix {p}: <{n}> ." for n, p in own.items()]
+        caption = "; ".join(filter(None, [caption, "to paste the triples: " + " ".join(declared) if declared else ""]))
         table = Table(title="Assumptions made where the model is ambiguous", caption=caption or None)
         for column in ("about", "assumed", "state this to remove it", "rule"):
             table.add_column(column, overflow="fold")
-        for row in texts:
-            table.add_row(*(_IRI.sub(lambda m: _compact(m.group(0)), text) for text in row))
+        for (about, assumed, _, rule), fix in zip(texts, fixes):
+            table.add_row(*(_IRI.sub(lambda m: _compact(m.group(0)), text) for text in (about, assumed)), fix,
+                          _IRI.sub(lambda m: _compact(m.group(0)), rule))
         console.print(table)
     for title, points, needed in (
         ("Points with no column (ref:hasTimeseriesId or rdfs:label)", report.points_without_column,

@@ -2,6 +2,7 @@
 unit, written by its points only. What holds whatever the data: what assembles from the file as it
 is, what the Brick report says is missing, and that stating what it names completes the model."""
 
+import re
 import csv
 
 import pyoxigraph as ox
@@ -97,6 +98,18 @@ def test_the_assumptions_read_whole_at_80_columns_nodes_by_their_local_names(sto
     # its units are Brick 1.x's, taken for QUDT's: the two told apart, not both read <DEG_F>
     assert "<bu:DEG_F>" in text and "<unit:DEG_F>" in text and "<DEG_F>" not in text
     assert "bu: http://brickschema.org/schema/Brick/units#" in caption
+    # what to state is Turtle to paste (it read "<mat_sensor> brick:hasUnit <unit:DEG_F> ."): the model's
+    # nodes under the empty prefix and QUDT's units under unit:, both declared in the caption
+    import pyoxigraph as ox
+
+    wide = Console(width=250, record=True)
+    print_brick_report(brick_report(store, "school-fixed"), wide)
+    flat = " ".join(wide.export_text().split())
+    declarations = " ".join(re.findall(r"@prefix [\w]*: <[^>]+> \.", caption))
+    assert "@prefix : <http://openfdd.local/ahu7#> ." in declarations and "@prefix unit: <http://qudt.org/vocab/unit/> ." in declarations
+    assert ":mat_sensor brick:hasUnit unit:DEG_F ." in flat
+    triples = list(ox.parse(f"{declarations} :mat_sensor brick:hasUnit unit:DEG_F .".encode(), ox.RdfFormat.TURTLE))
+    assert [(t.subject.value, t.object.value) for t in triples] == [(AHU7 + "mat_sensor", "http://qudt.org/vocab/unit/DEG_F")]
 
 
 def test_with_what_the_report_names_the_unit_assembles_and_links_to_the_csv(store):
