@@ -59,7 +59,15 @@ def print_calibration(record: CalibrationRecord) -> None:
         table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", unit_label(e.unit),
                       "yes" if e.identified
                       else "no: " + _PARAMETER_KEY.sub(lambda m: parameter_label(m[0]), "; ".join(e.reasons)))
+    identified = sum(e.identified for e in record.estimates)
+    table.caption = f"{identified} of {len(record.estimates)} estimated parameters identified by these data"
     console.print(table)
+    if 2 * identified < len(record.estimates):
+        console.print(f"Only {identified} of {len(record.estimates)} estimated parameters are identified: the others fit "
+                      "the training window about as well anywhere over much of their ranges, so predictions for "
+                      "operation it did not show are uncertain; data with more varied operation, or a measurement "
+                      "of what they set, would pin them (docs/calibration.md, \"Identifiability verdicts\").",
+                      markup=False, highlight=False)
     if record.diagnostics.start is not None:
         console.print(record.diagnostics.start, markup=False, highlight=False)
     if record.diagnostics.sampler is not None:

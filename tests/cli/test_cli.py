@@ -4,6 +4,7 @@ import csv
 import gc
 import io
 import json
+import re
 import shlex
 import subprocess
 import sys
@@ -427,6 +428,10 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
                                  "--train", f"{stamps[0]}/{stamps[143]}", "--test", f"{stamps[144]}/"], env={"COLUMNS": "200"})
     assert result.exit_code == 0, result.output
     assert "Estimates (point" in result.output and "Metrics, test window" in result.output
+    counted = re.search(r"(\d+) of (\d+) estimated parameters identified by these data", result.output)
+    assert counted and 0 < int(counted[1]) <= int(counted[2])  # the verdicts counted under the table
+    # fewer than half identified is said in a sentence, as it is on the school AHU (0 of 19)
+    assert ("Only " in result.output) == (2 * int(counted[1]) < int(counted[2]))
     regimes = result.output[result.output.index("Test RMSE per operating regime"):]
     assert "supply air flow meter" in regimes and " %" in regimes and "°C" in regimes  # rules, shares, units
     refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--gp-input", "supply_air_flow"])
