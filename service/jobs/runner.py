@@ -130,7 +130,7 @@ class JobRunner:
             raise NotFoundError(f"no job {job_id!r}")
         if old.status in ACTIVE:
             raise JobStateError(f"job {job_id} is {old.status}: cancel it or wait for it before resubmitting")
-        return self.submit(old.kind, self._request(old), resubmitted_from=job_id)
+        return self.submit(old.kind, self.request_of(old), resubmitted_from=job_id)
 
     def cancel(self, job_id: str) -> JobRecord:
         """Cancel a queued job at once, flag a running one (module docstring).
@@ -175,7 +175,7 @@ class JobRunner:
                 thread.join()
 
     # ------------------------------------------------------------------ internals
-    def _request(self, record: JobRecord) -> JobRequest:
+    def request_of(self, record: JobRecord) -> JobRequest:
         """The typed request of ``record`` (its params as they were submitted)."""
         return self.kinds[record.kind].request.model_validate(record.params)
 
@@ -268,7 +268,7 @@ class JobRunner:
             record.status, record.started = JobStatus.RUNNING, now()
             record.progress.append({"time": record.started, "message": "started"})
             self.records.save(record)
-            kind, request = record.kind, self._request(record)
+            kind, request = record.kind, self.request_of(record)
         writes = DeferredWrites(self.store.backend)
         try:
             before = self._model_state(request)

@@ -629,6 +629,28 @@ def test_job_state_survives_a_restart_and_interrupted_jobs_can_be_resubmitted(tm
         assert wait_job(client, resubmitted.json()["id"])["status"] == "succeeded"
 
 
+def test_a_job_whose_upload_is_gone_is_refused_at_resubmission_and_an_unknown_kind_names_the_kinds(tmp_path, store, auth):
+    """Resubmitting a calibration whose upload was deleted had queued a job that then failed; a
+    POST to a job kind that does not exist had been a bare 405."""
+    settings = Settings(data_dir=tmp_path / "service", token="test-token-0123456789", executor="threads")
+    gone = JobRecord(id="cd" * 16, kind="calibrate", params={"model": "case", "measurements": "0123456789abcdef"},
+                     status="failed", started="2026-01-01T00:00:00+00:00")
+    JobRecords(settings.jobs_dir).save(gone)
+    with TestClient(create_app(settings, store=store)) as client:
+        refused = client.post(f"/jobs/{gone.id}/resubmit", headers=auth)
+        assert refused.status_code == 404 and "0123456789abcdef" in refused.json()["detail"], refused.json()
+        assert client.get("/jobs").json()["count"] == 1  # nothing queued
+        unknown = client.post("/jobs/compare", headers=auth, json={"model": "case"})
+        assert unknown.status_code == 404 and "/jobs/calibrate, /jobs/diagnose" in unknown.json()["detail"]
+
+
+def test_a_body_that_is_no_json_is_refused_naming_where_it_breaks(client, auth):
+    broken = client.post("/jobs/assemble", content=b'{"model": "case",\n "seed": }',
+                         headers={**auth, "Content-Type": "application/json"})
+    assert broken.status_code == 422
+    assert broken.json()["detail"] == "the request is not valid: the body is not valid JSON at line 2, column 10: Expecting value"
+
+
 def test_a_running_record_is_interrupted_when_the_app_starts(tmp_path):
     settings = Settings(data_dir=tmp_path / "service")
     JobRecords(settings.jobs_dir).save(JobRecord(id="cd" * 16, kind="calibrate", params={}, status="running"))

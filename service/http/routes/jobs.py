@@ -8,7 +8,7 @@ from fastapi import APIRouter, Response
 from service.components.library import SignatureLibrary
 from service.errors import NotFoundError
 from service.http.deps import ReadAccess, Service, ServiceDep, WriteAccess, require_fit_models, require_model
-from service.http.errors import error_responses
+from service.http.errors import ApiError, error_responses
 from service.http.schemas import JobList, JobPublic
 from service.jobs.records import JobRecord
 from service.workflows.effects import check_effect_version, checked_effect_triples
@@ -87,6 +87,12 @@ def submit_add_effect(body: AddEffectRequest, response: Response, service: Servi
     return _submit(service, "add-effect", body, response)
 
 
+@router.post("/jobs/{kind}", include_in_schema=False, responses=error_responses(404))
+def unknown_job_kind(kind: str) -> None:
+    """A job kind the service does not run (it was a 405 naming nothing)."""
+    raise ApiError(404, f"no job kind {kind!r}: POST /jobs/assemble, /jobs/calibrate, /jobs/diagnose or /jobs/add-effect")
+
+
 @router.get("/jobs", response_model=JobList, dependencies=[ReadAccess], responses=error_responses(401, 403))
 def list_jobs(service: ServiceDep) -> dict:
     """Every job, oldest first."""
@@ -113,7 +119,9 @@ def cancel_job(job_id: str, service: ServiceDep) -> dict:
              responses=error_responses(401, 403, 404, 409))
 def resubmit_job(job_id: str, response: Response, service: ServiceDep) -> dict:
     """Run an ended job (interrupted, failed, cancelled…) again with the same parameters: a new job."""
-    _job(service, job_id)
+    request = service.runner.request_of(_job(service, job_id))
+    if isinstance(request, (CalibrateRequest, DiagnoseRequest)):  # its upload or model may be gone since
+        _check_fit(service, request)
     record = service.runner.resubmit(job_id)
     response.headers["Location"] = f"/jobs/{record.id}"
     return _public(record)
