@@ -130,6 +130,11 @@ def test_malformed_rdf_is_refused_with_line_and_column_and_changes_nothing(clien
         assert response.json()["line"] == 3 and response.json()["column"] >= 1 and "zz" in response.json()["detail"]
     assert snapshot(store) == before
     assert client.put("/models/x", content=b"<a> <b> <c> .", headers={**auth, "Content-Type": "image/png"}).status_code == 415
+    # what curl --data-binary @model.ttl sends without -H Content-Type: read as Turtle, as an absent type is
+    curl = client.put("/models/curl", content=CASE_STUDY.read_bytes(),
+                      headers={**auth, "Content-Type": "application/x-www-form-urlencoded"})
+    assert curl.status_code == 201 and curl.json()["assembly"]["complete"]
+    before = snapshot(store)
     assert client.put("/models/bad name", content=b"", headers=auth).status_code == 422
     assert snapshot(store) == before
 

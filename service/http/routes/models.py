@@ -72,7 +72,9 @@ def get_model(name: str, service: ServiceDep) -> dict:
 
 def _load_model(store: GraphStore, name: str, data: bytes, content_type: str | None) -> dict:
     GraphStore.check_name(name)  # before the format: a bad name is a 422 whatever the media type
-    fmt = rdf_format(content_type or "text/turtle")
+    # absent, or curl's default for --data-binary (form-urlencoded, which no model is): Turtle
+    form = (content_type or "").split(";")[0].strip().lower() == "application/x-www-form-urlencoded"
+    fmt = rdf_format("text/turtle" if form or not content_type else content_type)
     loaded = store.load_model(name, data, fmt.media_type, source_name=f"model {name}")
     return {"name": name, "graph": store.model_graph(name).value, "triples": loaded.triples, "replaced": loaded.replaced,
             "changed": loaded.changed,
