@@ -38,7 +38,7 @@ from service.calibration.record import (
 )
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
 from service.calibration.triples import calibration_triples
-from service.calibration.unit_mixup import unit_mixups
+from service.calibration.unit_mixup import inputs_off_scale, unit_mixups
 from service.data.measurements import MeasuredData
 from service.data.model_series import SETTLING_S, read_model_data
 from service.data.operating_filter import operating_mask
@@ -461,6 +461,7 @@ def calibrate(
         at_defaults = {k: v[0] for k, v in problem.run(md.default_theta()[None, :]).items()}
         compared = problem.observed, [predictions["train"], at_defaults]
     diagnostics.warnings += unit_mixups(data, md.units, *compared, list(compared[0]))
+    diagnostics.warnings += inputs_off_scale(data, model, md.node_of)  # an input the model cannot predict
     finished = datetime.now(timezone.utc)
     times = data.timestamps
     as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime).replace(  # noqa: E731

@@ -20,8 +20,10 @@ import numpy as np
 from service.data.measurements import MeasuredData
 from service.graph.namespaces import local_name
 from service.graph.units import QUDT_UNIT_NAMESPACE, QUDT_UNITS, convert, unit_label, unit_spec
+from service.model.assembled_model import AssembledModel
 
-__all__ = ["unit_mixups", "MIXUP_IMPROVEMENT", "TRACKING_SHARE"]
+__all__ = ["unit_mixups", "inputs_off_scale", "MIXUP_IMPROVEMENT", "TRACKING_SHARE", "OFF_SCALE_ABOVE",
+           "OFF_SCALE_BELOW"]
 
 #: How many times smaller the RMSE read in the other unit must be than as declared.
 MIXUP_IMPROVEMENT = 5.0
@@ -66,4 +68,47 @@ def unit_mixups(data: MeasuredData, port_units: Mapping[str, str], observed: Map
                 f"instead of the {unit_label(declared)} the model declares, it would miss the model by "
                 f"{alternative:.3g} {label} instead of {rmse:.3g} {label}: is it in {other_label}? (then declare its "
                 f"unit as unit:{name})")
+    return warnings
+
+
+#: A flow or power boundary input whose 95th percentile lies beyond these multiples of the largest
+#: nominal value of its dimension the graph states is off the plant's scale.
+OFF_SCALE_ABOVE, OFF_SCALE_BELOW = 10.0, 1.0 / 50.0
+
+
+def inputs_off_scale(data: MeasuredData, model: AssembledModel, node_of: Mapping[str, str]) -> list[str]:
+    """One warning per boundary input (a flow or a power the model reads, not predicts) whose readings
+    lie far off the scale the graph states for the plant: their 95th percentile beyond
+    :data:`OFF_SCALE_ABOVE` times, or below :data:`OFF_SCALE_BELOW` of, the largest mapped nominal
+    value of the same dimension (a fan's nominal flow), with the unit in which they would fit it (an
+    air flow in m³/h declared as m³/s drives the model with 3,600 times the flow, which no parameter
+    and no diagnosis can explain). ``node_of``: component IRI → its node."""
+    warnings = []
+    for component in model.boundary_inputs:
+        node = node_of[component]
+        declared, port = data.source_units.get(node), data.units.get(node)
+        if declared is None or port is None or unit_spec(port).dimension not in ("volume_flow", "mass_flow", "power"):
+            continue
+        nominal = [(convert([ref.value], ref.spec.unit, port)[0], ref) for ref in model.mapped_parameters
+                   if ref.value and unit_spec(ref.spec.unit).dimension == unit_spec(port).dimension]
+        readings = np.abs(data.series[node][np.isfinite(data.series[node])])
+        if not nominal or readings.size == 0:
+            continue
+        scale, ref = max(nominal, key=lambda pair: pair[0])
+        high = float(np.quantile(readings, 0.95))
+        if OFF_SCALE_BELOW * scale <= high <= OFF_SCALE_ABOVE * scale:
+            continue
+        raw = convert([high], port, declared)[0]
+        # the unit that puts the readings' 95th percentile nearest the nominal value, within its scale
+        reread = {name: convert([raw], QUDT_UNIT_NAMESPACE + name, port)[0] for name, spec in QUDT_UNITS.items()
+                  if spec.dimension == unit_spec(declared).dimension and spec != unit_spec(declared)}
+        fits = sorted((abs(np.log(value / scale)), name) for name, value in reread.items()
+                      if OFF_SCALE_BELOW * scale <= value <= 2.0 * scale)
+        label = unit_label(port)
+        hint = (f": is it in {unit_label(QUDT_UNIT_NAMESPACE + fits[0][1])}? (then declare its unit as "
+                f"unit:{fits[0][1]})" if fits else "")
+        warnings.append(
+            f"column {data.columns.get(node, local_name(node))!r} ({local_name(node)}): its readings reach {high:.3g} "
+            f"{label} (95th percentile), {high / scale:.3g} times the {ref.spec.name} of "
+            f"{local_name(model.components[ref.component].node)} the graph states ({scale:.3g} {label}){hint}")
     return warnings

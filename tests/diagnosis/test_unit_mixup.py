@@ -60,6 +60,21 @@ def test_a_calibration_alone_warns_of_the_column_too(generated, tmp_path):
     assert len(said) == 1 and said[0].startswith("column 'coil_outlet_air_temperature'") and "is it in °F?" in said[0]
 
 
+def test_a_boundary_flow_in_another_unit_is_named_by_the_graphs_nominal_flow(generated, tmp_path):
+    """The supply air flow in m³/h under a model that says m³/s drives the model with 3,600 times the
+    flow; no prediction can meet a boundary input, so its scale is judged by the fan's nominal flow."""
+    from service.calibration.run import calibrate
+
+    store, path = generated
+    mixed = _rewritten(path, tmp_path / "flow.csv", "supply_air_flow", lambda q: 3600.0 * q)
+    outcome = calibrate(store, "case", mixed, train=TRAIN, seed=0)
+    said = [w for w in outcome.record.diagnostics.warnings if "the graph states" in w]
+    assert len(said) == 1 and said[0].startswith("column 'supply_air_flow'"), said
+    assert "times the nominal_air_flow of supply_fan the graph states (1.5 m³/s): is it in m³/h?" in said[0]
+    assert not [w for w in calibrate(store, "case", path, train=TRAIN, seed=0).record.diagnostics.warnings
+                if "the graph states" in w]
+
+
 def test_the_data_as_generated_raise_no_unit_warning(generated):
     store, path = generated
     assert _warnings(store, path) == []
