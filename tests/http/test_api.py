@@ -230,7 +230,16 @@ def test_a_model_and_an_upload_are_deleted_and_runs_stay(client, auth, case_csv,
     upload = _upload_csv(client, auth, case_csv.read_text()).json()["id"]
     store.write_graph(store.run_graph("case-point-00000000"), [ox.Triple(ox.NamedNode(EX + "r"), ox.NamedNode(EX + "p"), ox.Literal("run"))])
     assert client.delete(f"/models/case/measurements/{upload}").status_code == 401  # writes need the token
-    assert client.delete(f"/models/case/measurements/{upload}", headers=auth).status_code == 204
+    # a stored run made with the upload: refused naming it (its report page plots the upload), unless forced
+    from service.graph.namespaces import GT
+
+    store.write_graph(store.run_graph("case-point-11111111"), [ox.Triple(
+        ox.NamedNode("https://w3id.org/graphtwin/resource/run/case-point-11111111"), GT.dataSource,
+        ox.Literal(f"{upload}.csv"))])
+    used = client.delete(f"/models/case/measurements/{upload}", headers=auth)
+    assert used.status_code == 409 and "case-point-11111111" in used.json()["detail"], used.json()
+    assert client.get("/models/case/measurements").json()["count"] == 1
+    assert client.delete(f"/models/case/measurements/{upload}", headers=auth, params={"force": "true"}).status_code == 204
     assert client.get("/models/case/measurements").json()["count"] == 0
     assert not list(settings.measurements_dir.rglob(f"{upload}.*"))
     assert client.delete(f"/models/case/measurements/{upload}", headers=auth).status_code == 404

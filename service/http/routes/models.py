@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated
 
+import pyoxigraph as ox
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
-from service.errors import GraphtwinError, IncompleteModelError, UnsupportedFormatError
+from service.errors import ConflictError, GraphtwinError, IncompleteModelError, UnsupportedFormatError
 from service.graph.backend import EmbeddedBackend
+from service.graph.namespaces import GT
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
 from service.graph.vocabulary import with_term_locations
@@ -161,8 +163,20 @@ def list_measurements(name: str, service: ServiceDep) -> dict:
 
 
 @router.delete("/models/{name}/measurements/{upload_id}", status_code=204, tags=["models"],
-               dependencies=[WriteAccess], responses=error_responses(401, 403, 404))
-def delete_measurements(name: str, upload_id: str, service: ServiceDep) -> Response:
-    """Remove a measurement upload of model ``name`` (runs made with it keep what they recorded)."""
+               dependencies=[WriteAccess], responses=error_responses(401, 403, 404, 409))
+def delete_measurements(name: str, upload_id: str, service: ServiceDep, force: Annotated[bool, Query(
+        description="remove it though stored runs read it (their report pages then lose their plots)")] = False,
+) -> Response:
+    """Remove a measurement upload of model ``name``; 409 naming the stored runs made with it unless
+    ``force`` (they keep what they recorded, but their report pages plot the upload)."""
+    if not any(info["id"] == upload_id for info in service.uploads.list(name)):
+        service.uploads.delete(name, upload_id)  # no such upload: its 404
+    runs = [] if force else [row["run"].value for row in service.store.query(
+        f"SELECT DISTINCT ?run WHERE {{ GRAPH ?g {{ ?run <{GT.dataSource.value}> ?source }} }} ORDER BY ?run",
+        substitutions={"source": ox.Literal(f"{upload_id}.csv")})]
+    if runs:
+        raise ConflictError(f"upload {upload_id} is the data of {len(runs)} stored run(s), whose report pages plot "
+                            f"it: {', '.join(r.rsplit('/', 1)[-1] for r in runs[:5])}{' …' if len(runs) > 5 else ''}; "
+                            "delete with force=true to remove it anyway")
     service.uploads.delete(name, upload_id)
     return Response(status_code=204)
