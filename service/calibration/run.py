@@ -301,13 +301,13 @@ def prepare_calibration(
                                 "inclusive): its metrics are partly on data the calibration fitted")
         window_notes += inputs_beyond_training(md, train_slice, test_slice)
     window_notes += _operating_filter_notes(md, only_when, train_slice, test_slice)
-    for name, cut in (("training", train_slice), ("test", test_slice)):
-        unmeasured = [local_name(n) for n, v in md.observed(cut).items() if not np.isfinite(v).any()] if cut else []
-        if unmeasured:  # a gap covers the window: said before the fit, not as a metric's failure after it
-            raise CalibrationError(
-                f"the {name} window {data.shown(data.timestamps[cut.start])} – {data.shown(data.timestamps[cut.stop - 1])} "
-                f"holds no measurement of {', '.join(unmeasured)} (a gap in the data covers it, or the operating "
-                "conditions leave none): give a window where it was measured")
+    unmeasured = [n for n, v in md.observed(test_slice).items() if not np.isfinite(v).any()] if test_slice else []
+    if unmeasured:  # said before the fit (the training window's: by its problem), not as a metric's failure after it
+        raise CalibrationError("; ".join(
+            f"target {local_name(n)} (column {data.columns.get(n, '?')!r}) has no measurements in the test window "
+            f"{data.shown(data.timestamps[test_slice.start])} – {data.shown(data.timestamps[test_slice.stop - 1])} (a gap "
+            "covers it, or the operating conditions leave none): choose a window where the column has values"
+            for n in unmeasured))
     unscored_s = md.unscored_start_s(train_slice)
     train_s = (train_slice.stop - train_slice.start) * data.step_s
     if train_s <= unscored_s:

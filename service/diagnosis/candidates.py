@@ -16,7 +16,7 @@ import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
-from multiprocessing import Manager
+from multiprocessing import get_context
 from queue import Empty
 from typing import NamedTuple
 
@@ -380,7 +380,12 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
             say(f"effect {len(done)} of {len(jobs)} refitted: {item[0]} at {local_name(item[1])}")
 
     if workers > 1:  # the workers tell through a queue the main thread reads
-        with Manager() as manager, ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent) as pool:
+        # forked from a fork server, not from this process: a fork copies its threads' locks (the candidates'
+        # thread pools, a service's) and once aborted a worker in the suite; the server imports this module once
+        context = get_context("forkserver")
+        context.set_forkserver_preload([__name__])
+        with context.Manager() as manager, ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                                               initializer=exit_with_parent) as pool:
             queue = manager.Queue()
             futures = [pool.submit(_evaluate_together, group_jobs, model, queue.put) for group_jobs, model in tasks]
             while len(done) < len(jobs) and not any(f.done() and f.exception() for f in futures):

@@ -277,8 +277,8 @@ def test_a_window_a_gap_covers_is_refused_before_the_fit_naming_the_window_and_t
     gappy = tmp_path / "gappy.csv"
     gappy.write_text("\n".join(rows) + "\n")
     graphs_before = set(store.backend.graphs())
-    with pytest.raises(ValueError, match=r"the test window 2026-01-14T11:00 – 2026-01-14T15:00 holds no measurement "
-                                         r"of coil_outlet_air_temperature_sensor \(a gap in the data covers it"):
+    with pytest.raises(ValueError, match=r"target coil_outlet_air_temperature_sensor \(column 'coil_outlet_air_temperature'\) "
+                                         r"has no measurements in the test window 2026-01-14T11:00 – 2026-01-14T15:00 \(a gap"):
         calibrate(store, "case", gappy, train=TRAIN, test=("2026-01-14T11:00", "2026-01-14T15:00"))
     assert set(store.backend.graphs()) == graphs_before
 
