@@ -94,10 +94,10 @@ class MeasurementUploads:
         return [json.loads(p.read_text(encoding="utf-8")) for p in sorted(folder.glob("*.json"))
                 if (folder / f"{p.stem}.csv").is_file()]
 
-    def delete(self, model_name: str, upload_id: str) -> None:
-        """Remove upload ``upload_id`` of model ``model_name``.
+    def require(self, model_name: str, upload_id: str) -> Path:
+        """The CSV of upload ``upload_id`` of model ``model_name``.
 
-        :raises NotFoundError: no such upload of that model.
+        :raises NotFoundError: no such upload of that model (or no name a model or an upload can have).
         """
         missing = NotFoundError(f"no measurement upload {upload_id!r} of model {model_name}")
         try:
@@ -106,8 +106,16 @@ class MeasurementUploads:
             raise missing from None
         if not _UPLOAD_ID.match(upload_id or "") or not (folder / f"{upload_id}.csv").is_file():
             raise missing
-        (folder / f"{upload_id}.json").unlink(missing_ok=True)  # the description first: list() then skips it
-        (folder / f"{upload_id}.csv").unlink()
+        return folder / f"{upload_id}.csv"
+
+    def delete(self, model_name: str, upload_id: str) -> None:
+        """Remove upload ``upload_id`` of model ``model_name``.
+
+        :raises NotFoundError: no such upload of that model.
+        """
+        csv = self.require(model_name, upload_id)
+        csv.with_suffix(".json").unlink(missing_ok=True)  # the description first: list() then skips it
+        csv.unlink()
 
     def locate(self, upload_id: str) -> Path:
         """The CSV of upload ``upload_id`` (under whichever model it was validated against).

@@ -244,6 +244,7 @@ def test_a_model_and_an_upload_are_deleted_and_runs_stay(client, auth, case_csv,
     assert not list(settings.measurements_dir.rglob(f"{upload}.*"))
     assert client.delete(f"/models/case/measurements/{upload}", headers=auth).status_code == 404
     assert client.delete("/models/../measurements/0123456789abcdef", headers=auth).status_code == 404
+    assert client.delete("/models/" + "m" * 300 + "/measurements/0", headers=auth).status_code == 404  # was a 500
     store.write_graph(store.assembly_graph("case"), [ox.Triple(ox.NamedNode(EX + "c"), ox.NamedNode(EX + "p"), ox.Literal("x"))])
     assert client.delete("/models/case", headers=auth).status_code == 204
     graphs = store.backend.graphs()

@@ -169,8 +169,7 @@ def delete_measurements(name: str, upload_id: str, service: ServiceDep, force: A
 ) -> Response:
     """Remove a measurement upload of model ``name``; 409 naming the stored runs made with it unless
     ``force`` (they keep what they recorded, but their report pages plot the upload)."""
-    if not any(info["id"] == upload_id for info in service.uploads.list(name)):
-        service.uploads.delete(name, upload_id)  # no such upload: its 404
+    service.uploads.require(name, upload_id)  # no such upload: 404 before anything is looked up
     runs = [] if force else [row["run"].value for row in service.store.query(
         f"SELECT DISTINCT ?run WHERE {{ GRAPH ?g {{ ?run <{GT.dataSource.value}> ?source }} }} ORDER BY ?run",
         substitutions={"source": ox.Literal(f"{upload_id}.csv")})]
