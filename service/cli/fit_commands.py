@@ -75,7 +75,7 @@ def calibrate_command(
     if as_json:
         console.print_json(json.dumps(outcome.record.to_dict(), default=str))
     else:
-        print_calibration(outcome.record)
+        print_calibration(outcome.record, outcome.model_data.data.source_units)
 
 
 PlotsOption = Annotated[Path, typer.Option(help="Folder for the plots (text output only).")]

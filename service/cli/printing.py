@@ -28,11 +28,12 @@ __all__ = ["print_metrics", "print_calibration", "print_regimes", "print_data_wa
 _PARAMETER_KEY = re.compile(r"\S*/component/[^\s#]+#\w+")
 
 
-def print_metrics(title: str, metrics: dict) -> None:
+def print_metrics(title: str, metrics: dict, logged_units: dict[str, str] | None = None) -> None:
     """Per sensor: RMSE, the measurement noise σ its residual shows and RMSE/σ (about 1 for a model
     right to the noise), MAE, R², CV(RMSE), NMBE (– for a temperature in °C or °F, whose mean
     depends on the scale's zero) and, for a Bayesian run's prediction intervals, the ACE and mean
-    width of the 90 % one (every level: ``--json``)."""
+    width of the 90 % one (every level: ``--json``). ``logged_units``: the unit each sensor's column
+    was logged in; where it is not the errors' (°F for K), the caption says what one of theirs is."""
     intervals = any(m.coverage for m in metrics.values())
     table = Table(title=title)
     for column in ("sensor", "RMSE", "noise σ", "RMSE / σ", "MAE", "R²", "CV(RMSE) %", "NMBE %",
@@ -46,12 +47,16 @@ def print_metrics(title: str, metrics: dict) -> None:
         ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
         table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.noise:.3g}", f"{m.rmse / m.noise:.1f}" if m.noise > 0 else "–",
                       f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, difference_label(m.unit))
+    restated = sorted({text for node, m in metrics.items()
+                       if "(" in (text := difference_text(1.0, m.unit, (logged_units or {}).get(node, "")))})
+    if restated:  # 1 K (1.8 °F): the data's own degrees
+        table.caption = "as logged: " + "; ".join(text.replace(" (", " = ").rstrip(")") for text in restated)
     console.print(table)
 
 
-def print_calibration(record: CalibrationRecord) -> None:
+def print_calibration(record: CalibrationRecord, logged_units: dict[str, str] | None = None) -> None:
     """A calibration run as tables: the estimates, the start and the sampler's convergence, the
-    metrics per window, the regimes, the notes."""
+    metrics per window (``logged_units``: :func:`print_metrics`), the regimes, the notes."""
     table = Table(title=f"Estimates ({record.method}, run {record.run_id})")
     for column in ("component", "parameter", "estimate", "16–84 %", "unit", "identified"):
         table.add_column(column, overflow="fold")
@@ -79,7 +84,7 @@ def print_calibration(record: CalibrationRecord) -> None:
     for window, metrics in record.metrics.items():
         span = bounds.get(window)
         print_metrics(f"Metrics, {window} window" + (f" ({span[0]:%Y-%m-%d %H:%M} – {span[1]:%Y-%m-%d %H:%M})"
-                                                     if span else ""), metrics)
+                                                     if span else ""), metrics, logged_units)
     print_regimes(record)
     print_data_warnings(record.diagnostics.warnings)
 

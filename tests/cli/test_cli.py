@@ -540,3 +540,22 @@ def test_output_to_a_file_or_pipe_is_as_wide_as_a_log_is_read_and_columns_still_
     narrow = runner.invoke(app, ["example", "list"], env={"COLUMNS": "60"})
     row = next(line for line in narrow.output.splitlines() if line.startswith("ventilation_case_study"))
     assert not row.rstrip().endswith("model.ttl")  # folded at 60
+
+
+def test_metrics_of_data_logged_in_fahrenheit_say_what_a_kelvin_of_error_is_in_the_datas_degrees():
+    """The errors are in K, the model's unit; a user whose columns are in °F reads the caption."""
+    import numpy as np
+
+    from service.calibration.metrics import target_metrics
+    from service.cli.common import console
+    from service.cli.printing import print_metrics
+
+    observed = np.linspace(10.0, 20.0, 50) + np.random.default_rng(0).normal(0.0, 0.1, 50)
+    metrics = {EX + "sat": target_metrics(observed, np.linspace(10.0, 20.0, 50), n_parameters=1, unit="degC",
+                                          target=EX + "sat")}
+    with console.capture() as captured:
+        print_metrics("Metrics", metrics, {EX + "sat": "http://qudt.org/vocab/unit/DEG_F"})
+    assert "as logged: 1 K = 1.8 °F" in captured.get()
+    with console.capture() as captured:
+        print_metrics("Metrics", metrics)
+    assert "as logged" not in captured.get()
