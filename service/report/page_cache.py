@@ -24,9 +24,6 @@ from service.report.stored_run import DIAGNOSIS_SUFFIX
 
 __all__ = ["ReportPageCache", "page_state"]
 
-_SOURCE_QUERY = "SELECT ?source WHERE { GRAPH ?g { ?run <https://w3id.org/graphtwin/ontology#dataSource> ?source } }"
-
-
 def _digest(data: bytes) -> str:
     return hashlib.blake2b(data, digest_size=16).hexdigest()
 
@@ -44,7 +41,7 @@ def page_state(store: GraphStore, run_id: str, locate_data: Callable[[str], Path
     diagnosis = _digest(store.backend.dump(diagnosis_graph, ox.RdfFormat.N_TRIPLES))
     data = "no data locator"
     if locate_data is not None:
-        rows = store.query(_SOURCE_QUERY, substitutions={"g": run_graph, "run": run_iri(base)})
+        rows = store.run_named_query("run-data-sources", g=run_graph, run=run_iri(base))
         try:
             path = locate_data(rows[0]["source"].value) if rows else None
             data = f"{path}@{path.stat().st_mtime_ns}" if path is not None else "no data source"

@@ -10,7 +10,6 @@ from fastapi.concurrency import run_in_threadpool
 
 from service.errors import ConflictError, GraphtwinError, IncompleteModelError, UnsupportedFormatError
 from service.graph.backend import EmbeddedBackend
-from service.graph.namespaces import GT
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
 from service.graph.vocabulary import with_term_locations
@@ -170,9 +169,8 @@ def delete_measurements(name: str, upload_id: str, service: ServiceDep, force: A
     """Remove a measurement upload of model ``name``; 409 naming the stored runs made with it unless
     ``force`` (they keep what they recorded, but their report pages plot the upload)."""
     service.uploads.require(name, upload_id)  # no such upload: 404 before anything is looked up
-    runs = [] if force else [row["run"].value for row in service.store.query(
-        f"SELECT DISTINCT ?run WHERE {{ GRAPH ?g {{ ?run <{GT.dataSource.value}> ?source }} }} ORDER BY ?run",
-        substitutions={"source": ox.Literal(f"{upload_id}.csv")})]
+    runs = [] if force else [row["run"].value for row in service.store.run_named_query(
+        "run-data-sources", source=ox.Literal(f"{upload_id}.csv"))]
     if runs:
         raise ConflictError(f"upload {upload_id} is the data of {len(runs)} stored run(s), whose report pages plot "
                             f"it: {', '.join(r.rsplit('/', 1)[-1] for r in runs[:5])}{' …' if len(runs) > 5 else ''}; "
