@@ -13,7 +13,14 @@ from rich.text import Text
 from service.calibration.metrics import on_interval_scale
 from service.cli.common import DEFAULT_STORE, console
 from service.graph.namespaces import local_name
-from service.graph.units import difference_label, difference_text, difference_unit, quantity_text, unit_label
+from service.graph.units import (
+    difference_label,
+    difference_text,
+    difference_unit,
+    logged_difference_text,
+    quantity_text,
+    unit_label,
+)
 from service.model.wiring import parameter_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
@@ -47,10 +54,10 @@ def print_metrics(title: str, metrics: dict, logged_units: dict[str, str] | None
         ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
         table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.noise:.3g}", f"{m.rmse / m.noise:.1f}" if m.noise > 0 else "–",
                       f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, difference_label(m.unit))
-    restated = sorted({text for node, m in metrics.items()
-                       if "(" in (text := difference_text(1.0, m.unit, (logged_units or {}).get(node, "")))})
-    if restated:  # 1 K (1.8 °F): the data's own degrees
-        table.caption = "as logged: " + "; ".join(text.replace(" (", " = ").rstrip(")") for text in restated)
+    restated = sorted({f"1 {difference_label(m.unit)} = {logged}" for node, m in metrics.items()
+                       if (logged := logged_difference_text(1.0, m.unit, (logged_units or {}).get(node, "")))})
+    if restated:  # the data's own degrees
+        table.caption = "as logged: " + "; ".join(restated)
     console.print(table)
 
 

@@ -19,7 +19,8 @@ from service.errors import UnitError
 from service.graph.spelling import one_edit_apart
 
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
-           "quantity_text", "closest_unit_hint", "KNOWN_UNITS", "difference_unit", "difference_label", "difference_text"]
+           "quantity_text", "closest_unit_hint", "KNOWN_UNITS", "difference_unit", "difference_label", "difference_text",
+           "logged_difference_text"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -141,16 +142,23 @@ def difference_text(value: float | None, unit: str, logged_unit: str = "",
     value; a missing value (None, NaN) is ``–``."""
     if value is None or not np.isfinite(value):
         return "–"
-    own = difference_unit(unit)
-    text = f"{number(value)} {unit_label(own)}".rstrip()
+    text = f"{number(value)} {unit_label(difference_unit(unit))}".rstrip()
+    restated = logged_difference_text(value, unit, logged_unit, number)
+    return f"{text} ({restated})" if restated else text
+
+
+def logged_difference_text(value: float, unit: str, logged_unit: str,
+                           number: Callable[[float], str] = lambda v: format(v, ".3g")) -> str | None:
+    """A difference of readings in ``unit`` stated in the unit they were logged in (``1.8 °F`` for
+    1 K of readings in °C logged in °F); None where the two units' degrees agree, their dimensions
+    differ or either is unknown."""
     try:
-        spec, logged = unit_spec(own), unit_spec(logged_unit) if logged_unit else None
+        own, logged = unit_spec(difference_unit(unit)), unit_spec(logged_unit) if logged_unit else None
     except UnitError:
-        return text
-    if logged is None or logged.dimension != spec.dimension or logged.multiplier == spec.multiplier:
-        return text
-    restated = f"{number(value * spec.multiplier / logged.multiplier)} {unit_label(difference_unit(logged_unit))}"
-    return f"{text} ({restated.rstrip()})"
+        return None
+    if logged is None or logged.dimension != own.dimension or logged.multiplier == own.multiplier:
+        return None
+    return f"{number(value * own.multiplier / logged.multiplier)} {unit_label(difference_unit(logged_unit))}".rstrip()
 
 
 def unit_label(unit: str) -> str:
