@@ -460,7 +460,7 @@ def calibrate(
     else:
         at_defaults = {k: v[0] for k, v in problem.run(md.default_theta()[None, :]).items()}
         compared = problem.observed, [predictions["train"], at_defaults]
-    diagnostics.warnings += unit_mixups(data, md.units, *compared, list(compared[0]))
+    diagnostics.warnings += unit_mixups(data, md.units, *compared)
     diagnostics.warnings += inputs_off_scale(data, model, md.node_of)  # an input the model cannot predict
     finished = datetime.now(timezone.utc)
     times = data.timestamps

@@ -1,6 +1,6 @@
-"""A column in another unit than the model declares for it: the failing sensor's readings, read again
+"""A column in another unit than the model declares for it: a target sensor's readings, read again
 in each other unit of the same dimension (°F for °C, kW for W, L/s for m³/s), against the model's
-prediction of the test window. Where one such reading misses the prediction by at most a fifth of
+prediction of the run's last window (the test window where there is one). Where one such reading misses the prediction by at most a fifth of
 the RMSE as declared, and by at most a fifth of its own magnitude (readings shrunk towards a
 prediction near zero are not met), the column is probably in that unit (read in the wrong one of °C, °F and K a
 temperature moves by tens of kelvin at least, a power or a flow by a factor of 2 or more): said as
@@ -32,13 +32,13 @@ TRACKING_SHARE = 0.2
 
 
 def unit_mixups(data: MeasuredData, port_units: Mapping[str, str], observed: Mapping[str, np.ndarray],
-                predictions: Sequence[Mapping[str, np.ndarray]], failing: Sequence[str]) -> list[str]:
-    """One warning per sensor of ``failing`` (readings and predictions in its simulator unit
-    ``port_units[node]``) whose test readings ``observed`` meet one of ``predictions`` (the calibrated
+                predictions: Sequence[Mapping[str, np.ndarray]]) -> list[str]:
+    """One warning per sensor of ``observed`` (readings and predictions in its simulator unit
+    ``port_units[node]``) whose readings meet one of ``predictions`` (the calibrated
     model's, and the model's at its parameters' defaults, which a fit to the misread column has not
     bent) in another unit of its column's dimension (:data:`MIXUP_IMPROVEMENT`)."""
     warnings = []
-    for node in failing:
+    for node in observed:
         declared, port = data.source_units.get(node), port_units[node]
         if declared is None:
             continue

@@ -97,5 +97,5 @@ def test_readings_shrunk_towards_a_prediction_near_zero_are_not_a_unit_mixup():
                            columns={"flow": "SA flow", "air": "DAT"})
     observed = {"flow": flow, "air": 32.0 + 1.8 * temperature}  # the air column is in °F
     predicted = {"flow": np.zeros(200), "air": temperature}
-    warnings = unit_mixups(data, {"flow": "m3/s", "air": "degC"}, observed, [predicted], ["flow", "air"])
+    warnings = unit_mixups(data, {"flow": "m3/s", "air": "degC"}, observed, [predicted])
     assert len(warnings) == 1 and warnings[0].startswith("column 'DAT' (air): read as °F"), warnings
