@@ -161,23 +161,24 @@ class GraphStore:
         return self.backend.query(_GRAPH_TRIPLES, substitutions={"graph": graph})
 
     # ------------------------------------------------------------------ loading
-    def ensure_ontologies(self) -> bool:
+    def ensure_ontologies(self, *, recheck: bool = False) -> bool:
         """Make the ontology graph hold ``ontologies/*.ttl`` and the alignment-rules graph the rules of
         ``queries/alignment`` (:func:`~service.graph.alignment.alignment_rule_triples`); checked once per
-        :class:`GraphStore`. Every model's inferred graph is what those rules derive from it with
+        :class:`GraphStore` (``recheck``: again, after an update that may have changed them; the files
+        are read once). Every model's inferred graph is what those rules derive from it with
         those ontologies: when either differs from what the store holds (a new graphtwin version
         opening an old store), both graphs are replaced and every model's inferences derived again.
 
         :returns: whether the graphs were (re)written.
         """
-        if self._ontology_triples is not None:
+        if self._ontology_triples is not None and not recheck:
             return False
-        triples: list[ox.Triple] = []
-        for path in sorted(ontologies_dir().glob("*.ttl")):
-            triples += parse_rdf(path.read_bytes(), ox.RdfFormat.TURTLE, str(path))
-        triples = skolemize(triples, f"{GTR}ontology/genid/")
-        self._ontology_triples = triples
-        held = {ONTOLOGY_GRAPH: triples, ALIGNMENT_RULES_GRAPH: alignment_rule_triples()}
+        if self._ontology_triples is None:
+            triples: list[ox.Triple] = []
+            for path in sorted(ontologies_dir().glob("*.ttl")):
+                triples += parse_rdf(path.read_bytes(), ox.RdfFormat.TURTLE, str(path))
+            self._ontology_triples = skolemize(triples, f"{GTR}ontology/genid/")
+        held = {ONTOLOGY_GRAPH: self._ontology_triples, ALIGNMENT_RULES_GRAPH: alignment_rule_triples()}
         if all(set(content) == set(self.graph_triples(graph)) for graph, content in held.items()):
             return False
         self.write_graphs(held)
@@ -303,9 +304,8 @@ class GraphStore:
         with self._model_lock:
             before = self.models()
             self.backend.update(sparql)
-            if written is None:  # it may have changed the maintained graphs: the ontologies are checked again
-                self._ontology_triples = None
-                self.ensure_ontologies()
+            if written is None:  # it may have changed the maintained graphs
+                self.ensure_ontologies(recheck=True)
             after = self.models()
             changed = [name for name in after if written is None or self.model_graph(name).value in written]
             dropped = sorted(set(before) - set(after))
