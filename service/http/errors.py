@@ -26,8 +26,8 @@ __all__ = ["ApiError", "error_responses", "EXCEPTION_HANDLERS", "status_of"]
 
 #: Status of each kind of graphtwin error, the first class that matches in this order.
 STATUSES: tuple[tuple[type[GraphtwinError], int], ...] = (
-    (NotFoundError, 404), (ConflictError, 409), (MaintainedGraphError, 403), (ModelLoadError, 400), (UnsupportedFormatError, 415),
-    (StoreRequestError, 400), (StoreError, 503), (InputError, 422), (GraphtwinError, 422),
+    (NotFoundError, 404), (ConflictError, 409), (MaintainedGraphError, 403), (ModelLoadError, 400),
+    (UnsupportedFormatError, 415), (StoreRequestError, 400), (StoreError, 503), (InputError, 422), (GraphtwinError, 422),
 )
 
 
@@ -74,17 +74,18 @@ def _api_error_response(request: Request, exc: ApiError) -> JSONResponse:
 def _validation_error_response(request: Request, exc: RequestValidationError) -> JSONResponse:
     """A request FastAPI could not validate (body, path or query) → 422, one problem per invalid
     field (the values themselves are not echoed: they may be secrets)."""
-    problems = [_problem(error, request) for error in exc.errors()]
+    problems = [_problem(error, exc.body) for error in exc.errors()]
     body = ErrorBody(detail="the request is not valid: " + "; ".join(problems), problems=problems)
     return JSONResponse(body.model_dump(exclude_none=True), status_code=422)
 
 
-def _problem(error: dict, request: Request) -> str:
-    """One invalid field as ``loc: message``; a body that is no JSON at all as where its text breaks
-    (line and column, from the character offset FastAPI gives) and why."""
+def _problem(error: dict, body: object) -> str:
+    """One invalid field as ``loc: message``; a body that is no JSON at all (``body``: its text, as
+    FastAPI keeps it) as where its text breaks (line and column, from the character offset FastAPI
+    gives) and why."""
     if error.get("type") == "json_invalid" and len(error["loc"]) == 2 and isinstance(error["loc"][1], int):
         offset, why = error["loc"][1], (error.get("ctx") or {}).get("error", "not JSON")
-        text = getattr(request, "_body", b"").decode("utf-8", errors="replace")[:offset]
+        text = (body if isinstance(body, str) else "")[:offset]
         return (f"the body is not valid JSON at line {text.count(chr(10)) + 1}, column {offset - text.rfind(chr(10))}: "
                 f"{why}")
     return f"{'.'.join(str(part) for part in error['loc'])}: {error['msg']}"
