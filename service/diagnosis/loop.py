@@ -32,6 +32,7 @@ from service.diagnosis.report import (
     SensorVerdict,
     diagnosis_triples,
     fails_at,
+    spans_a_regime,
 )
 from service.diagnosis.residual_dependence import Dependence, distinct_signals, residual_dependence, time_trend
 from service.diagnosis.separation import indistinguishable, told_apart
@@ -153,7 +154,7 @@ def _regimes_with_worst(regimes: list[dict], sensors: Mapping[str, SensorVerdict
     scaled = [np.array([r["rmse"][k] / sensors[k].noise for k in r["rmse"]]) for r in regimes]
     scaled = [float(np.nanmean(s)) if r["share"] > 0 and np.isfinite(s).any() else np.nan
               for r, s in zip(regimes, scaled)]
-    held = [r["share"] * test_steps >= MIN_TEST_STEPS for r in regimes]
+    held = [spans_a_regime(r, test_steps) for r in regimes]
     if any(h and np.isfinite(v) for h, v in zip(held, scaled)):
         scaled = [v if h else np.nan for h, v in zip(held, scaled)]
     for row in regimes:

@@ -24,7 +24,7 @@ from service.diagnosis.separation import Lookalike, ToldApart
 from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 from service.graph.units import difference_label
 
-__all__ = ["FAILURE_RATIO", "MIN_TEST_STEPS", "fails_at", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
+__all__ = ["FAILURE_RATIO", "MIN_TEST_STEPS", "fails_at", "spans_a_regime", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
 
 #: A sensor fails where its test RMSE exceeds this multiple of its noise σ (``docs/diagnosis.md``).
 FAILURE_RATIO = 2.0
@@ -40,6 +40,13 @@ def fails_at(rmse: float, noise: float, failure_ratio: float = FAILURE_RATIO) ->
 #: noise level comes from second differences and the effects are judged on the window's second half;
 #: a regime over fewer is a spike's, not one to name worst.
 MIN_TEST_STEPS = 12
+
+
+def spans_a_regime(row: dict, test_steps: int) -> bool:
+    """Whether a regime row (its ``share`` of the ``test_steps``) holds :data:`MIN_TEST_STEPS` of them:
+    an RMSE over fewer is a spike's, not a regime's to name worst."""
+    return row["share"] * test_steps >= MIN_TEST_STEPS
+
 
 @dataclass(frozen=True, kw_only=True)
 class SensorVerdict:
@@ -160,7 +167,7 @@ class DiagnosisReport:
             parts.append(self.residual_trend[node].describe(unit))
         regimes = [r for r in self.regimes if r["share"] > 0 and np.isfinite(r["rmse"].get(node, np.nan))]
         steps = len(self.test_timestamps) if self.test_timestamps is not None else 0
-        regimes = [r for r in regimes if r["share"] * steps >= MIN_TEST_STEPS] or regimes  # as the worst regime's
+        regimes = [r for r in regimes if spans_a_regime(r, steps)] or regimes  # as the worst regime's
         if len(regimes) > 1:
             worst = max(regimes, key=lambda r: r["rmse"][node])
             parts.append(f"its error is largest where {worst['rule']} (RMSE {worst['rmse'][node]:.3g} {unit} over "
