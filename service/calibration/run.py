@@ -305,8 +305,8 @@ def prepare_calibration(
     if unmeasured:  # said before the fit (the training window's: by its problem), not as a metric's failure after it
         raise CalibrationError("; ".join(
             f"target {local_name(n)} (column {data.columns.get(n, '?')!r}) has no measurements in the test window "
-            f"{data.shown(data.timestamps[test_slice.start])} – {data.shown(data.timestamps[test_slice.stop - 1])} (a gap "
-            "covers it, or the operating conditions leave none): choose a window where the column has values"
+            f"{data.shown(data.timestamps[test_slice.start])} – {data.shown(data.timestamps[test_slice.stop - 1])} "
+            "(a gap covers it, or the operating conditions leave none): choose a window where the column has values"
             for n in unmeasured))
     unscored_s = md.unscored_start_s(train_slice)
     train_s = (train_slice.stop - train_slice.start) * data.step_s

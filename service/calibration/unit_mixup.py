@@ -1,6 +1,7 @@
 """A column in another unit than the model declares for it: a target sensor's readings, read again
 in each other unit of the same dimension (°F for °C, kW for W, L/s for m³/s), against the model's
-prediction of the run's last window (the test window where there is one). Where one such reading misses the prediction by at most a fifth of
+prediction of the run's last window (the test window where there is one). Where one such reading
+misses the prediction by at most a fifth of
 the RMSE as declared, and by at most a fifth of its own magnitude (readings shrunk towards a
 prediction near zero are not met), the column is probably in that unit (read in the wrong one of °C, °F and K a
 temperature moves by tens of kelvin at least, a power or a flow by a factor of 2 or more): said as

@@ -75,10 +75,10 @@ def print_calibration(record: CalibrationRecord, logged_units: dict[str, str] | 
     table.caption = f"{identified} of {len(record.estimates)} estimated parameters identified by these data"
     console.print(table)
     if 2 * identified < len(record.estimates):
-        console.print(f"Only {identified} of {len(record.estimates)} estimated parameters are identified: the others fit "
-                      "the training window about as well anywhere over much of their ranges, so predictions for "
-                      "operation it did not show are uncertain; data with more varied operation, or a measurement "
-                      "of what they set, would pin them (docs/calibration.md, \"Identifiability verdicts\").",
+        console.print(f"Only {identified} of {len(record.estimates)} estimated parameters are identified: the "
+                      "others fit the training window about as well anywhere over much of their ranges, so "
+                      "predictions for operation it did not show are uncertain; data with more varied operation, or a "
+                      "measurement of what they set, would pin them (docs/calibration.md, \"Identifiability verdicts\").",
                       markup=False, highlight=False)
     if record.diagnostics.start is not None:
         console.print(record.diagnostics.start, markup=False, highlight=False)

@@ -24,7 +24,8 @@ from service.diagnosis.separation import Lookalike, ToldApart
 from service.graph.namespaces import DCTERMS, GT, PROV, RDF, RDFS, XSD, distinct_local_names, local_name
 from service.graph.units import difference_label
 
-__all__ = ["FAILURE_RATIO", "MIN_TEST_STEPS", "fails_at", "spans_a_regime", "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
+__all__ = ["FAILURE_RATIO", "MIN_TEST_STEPS", "fails_at", "spans_a_regime",
+           "SensorVerdict", "DiagnosisReport", "diagnosis_triples"]
 
 #: A sensor fails where its test RMSE exceeds this multiple of its noise σ (``docs/diagnosis.md``).
 FAILURE_RATIO = 2.0

@@ -19,7 +19,8 @@ from service.errors import UnitError
 from service.graph.spelling import one_edit_apart
 
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
-           "quantity_text", "closest_unit_hint", "KNOWN_UNITS", "difference_unit", "difference_label", "difference_text",
+           "quantity_text", "closest_unit_hint", "KNOWN_UNITS", "difference_unit", "difference_label",
+           "difference_text",
            "logged_difference_text"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
@@ -114,7 +115,8 @@ def closest_unit_hint(unit: str) -> str:
         return name.replace("_", "").replace("-", "").lower()
 
     close = ([name for name in QUDT_UNITS if bare(name) == bare(local)][:1]
-             or [name for name in QUDT_UNITS if len(local) >= 4 and one_edit_apart(bare(name), bare(local), replaced=False)])
+             or [name for name in QUDT_UNITS
+                 if len(local) >= 4 and one_edit_apart(bare(name), bare(local), replaced=False)])
     return f" (did you mean {' or '.join(QUDT_UNIT_NAMESPACE + name for name in close)}?)" if close else ""
 
 

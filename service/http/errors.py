@@ -27,7 +27,8 @@ __all__ = ["ApiError", "error_responses", "EXCEPTION_HANDLERS", "status_of"]
 #: Status of each kind of graphtwin error, the first class that matches in this order.
 STATUSES: tuple[tuple[type[GraphtwinError], int], ...] = (
     (NotFoundError, 404), (ConflictError, 409), (MaintainedGraphError, 403), (ModelLoadError, 400),
-    (UnsupportedFormatError, 415), (StoreRequestError, 400), (StoreError, 503), (InputError, 422), (GraphtwinError, 422),
+    (UnsupportedFormatError, 415), (StoreRequestError, 400), (StoreError, 503), (InputError, 422),
+    (GraphtwinError, 422),
 )
 
 

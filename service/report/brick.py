@@ -172,8 +172,8 @@ def _turtle(text: str, own: dict[str, str]) -> str:
     """Triples as Turtle to paste: an IRI in a namespace graphtwin knows as its prefixed name
     (``unit:DEG_F``, QUDT's), one in the model's namespaces by ``own``'s prefix (``:mat_sensor``)."""
     def name(iri: str) -> str:
-        known = compact_iri(iri)
-        return known if known[0] != "<" or namespace_of(iri) not in own else f"{own[namespace_of(iri)]}:{local_name(iri)}"
+        known, namespace = compact_iri(iri), namespace_of(iri)
+        return known if known[0] != "<" or namespace not in own else f"{own[namespace]}:{local_name(iri)}"
 
     return re.sub(r"<(https?://[^\s<>]+)>", lambda m: name(m.group(1)), text)
 

@@ -90,7 +90,8 @@ def submit_add_effect(body: AddEffectRequest, response: Response, service: Servi
 @router.post("/jobs/{kind}", include_in_schema=False, responses=error_responses(404))
 def unknown_job_kind(kind: str) -> None:
     """A job kind the service does not run (it was a 405 naming nothing)."""
-    raise ApiError(404, f"no job kind {kind!r}: POST /jobs/assemble, /jobs/calibrate, /jobs/diagnose or /jobs/add-effect")
+    raise ApiError(404, f"no job kind {kind!r}: POST /jobs/assemble, /jobs/calibrate, /jobs/diagnose or "
+                        "/jobs/add-effect")
 
 
 @router.get("/jobs", response_model=JobList, dependencies=[ReadAccess], responses=error_responses(401, 403))

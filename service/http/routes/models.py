@@ -172,8 +172,9 @@ def delete_measurements(name: str, upload_id: str, service: ServiceDep, force: A
     runs = [] if force else [row["run"].value for row in service.store.run_named_query(
         "run-data-sources", source=ox.Literal(f"{upload_id}.csv"))]
     if runs:
+        named = ", ".join(r.rsplit("/", 1)[-1] for r in runs[:5]) + (" …" if len(runs) > 5 else "")
         raise ConflictError(f"upload {upload_id} is the data of {len(runs)} stored run(s), whose report pages plot "
-                            f"it: {', '.join(r.rsplit('/', 1)[-1] for r in runs[:5])}{' …' if len(runs) > 5 else ''}; "
+                            f"it: {named}; "
                             "delete with force=true to remove it anyway")
     service.uploads.delete(name, upload_id)
     return Response(status_code=204)

@@ -84,8 +84,8 @@ def _update(store: GraphStore, text: str) -> None:
     except GraphtwinError:  # a maintained graph named: 403 (nothing was changed)
         raise
     except SyntaxError as exc:
-        raise ApiError(400, sparql_syntax_message(text, exc).replace("SPARQL syntax error", "SPARQL Update syntax error",
-                                                                     1)) from None
+        message = sparql_syntax_message(text, exc).replace("SPARQL syntax error", "SPARQL Update syntax error", 1)
+        raise ApiError(400, message) from None
     except ValueError as exc:
         raise ApiError(400, f"SPARQL Update syntax error: {exc}") from None
     except (RuntimeError, OSError) as exc:  # the store refused it as it ran (DROP of a graph that does not exist)
