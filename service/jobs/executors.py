@@ -20,7 +20,7 @@ from service.jobs.shipping import ShippedJob
 from service.runtime import exit_with_parent
 from service.settings import check_executor
 
-__all__ = ["ProcessJobExecutor", "DaskJobExecutor", "job_executor"]
+__all__ = ["ProcessJobExecutor", "DaskJobExecutor", "job_executor", "WORK_FOLDER_PREFIX"]
 
 log = logging.getLogger("graphtwin.jobs")
 
@@ -39,11 +39,12 @@ class ProcessJobExecutor:
         self._slots = [self._new_pool() for _ in range(max_workers)]
         self._submitted: list[list[Future]] = [[] for _ in range(max_workers)]
         self._lock = threading.Lock()
-        self._progress_folder = Path(tempfile.mkdtemp(prefix="graphtwin-progress-"))
+        self._work_folder = _work_folder()
 
     def progress_path(self, job_id: str) -> Path:
-        """Where a job's process writes its progress as it goes (the server reads it meanwhile)."""
-        return self._progress_folder / f"{job_id}.jsonl"
+        """Where a job's process writes its progress as it goes (the server reads it meanwhile); its
+        scratch folder goes beside it (:func:`service.jobs.shipping.run_shipped_job`)."""
+        return self._work_folder / f"{job_id}.jsonl"
 
     @staticmethod
     def _new_pool() -> ProcessPoolExecutor:
@@ -83,7 +84,32 @@ class ProcessJobExecutor:
         with self._lock:
             for pool in self._slots:
                 _stop_pool(pool)
-        shutil.rmtree(self._progress_folder, ignore_errors=True)
+        shutil.rmtree(self._work_folder, ignore_errors=True)
+
+
+#: The prefix of a service's work folder in the temporary directory, followed by its process id.
+WORK_FOLDER_PREFIX = "graphtwin-jobs-"
+
+
+def _work_folder() -> Path:
+    """A new folder for this process's jobs (progress files, scratch folders), named with its process
+    id. Those of processes no longer running (a service killed before its shutdown) are removed first."""
+    for folder in Path(tempfile.gettempdir()).glob(f"{WORK_FOLDER_PREFIX}*"):
+        pid = folder.name[len(WORK_FOLDER_PREFIX):].split("-")[0]
+        if pid.isdigit() and not _running(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+    return Path(tempfile.mkdtemp(prefix=f"{WORK_FOLDER_PREFIX}{os.getpid()}-"))
+
+
+def _running(pid: int) -> bool:
+    """Whether a process ``pid`` exists (another user's included)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
 
 
 def _start_job_worker() -> None:

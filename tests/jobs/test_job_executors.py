@@ -5,7 +5,11 @@ test_service_faults.py, runs the process pool inside a real ``graphtwin serve``.
 
 import os
 import pickle
+import shutil
+import subprocess
+import tempfile
 import time
+from pathlib import Path
 
 import pyoxigraph as ox
 import pytest
@@ -22,7 +26,7 @@ from service.errors import (
 )
 from service.graph.store import GraphStore
 from service.http.app import create_app
-from service.jobs.executors import DaskJobExecutor, ProcessJobExecutor
+from service.jobs.executors import WORK_FOLDER_PREFIX, DaskJobExecutor, ProcessJobExecutor
 from service.jobs.kinds import JOB_KINDS, add_effect_job, assemble_job, calibrate_job
 from service.jobs.records import JobRecords
 from service.jobs.runner import JobRunner
@@ -142,6 +146,32 @@ def test_shutting_the_pool_down_stops_a_worker_still_running_a_job():
     assert future.running() and [w.is_alive() for w in workers] == [True]
     executor.shutdown()
     assert [w.is_alive() for w in workers] == [False]
+
+
+def test_a_jobs_scratch_lies_in_the_services_work_folder_and_a_killed_services_folder_goes_at_the_next_start():
+    """Each suite run left a job's scratch folder and a progress folder in /tmp: a service killed
+    (SIGKILL, out of memory) never reaches its shutdown. A job's scratch now lies in its service's
+    work folder, named with the service's process id, and the next service removes the folders of
+    processes no longer running; never one of a running process."""
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    left_by_dead = Path(tempfile.mkdtemp(prefix=f"{WORK_FOLDER_PREFIX}{dead.pid}-"))
+    (left_by_dead / "graphtwin-job-x").mkdir()
+    of_running = Path(tempfile.mkdtemp(prefix=f"{WORK_FOLDER_PREFIX}{os.getppid()}-"))
+    executor = ProcessJobExecutor(1)
+    try:
+        assert not left_by_dead.exists() and of_running.is_dir()
+        progress = executor.progress_path("j1")
+        shipped = ShippedJob("j1", JobRequest(), b"", {"u1": b"time,x\n"}, str(progress))
+        outcome, *_ = run_shipped_job(lambda store, request, context: JobResult(
+            {"folder": str(context.measurements("u1").parent)}), shipped)
+        scratch = Path(outcome.result["folder"])
+        assert scratch.parent == progress.parent and scratch.name.startswith("graphtwin-job-")
+        assert not scratch.exists()  # removed when the job ended
+    finally:
+        executor.shutdown()
+        shutil.rmtree(of_running)
+    assert not progress.parent.exists()
 
 
 class Sleep(JobRequest):
