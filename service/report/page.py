@@ -28,7 +28,14 @@ from service.diagnosis.report import fails_at
 from service.diagnosis.separation import distance_text
 from service.graph.namespaces import GTR, local_name
 from service.graph.store import GraphStore
-from service.graph.units import difference_label, difference_unit, quantity_text, unit_label
+from service.graph.units import (
+    difference_label,
+    difference_text,
+    difference_unit,
+    logged_difference_text,
+    quantity_text,
+    unit_label,
+)
 from service.report.run_series import INTERVAL_LEVEL, INTERVAL_Z, RunSeries, recompute_series
 from service.report.stored_run import StoredCandidate, StoredDiagnosis, StoredRun, read_diagnosis, read_run
 from service.report.topology_svg import TOPOLOGY_KEY, topology_svg
@@ -117,9 +124,12 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
                   else [test.get("cv_rmse_percent"), test.get("nmbe_percent")])
         noise, rmse = test.get("noise"), test.get("rmse")
         over_noise = rmse / noise if noise and rmse is not None else None  # runs stored before have no noise
+        logged = logged_difference_text(1.0, run.units[sensor], series.logged_units.get(sensor, "")) if series else None
+        unit = difference_label(run.units[sensor]) + (f" (as logged: 1 {difference_label(run.units[sensor])} = "
+                                                      f"{logged})" if logged else "")
         rows.append([_breakable(sensor), _number(train.get("rmse")), _number(rmse), _number(noise),
                      _number(over_noise), _number(test.get("mae")), _number(test.get("r2")), *map(_number, ratios),
-                     html.escape(difference_label(run.units[sensor])), verdict])
+                     html.escape(unit), verdict])
     out = ["<h2>Measured against the model, per sensor</h2>",
            _table(["sensor", "train RMSE", "test RMSE", "test noise σ", "test RMSE / σ", "test MAE", "test R²",
                    "CV(RMSE) %", "NMBE %", "unit", "located failure"], rows, "metrics")]
@@ -140,13 +150,18 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
                    f'is the {100 * INTERVAL_LEVEL:.0f} % prediction interval '
                    f'ŷ ± {INTERVAL_Z:.3f}·s with s the sensor\'s training RMSE.</p>')
     out += [f'<p class="note">{html.escape(note)}</p>' for note in series.notes]
+    left_out = None if series.compared is None or series.compared.all() else ~series.compared
+    if left_out is not None:
+        out.append(f"<p>Shaded grey: the {int(left_out.sum())} of {left_out.size} steps the run's operating filter "
+                   f"({html.escape(' and '.join(run.settings.get('only_when', [])))}) left out of its fit and "
+                   "metrics.</p>")
     for sensor in series.predicted:
-        rmse = quantity_text(series.rmse[sensor], difference_unit(series.units[sensor]))
+        rmse = difference_text(series.rmse[sensor], series.units[sensor], series.logged_units.get(sensor, ""))
         picture = _png(measured_vs_model_figure(
             series.timestamps, {sensor: series.observed[sensor]}, {model_name: {sensor: series.predicted[sensor]}},
             series.units, {sensor: series.band[sensor]}, title=f"{local_name(sensor)}: {series.window} window, RMSE {rmse}",
-            interval_label=band_name))
-        alt = f"measured vs model: {local_name(sensor)}"
+            interval_label=band_name, left_out=left_out))
+        alt = f"measured vs model: {local_name(sensor)}, {series.window} window, RMSE {rmse}"
         out.append(f'<figure>{_img(picture, "image/png", alt, "series")}</figure>')
     return "".join(out)
 

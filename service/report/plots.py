@@ -52,13 +52,18 @@ def measured_vs_model_figure(
     title: str = "",
     interval_level: float = 0.9,
     interval_label: str = "",
+    left_out: np.ndarray | None = None,
 ) -> Figure:
     """One panel per sensor: the measurement and each named model prediction (e.g. ``before`` and
     ``after``), with the shaded interval where given, labelled ``interval_label`` (default: the
-    ``interval_level`` prediction interval)."""
+    ``interval_level`` prediction interval); the steps ``left_out`` (bool per step: an operating
+    filter did not compare them) shaded light grey."""
     sensors = list(observed)
     fig, axes = plt.subplots(len(sensors), 1, figsize=(11, 2.2 * len(sensors)), sharex=True, squeeze=False)
     for ax, sensor in zip(axes[:, 0], sensors):
+        if left_out is not None and left_out.any():
+            ax.fill_between(timestamps, 0, 1, where=left_out, step="mid", transform=ax.get_xaxis_transform(),
+                            color="0.85", lw=0, label="not compared (operating filter)")
         if intervals and sensor in intervals:
             low, high = intervals[sensor]
             ax.fill_between(timestamps, low, high, color="tab:blue", alpha=0.2,

@@ -44,7 +44,9 @@ REPRODUCTION_TOLERANCE = 0.01
 class RunSeries:
     """Measured and modelled series of one window (``window`` is ``"test"`` or ``"train"``), each
     target node's interval ``band[node] = (low, high)`` (the stored posterior predictive band when
-    ``posterior_band``, else ŷ ± z·s), the recomputed RMSE, and ``notes``."""
+    ``posterior_band``, else ŷ ± z·s), the recomputed RMSE, and ``notes``; ``logged_units`` the unit
+    each column was logged in (where the data file gives one), ``compared`` the window's steps the run's
+    operating filter (``only_when``) kept."""
 
     window: str
     timestamps: np.ndarray
@@ -55,6 +57,8 @@ class RunSeries:
     units: dict[str, str]
     notes: list[str] = field(default_factory=list)
     posterior_band: bool = False
+    logged_units: dict[str, str] = field(default_factory=dict)
+    compared: np.ndarray | None = None
 
 
 def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunSeries:
@@ -72,7 +76,8 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
                          "its series cannot be recomputed")
     model = assemble(store, run.model)
     data = read_model_data(model, data_path)
-    md = ModelData(model, data, int(run.settings["substeps"]), operating_mask(data, run.settings.get("only_when", [])),
+    compared = operating_mask(data, run.settings.get("only_when", []))
+    md = ModelData(model, data, int(run.settings["substeps"]), compared,
                    warmup_s=run.settings.get("warmup_s", 0.0))  # a run stored before warm-ups was simulated cold
     missing = [ref.key for ref in model.estimated_parameters if ref.key not in run.estimates]
     if missing:
@@ -104,7 +109,8 @@ def recompute_series(store: GraphStore, run: StoredRun, data_path: Path) -> RunS
                          f"{stored:.4g}" + (" (a Bayesian run stores the predictive median's error; the figure "
                                             "simulates the posterior median parameters)" if run.method == "bayes"
                                             else ": the data file is not the one the run used"))
-    return RunSeries(name, data.timestamps[window], observed, predicted, band, rmse, dict(md.units), notes, posterior)
+    return RunSeries(name, data.timestamps[window], observed, predicted, band, rmse, dict(md.units), notes, posterior,
+                     dict(data.source_units), compared[window])
 
 
 def data_file_locator(explicit: Path | None = None, folder: Path | None = None) -> Callable[[str], Path]:

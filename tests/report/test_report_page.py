@@ -19,6 +19,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from case_study import CASE_STUDY, EX
 from fastapi.testclient import TestClient
@@ -40,6 +41,7 @@ from service.http.app import create_app
 from service.matching.library_triples import ensure_signature_library
 from service.model.effect_recording import applied_effect_triples, record_effect_in_file
 from service.report.page import CONTENT_SECURITY_POLICY, p_value_text, report_html
+from service.report.plots import measured_vs_model_figure
 from service.report.run_series import INTERVAL_LEVEL, data_file_locator, recompute_series
 from service.report.stored_run import read_diagnosis, read_run
 from service.report.topology_svg import topology_svg
@@ -167,7 +169,7 @@ def test_every_sensor_has_its_stored_metrics_and_a_measured_vs_model_figure_that
         assert row[3] == f"{measures.noise:.3g}", row  # the metric's σ is the diagnosis's
         assert row[-1] == ("yes" if sensor in {loc.failing_sensor for loc in case.report.localization} else "no")
     figures = {i["alt"]: i for i in parsed.images if i["class"] == "series"}
-    assert set(figures) == {f"measured vs model: {_short(s)}" for s in sensors}
+    assert {alt.split(",")[0] for alt in figures} == {f"measured vs model: {_short(s)}" for s in sensors}
     for image in figures.values():
         picture = Image.open(io.BytesIO(image_bytes(image, "image/png")))
         picture.load()
@@ -471,6 +473,39 @@ def test_a_run_with_an_operating_filter_says_so_and_reproduces_its_metrics(case)
     series = recompute_series(case.store, read_run(case.store, run.record.run_id), case.data)
     for sensor, metrics in run.record.metrics["test"].items():  # the filtered steps are left out again
         assert series.rmse[sensor] == pytest.approx(metrics.rmse, rel=1e-6), sensor
+    left_out = ~series.compared  # the steps the figures shade, said in numbers
+    assert 0 < left_out.sum() < left_out.size
+    assert f"Shaded grey: the {left_out.sum()} of {left_out.size} steps the run's operating filter" in page
+    data = pd.read_csv(case.data)
+    test_day = data[data.iloc[:, 0].str.startswith("2026-01-13")]
+    assert left_out.size == len(test_day) and left_out.sum() == (test_day["supply_air_flow"] <= 0.9).sum()
+    figure = measured_vs_model_figure(series.timestamps, series.observed, {"model": series.predicted}, series.units,
+                                      left_out=left_out)
+    assert "not compared (operating filter)" in [t.get_text() for t in figure.axes[0].get_legend().get_texts()]
+
+
+def test_a_sensor_logged_in_fahrenheit_has_its_errors_in_both_units_on_the_page(case, tmp_path):
+    """The errors are in K, the model's unit; a user whose column is in °F reads what 1 K is in it, in
+    the metrics table and in the figure's title."""
+    fahrenheit = tmp_path / "model_f.ttl"
+    text = CASE_STUDY.read_text()
+    column = 'saref:isMeasuredIn unit:DEG_C ;\n    gt:timeSeriesId "coil_outlet_air_temperature"'
+    assert column in text
+    fahrenheit.write_text(text.replace(column, column.replace("DEG_C", "DEG_F")))
+    data = pd.read_csv(case.data)
+    data["coil_outlet_air_temperature"] = data["coil_outlet_air_temperature"] * 1.8 + 32.0
+    data_f = tmp_path / "data_f.csv"
+    data.to_csv(data_f, index=False)
+    case.store.load_model("case_f", fahrenheit)
+    run = calibrate(case.store, "case_f", data_f, train=TRAIN, test=TEST, seed=0)
+    page = report_html(case.store, run.record.run_id, locate_data=data_file_locator(data_f))
+    rows = {row[0]: row for row in PageParser(page).tables["metrics"][1:]}
+    assert rows["coil_outlet_air_temperature_sensor"][-2] == "K (as logged: 1 K = 1.8 °F)"
+    assert rows["coil_outlet_water_temperature_sensor"][-2] == "K"
+    rmse = run.record.metrics["test"][EX + "coil_outlet_air_temperature_sensor"].rmse
+    alt = [i["alt"] for i in PageParser(page).images if i["alt"].startswith("measured vs model: coil_outlet_air")]
+    assert alt == [f"measured vs model: coil_outlet_air_temperature_sensor, test window, RMSE {rmse:.3g} K "
+                   f"({1.8 * rmse:.3g} °F)"]  # the figure's title says the same
 
 
 def test_a_heat_coupling_is_drawn_once_dashed_and_not_as_a_fluid_edge_back():
