@@ -38,7 +38,7 @@ from service.calibration.record import (
 )
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
 from service.calibration.triples import calibration_triples
-from service.calibration.unit_mixup import inputs_off_scale, unit_mixups
+from service.calibration.unit_mixup import inputs_off_scale, temperature_inputs_misread, unit_mixups
 from service.data.measurements import MeasuredData
 from service.data.model_series import SETTLING_S, read_model_data
 from service.data.operating_filter import operating_mask
@@ -462,6 +462,7 @@ def calibrate(
         compared = problem.observed, [predictions["train"], at_defaults]
     diagnostics.warnings += unit_mixups(data, md.units, *compared)
     diagnostics.warnings += inputs_off_scale(data, model, md.node_of)  # an input the model cannot predict
+    diagnostics.warnings += temperature_inputs_misread(md, test_slice or train_slice, problem.target_scales)
     finished = datetime.now(timezone.utc)
     times = data.timestamps
     as_datetime = lambda s: times[s].astype("datetime64[s]").astype(datetime).replace(  # noqa: E731

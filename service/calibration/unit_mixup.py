@@ -15,16 +15,18 @@ declared as percent, or the reverse, is caught when the data are read (``service
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
+from service.calibration.model_data import ModelData
 from service.data.measurements import MeasuredData
 from service.graph.namespaces import local_name
 from service.graph.units import QUDT_UNIT_NAMESPACE, QUDT_UNITS, convert, unit_label, unit_spec
 from service.model.assembled_model import AssembledModel
 
-__all__ = ["unit_mixups", "inputs_off_scale", "MIXUP_IMPROVEMENT", "TRACKING_SHARE", "OFF_SCALE_ABOVE",
-           "OFF_SCALE_BELOW"]
+__all__ = ["unit_mixups", "inputs_off_scale", "temperature_inputs_misread", "MIXUP_IMPROVEMENT", "TRACKING_SHARE",
+           "OFF_SCALE_ABOVE", "OFF_SCALE_BELOW", "REACH_SHARE"]
 
 #: How many times smaller the RMSE read in the other unit must be than as declared.
 MIXUP_IMPROVEMENT = 5.0
@@ -112,4 +114,73 @@ def inputs_off_scale(data: MeasuredData, model: AssembledModel, node_of: Mapping
             f"column {data.columns.get(node, local_name(node))!r} ({local_name(node)}): its readings reach {high:.3g} "
             f"{label} (95th percentile), {high / scale:.3g} times the {ref.spec.name} of "
             f"{local_name(model.components[ref.component].node)} the graph states ({scale:.3g} {label}){hint}")
+    return warnings
+
+
+#: A target whose prediction moves by less than this share of its scale (RMS) when an input is re-read
+#: is not one the input reaches: its error, whatever it is, does not judge the re-reading.
+REACH_SHARE = 0.1
+
+
+def temperature_inputs_misread(md: ModelData, window: slice, scales: Mapping[str, float]) -> list[str]:
+    """One warning per temperature boundary input (an air or water temperature, a set point: the graph
+    does not say which scale fits it) that, read in another temperature unit, lets the model at its
+    parameters' defaults meet the targets it reaches over ``window`` far better: their squared error
+    Σₖ mean(((y − ŷ)/scaleₖ)²) falls :data:`MIXUP_IMPROVEMENT`² times or more (a target whose prediction
+    moves by less than :data:`REACH_SHARE` of its scale is not reached). Outdoor air in °F declared as
+    °C drives the model with air at 30–60 °C: every target it reaches misses by tens of kelvin, and no
+    target's own column is the one to re-read. The best re-reading is taken first and the others judged
+    with it (with the supply water in K, re-reading the set point in °F also helps: it shuts the valve).
+    ``scales``: each target's scale (the calibration's)."""
+    observed = md.observed(window)
+    defaults = md.default_theta()[None, :]
+
+    def predict(series: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {node: values[0] for node, values in replace(md, data=replace(md.data, series=dict(series)))
+                .simulate_targets(window, defaults).items()}
+
+    def squared_error(predicted: Mapping[str, np.ndarray], reached: Sequence[str]) -> float:
+        total = 0.0
+        for node in reached:
+            finite = np.isfinite(observed[node]) & np.isfinite(predicted[node])
+            if finite.any():
+                total += float(np.mean(((observed[node][finite] - predicted[node][finite]) / scales[node]) ** 2))
+        return total
+
+    def reached(before: Mapping[str, np.ndarray], after: Mapping[str, np.ndarray]) -> list[str]:
+        moved = {node: np.abs(after[node] - before[node]) for node in observed}
+        return [node for node, change in moved.items()
+                if np.isfinite(change).any() and np.sqrt(np.nanmean(change**2)) > REACH_SHARE * scales[node]]
+
+    data = md.data
+    rereadings = {}  # (node, other unit) → the column read in it, in the port unit
+    for component in md.model.boundary_inputs:
+        node = md.node_of[component]
+        declared, port = data.source_units.get(node), data.units.get(node)
+        if declared is None or port is None or unit_spec(port).dimension != "temperature":
+            continue
+        raw = convert(data.series[node], port, declared)
+        rereadings |= {(node, name): convert(raw, QUDT_UNIT_NAMESPACE + name, port) for name, spec in QUDT_UNITS.items()
+                       if spec.dimension == "temperature" and spec != unit_spec(declared)}
+    series, current, warnings = dict(data.series), None, []
+    while rereadings:
+        current = predict(series) if current is None else current
+        best = None  # (improvement, key, its prediction)
+        for key, values in rereadings.items():
+            trial = predict(series | {key[0]: values})
+            targets = reached(current, trial)
+            before, after = squared_error(current, targets), squared_error(trial, targets)
+            if targets and after * MIXUP_IMPROVEMENT**2 <= before and (best is None or before / after > best[0]):
+                best = (before / after if after > 0 else np.inf, key, trial)
+        if best is None:
+            break
+        improvement, (node, name), current = best
+        other = unit_label(QUDT_UNIT_NAMESPACE + name)
+        warnings.append(
+            f"column {data.columns.get(node, local_name(node))!r} ({local_name(node)}), a boundary input: read as "
+            f"{other} instead of the {unit_label(data.source_units[node])} the model declares, it lets the model "
+            f"meet the targets it drives {np.sqrt(improvement):.3g} times closer (RMS over their scales, at the "
+            f"parameters' defaults): is it in {other}? (then declare its unit as unit:{name})")
+        series[node] = rereadings[(node, name)]
+        rereadings = {key: values for key, values in rereadings.items() if key[0] != node}
     return warnings

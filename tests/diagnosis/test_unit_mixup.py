@@ -75,6 +75,26 @@ def test_a_boundary_flow_in_another_unit_is_named_by_the_graphs_nominal_flow(gen
                 if "the graph states" in w]
 
 
+@pytest.mark.parametrize(("column", "convert", "unit"), [
+    ("fan_inlet_air_temperature", lambda c: 32.0 + 1.8 * c, "°F"),
+    ("supply_water_temperature", lambda c: c + 273.15, "K"),
+])
+def test_a_boundary_temperature_in_another_unit_is_named_by_how_much_closer_the_targets_come(
+        generated, tmp_path, column, convert, unit):
+    """Outdoor air in °F under a model that says °C drove the model with air at 30–60 °C: every target
+    missed by tens of kelvin and nothing was said. The graph gives no scale for a temperature (air or
+    water, set point or reading), so the model at its defaults is run with the column read in each
+    other unit: the one that brings the targets far closer is named."""
+    from service.calibration.run import calibrate
+
+    store, path = generated
+    mixed = _rewritten(path, tmp_path / "input.csv", column, convert)
+    said = [w for w in calibrate(store, "case", mixed, train=TRAIN, test=TEST, seed=0).record.diagnostics.warnings
+            if "the model declares" in w]
+    assert len(said) == 1 and said[0].startswith(f"column {column!r}") and "a boundary input" in said[0], said
+    assert f"is it in {unit}?" in said[0]
+
+
 def test_the_data_as_generated_raise_no_unit_warning(generated):
     store, path = generated
     assert _warnings(store, path) == []
