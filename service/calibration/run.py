@@ -39,6 +39,7 @@ from service.calibration.record import (
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
 from service.calibration.triples import calibration_triples
 from service.calibration.unit_mixup import inputs_off_scale, temperature_inputs_misread, unit_mixups
+from service.calibration.versus_start import worse_than_start
 from service.data.measurements import MeasuredData
 from service.data.model_series import SETTLING_S, read_model_data
 from service.data.operating_filter import operating_mask
@@ -480,6 +481,8 @@ def calibrate(
         regime_rule_accuracy=regimes.rule_accuracy if regimes is not None else float("nan"),
         predictive_bands=bands,
     )
+    if start_runs:  # a sensor the model it started from fitted better on these data
+        diagnostics.warnings += worse_than_start(store, start_runs, record, model, start, theta)
     store_run(store, model, model_name, record)
     return CalibrationOutcome(record, model, md, theta, train_slice, test_slice, predictions, intervals,
                               calibrator, regimes)

@@ -17,7 +17,7 @@ from service.graph.units import (
     difference_label,
     difference_text,
     difference_unit,
-    logged_difference_text,
+    logged_scale_text,
     quantity_text,
     unit_label,
 )
@@ -54,8 +54,8 @@ def print_metrics(title: str, metrics: dict, logged_units: dict[str, str] | None
         ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
         table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.noise:.3g}", f"{m.rmse / m.noise:.1f}" if m.noise > 0 else "–",
                       f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, difference_label(m.unit))
-    restated = sorted({f"1 {difference_label(m.unit)} = {logged}" for node, m in metrics.items()
-                       if (logged := logged_difference_text(1.0, m.unit, (logged_units or {}).get(node, "")))})
+    restated = sorted({scale for node, m in metrics.items()
+                       if (scale := logged_scale_text(m.unit, (logged_units or {}).get(node, "")))})
     if restated:  # the data's own degrees
         table.caption = "as logged: " + "; ".join(restated)
     console.print(table)
@@ -145,6 +145,7 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
     from service.diagnosis.drift import (
         drifting_parameter,  # scipy: not at the CLI's start
     )
+    from service.diagnosis.localization import describe_locations
     from service.diagnosis.ranking import BIC_THRESHOLD, MIN_TEST_IMPROVEMENT
 
     print_data_warnings(report.data_warnings)
@@ -158,8 +159,8 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         table.add_row(local_name(node), difference_text(s.rmse, s.unit, s.logged_unit), f"{s.rmse_over_noise:.1f}",
                       "–" if on_interval_scale(s.unit) else f"{s.nmbe_percent:+.1f}", verdict)
     console.print(table)
-    for location in report.localization:
-        console.print(f"• {location.describe()}")
+    for sentence in describe_locations(report.localization):
+        console.print(f"• {sentence}")
     worst = next((r for r in report.regimes if r["worst"]), None)
     if worst is not None:
         console.print(f"Worst operating regime ({100 * worst['share']:.0f} % of the test window): {worst['rule']}  "

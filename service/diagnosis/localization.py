@@ -13,12 +13,12 @@ rationale: ``docs/diagnosis.md``, "Localisation on the flow path".
 from __future__ import annotations
 
 from collections import defaultdict, deque
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from service.graph.namespaces import local_name
 
-__all__ = ["FlowTopology", "FailureLocation", "localize_failures"]
+__all__ = ["FlowTopology", "FailureLocation", "describe_locations", "localize_failures"]
 
 
 @dataclass(frozen=True)
@@ -36,10 +36,18 @@ class FailureLocation:
     #: ``matching_sensor`` is a boundary input: the model is fed its measurement, not judged on it
     matching_is_input: bool = False
 
-    def describe(self) -> str:
-        where = " or ".join(local_name(c) for c in self.components) or "no modelled component"
+    def describe(self, inputs_beside: Sequence[FailureLocation] = ()) -> str:
+        """In words; ``inputs_beside``: other locations of the same failing sensor downstream of other
+        inputs (:func:`describe_locations`), named in the one sentence with their suspects."""
+        components = list(dict.fromkeys(c for location in (self, *inputs_beside) for c in location.components))
+        where = " or ".join(local_name(c) for c in components) or "no modelled component"
         loop = (f" (through the controller that moves {local_name(self.through_controller_of)}: a disturbance "
                 "upstream of its sensor shows on the side it moves)" if self.through_controller_of else "")
+        if inputs_beside:
+            names = [local_name(location.matching_sensor) for location in (self, *inputs_beside)]
+            return (f"The model fails at {local_name(self.failing_sensor)}, downstream of {', '.join(names[:-1])} and "
+                    f"{names[-1]}, whose measurements it takes as inputs: the missing effect sits in {where} between "
+                    f"them{loop}.")
         if self.matching_sensor is None:
             return (f"The model fails at {local_name(self.failing_sensor)} with no matching sensor upstream: "
                     f"look at {where}{loop}.")
@@ -63,6 +71,24 @@ class FailureLocation:
         return {"between": [self.matching_sensor, self.failing_sensor], "components": list(self.components),
                 "upstream_fails": self.upstream_fails, "through_controller_of": self.through_controller_of,
                 "upstream_is_input": self.matching_is_input}
+
+
+def describe_locations(locations: Sequence[FailureLocation]) -> list[str]:
+    """One sentence per failing sensor and upstream sensor, but one for a failing sensor downstream of
+    several boundary inputs (an air flow and a water temperature both feed a coil): the inputs named
+    together, their suspects joined."""
+    beside: dict[tuple[str, str | None], list[FailureLocation]] = defaultdict(list)
+    for location in locations:
+        if location.matching_is_input and not location.upstream_fails:
+            beside[(location.failing_sensor, location.through_controller_of)].append(location)
+    sentences = []
+    for location in locations:
+        group = beside.get((location.failing_sensor, location.through_controller_of), [])
+        if location not in group:
+            sentences.append(location.describe())
+        elif location is group[0]:
+            sentences.append(location.describe(group[1:]))
+    return sentences
 
 
 class FlowTopology:

@@ -24,7 +24,7 @@ from service.diagnosis.candidates import rank_catalog, split_windows
 from service.diagnosis.drift import drifting_components
 from service.diagnosis.episodes import Episode, find_episodes
 from service.diagnosis.localization import FailureLocation, FlowTopology, localize_failures
-from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT
+from service.diagnosis.ranking import MIN_TEST_IMPROVEMENT, EffectEvidence
 from service.diagnosis.report import (
     FAILURE_RATIO,
     MIN_TEST_STEPS,
@@ -40,6 +40,7 @@ from service.graph.namespaces import local_name
 from service.graph.store import GraphStore
 from service.graph.units import difference_label
 from service.matching.signature import Signature
+from service.model.assembled_model import AssembledModel
 
 __all__ = ["diagnose", "MIN_TEST_STEPS"]
 
@@ -110,7 +111,9 @@ def diagnose(
     answer = next((e for e in ranked if e.significant), None)
     lookalikes, others = [], []
     if answer is not None:  # one story: where the missing effect shows, a failure is located
-        sensors = {node: replace(verdict, shows_missing_effect=answer.error_removed_at(node) >= MIN_TEST_IMPROVEMENT)
+        reached = _sensors_reached(answer, model)
+        sensors = {node: replace(verdict, shows_missing_effect=node in reached
+                                 and answer.error_removed_at(node) >= MIN_TEST_IMPROVEMENT)
                    for node, verdict in sensors.items()}
         say("telling the answer from its look-alikes")
         _, run_window, evaluation = split_windows(base.train, test_slice)
@@ -144,6 +147,18 @@ def diagnose(
     )
     store.write_graph(store.run_graph(f"{base.record.run_id}-diagnosis"), diagnosis_triples(report))
     return report
+
+
+def _sensors_reached(effect: EffectEvidence, base: AssembledModel) -> set[str]:
+    """The sensors (nodes) ``effect`` can move: the targets downstream of its components in its model,
+    or of the component whose parameter it drifts. A sensor it cannot reach that its refit improves was
+    mended by the base parameters the refit frees (a fan's unidentified curve), not by the effect."""
+    model = effect.model
+    if model is None:  # not kept (evidence read back): every sensor, as before
+        return {base.measurement(c).node for c in base.targets}
+    sources = (set(model.components) - set(base.components)
+               or {drift.parameter_key.rpartition("#")[0] for drift in model.drifts})
+    return {model.measurement(c).node for c in model.targets_reached_from(sources)}
 
 
 def _regimes_with_worst(regimes: list[dict], sensors: Mapping[str, SensorVerdict], test_steps: int) -> list[dict]:

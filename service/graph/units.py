@@ -21,7 +21,7 @@ from service.graph.spelling import one_edit_apart
 __all__ = ["UnitError", "UnitSpec", "QUDT_UNITS", "PORT_UNITS", "convert", "unit_spec", "unit_label", "bracketed_unit",
            "quantity_text", "closest_unit_hint", "KNOWN_UNITS", "difference_unit", "difference_label",
            "difference_text",
-           "logged_difference_text"]
+           "logged_difference_text", "logged_scale_text"]
 
 QUDT_UNIT_NAMESPACE = "http://qudt.org/vocab/unit/"
 
@@ -147,6 +147,13 @@ def difference_text(value: float | None, unit: str, logged_unit: str = "",
     text = f"{number(value)} {unit_label(difference_unit(unit))}".rstrip()
     restated = logged_difference_text(value, unit, logged_unit, number)
     return f"{text} ({restated})" if restated else text
+
+
+def logged_scale_text(unit: str, logged_unit: str) -> str | None:
+    """What one unit of a difference of readings in ``unit`` is in the unit they were logged in:
+    ``1 K = 1.8 °F``, ``1 = 100 %`` (None where :func:`logged_difference_text` gives none)."""
+    logged = logged_difference_text(1.0, unit, logged_unit)
+    return None if logged is None else f"{' '.join(filter(None, ['1', difference_label(unit)]))} = {logged}"
 
 
 def logged_difference_text(value: float, unit: str, logged_unit: str,

@@ -11,6 +11,7 @@ parameters to estimate are all parameters minus those mapped from the graph (Eq.
 
 from __future__ import annotations
 
+from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
@@ -133,6 +134,20 @@ class AssembledModel:
             if node_iri in component.modeled_nodes:
                 return component
         return None
+
+    def targets_reached_from(self, sources: Iterable[str]) -> set[str]:
+        """The targets (component IRIs) that an output of the components ``sources`` reaches along the
+        connections, each component on the way passing every input on to every output (a controller's
+        loop included): the sensors an effect spliced there can move at all."""
+        feeds = defaultdict(set)
+        for connection in self.connections:
+            feeds[connection.source].add(connection.target)
+        seen, stack = set(sources), list(sources)
+        while stack:
+            for following in feeds[stack.pop()] - seen:
+                seen.add(following)
+                stack.append(following)
+        return seen & set(self.targets)
 
     def measurement(self, component_iri: str) -> MeasurementLink:
         link = self.components[component_iri].measurement

@@ -32,7 +32,7 @@ from service.graph.units import (
     difference_label,
     difference_text,
     difference_unit,
-    logged_difference_text,
+    logged_scale_text,
     quantity_text,
     unit_label,
 )
@@ -124,9 +124,8 @@ def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: R
                   else [test.get("cv_rmse_percent"), test.get("nmbe_percent")])
         noise, rmse = test.get("noise"), test.get("rmse")
         over_noise = rmse / noise if noise and rmse is not None else None  # runs stored before have no noise
-        logged = logged_difference_text(1.0, run.units[sensor], series.logged_units.get(sensor, "")) if series else None
-        unit = difference_label(run.units[sensor]) + (f" (as logged: 1 {difference_label(run.units[sensor])} = "
-                                                      f"{logged})" if logged else "")
+        logged = logged_scale_text(run.units[sensor], series.logged_units.get(sensor, "")) if series else None
+        unit = difference_label(run.units[sensor]) + (f" (as logged: {logged})" if logged else "")
         rows.append([_breakable(sensor), _number(train.get("rmse")), _number(rmse), _number(noise),
                      _number(over_noise), _number(test.get("mae")), _number(test.get("r2")), *map(_number, ratios),
                      html.escape(unit), verdict])

@@ -1,6 +1,6 @@
 """Localisation along the flow path, including a recirculation loop and off-path sensors."""
 
-from service.diagnosis.localization import FlowTopology, localize_failures
+from service.diagnosis.localization import FailureLocation, FlowTopology, describe_locations, localize_failures
 
 # outdoor sensor → mixing box → fan → coil → supply sensor → room → return sensor → mixing box (loop)
 LOOP = [
@@ -143,3 +143,19 @@ def test_the_diagnosis_carries_a_failure_down_only_where_the_residuals_say_so():
     carries = _carried_down(residuals, units, noise, failure_ratio=2.0)
     assert carries("mat", "sat_same") and not carries("mat", "sat_grown")
     assert carries("mat", "power")  # other units: cannot be told apart, carried
+
+
+def test_a_sensor_failing_downstream_of_several_inputs_is_one_sentence_naming_them_all():
+    """A coil's outlet air downstream of the measured air flow and the measured hot water was two
+    sentences, one per input, each with its own suspects; a user read six bullets for three sensors."""
+    ex = "https://example.org/x#"
+    by_flow = FailureLocation(ex + "sat", ex + "air_flow", (ex + "fan", ex + "coil"), matching_is_input=True)
+    by_water = FailureLocation(ex + "sat", ex + "water_temperature", (ex + "pump", ex + "coil"), matching_is_input=True)
+    matched = FailureLocation(ex + "return_water", ex + "supply_water", (ex + "coil",))
+    assert describe_locations([by_flow, matched, by_water]) == [
+        "The model fails at sat, downstream of air_flow and water_temperature, whose measurements it takes as "
+        "inputs: the missing effect sits in fan or coil or pump between them.",
+        matched.describe(),
+    ]
+    assert describe_locations([by_flow]) == [by_flow.describe()]
+    assert "whose measurement it takes as an input" in by_flow.describe()

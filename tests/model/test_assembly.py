@@ -492,3 +492,23 @@ def test_a_seat_leak_changes_the_flow_while_the_position_feedback_reads_the_comm
     loop = model.component_for_node(EX + "heating_valve").iri
     assert {model.components[c.source].signature.id for c in model.connections
             if c.target == loop and c.target_port == "valve_position"} == {effect}
+
+
+@pytest.mark.parametrize(("effect", "node", "reached"), [
+    ("SensorOffset", "coil_outlet_air_temperature_sensor", {"coil_outlet_air_temperature_sensor", "valve_position_sensor",
+                                                            "coil_inlet_water_temperature_sensor",
+                                                            "coil_outlet_water_temperature_sensor"}),
+    ("FanMotorHeat", "supply_fan", {"coil_outlet_air_temperature_sensor", "valve_position_sensor",
+                                    "coil_inlet_water_temperature_sensor", "coil_outlet_water_temperature_sensor"}),
+    ("WaterSensorLag", "coil_outlet_water_temperature_sensor", {"coil_outlet_water_temperature_sensor"}),
+])
+def test_the_sensors_an_effect_can_move_are_those_downstream_of_it_through_the_control_loop(case_store, effect, node,
+                                                                                            reached):
+    """An offset of the controlled sensor moves every sensor the PI loop drives, never the fan's power
+    (a function of the measured air flow alone): a diagnosis had credited it with the fan meter's error
+    its refit removed by moving the fan's unidentified curve."""
+    base = assemble(case_store, "case")
+    model = assemble(case_store, "case", extra_effects=[EffectRequest(effect, EX + node)])
+    sources = set(model.components) - set(base.components)
+    assert sources and {model.measurement(c).node for c in model.targets_reached_from(sources)} == {
+        EX + name for name in reached}
