@@ -2,8 +2,8 @@
 unit, written by its points only. What holds whatever the data: what assembles from the file as it
 is, what the Brick report says is missing, and that stating what it names completes the model."""
 
-import re
 import csv
+import re
 
 import pyoxigraph as ox
 import pytest
