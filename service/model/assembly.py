@@ -125,18 +125,24 @@ def assemble(
     # measuring devices without a modelled source are boundary inputs, not missing connections
     devices = {iri for iri, inst in instances.items() if issubclass(inst.model_class, MeasuringDevice)}
     incomplete = misspelt.dropped + [u.reason for u in unconnected if u.component not in devices]
-    notes += [f"{u.reason}: {instances[u.component].node} is a boundary input, not a calibration target"
-              for u in unconnected if u.component in devices and u.source_modelled]
+    fed, read = {c.target for c in connections}, {c.source for c in connections}
+    unread = sorted(i for i in devices if i not in fed and i not in read)  # a column nothing needs
+    left_out = "left out, its column is not needed"
+    no_target = {u.component: f"{u.reason}: {instances[u.component].node} " + (
+        f"cannot be a calibration target and no component reads it: {left_out}" if u.component in unread
+        else "is a boundary input, not a calibration target") for u in unconnected
+        if u.component in devices and u.source_modelled}
+    notes += list(no_target.values())
     incomplete += _unmatched_anchor_report(store, components, claimed=claimed, lost=lost, session=session)
     if incomplete and not allow_incomplete:
         raise IncompleteModelError(incomplete, notes=notes)
     notes.extend(incomplete)
 
-    fed = {c.target for c in connections}
-    boundary = tuple(sorted(i for i in devices if i not in fed))
-    read = {c.source for c in connections}
     notes += [f"{short_name(instances[i].node)}: measured, but no component reads it (what it drives or sets is not "
-              f"in the model)" for i in boundary if i not in read]
+              f"in the model): {left_out}" for i in unread if i not in no_target]
+    instances = {iri: instance for iri, instance in instances.items() if iri not in unread}
+    devices -= set(unread)
+    boundary = tuple(sorted(i for i in devices if i not in fed))
     targets = tuple(sorted(i for i in devices if i in fed))
     mapped, estimated = split_parameters(instances, measured_outputs(connections, instances, targets))
     notes += [f"{problem}: a calibration refuses it; fix the value (or its unit) in the model graph"

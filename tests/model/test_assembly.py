@@ -2,10 +2,12 @@
 
 import dataclasses
 
+import pandas as pd
 import pytest
-from case_study import CASE_STUDY, EX, case_study_with_effect
+from case_study import CASE_STUDY, EX, case_study_data, case_study_with_effect
 
 from service.components.library import SignatureLibrary
+from service.data.model_series import read_model_data
 from service.errors import AssemblyError, IncompleteModelError
 from service.graph.store import GraphStore
 from service.model.assembly import assemble
@@ -101,9 +103,11 @@ def test_two_units_whose_nodes_share_local_names_keep_every_component():
         assert fed_by == {EX.replace("case-study#", f"case-study/{unit}#") + "supply_fan"}
 
 
-def test_a_device_whose_upstream_model_lacks_its_quantity_is_a_boundary_input_with_a_note():
+def test_a_device_whose_upstream_model_lacks_its_quantity_and_that_nothing_reads_is_left_out_with_a_note(tmp_path):
     """The coil outlet water sensor moved after the check valve: the hot-water loop models the check
-    valve but gives no temperature there, so the sensor cannot be a target — said, not silent."""
+    valve but gives no temperature there, so the sensor cannot be a target — said, not silent. No
+    component reads it either, so it is left out: a data file without its column is read (a user's
+    coil inlet water sensor between the valve and the coil had made every calibration refuse the file)."""
     text = CASE_STUDY.read_text()
     for old, new in (("fso:suppliesFluidTo ex:coil_outlet_water_temperature_sensor .", "fso:suppliesFluidTo ex:check_valve ."),
                      ('gt:timeSeriesId "coil_outlet_water_temperature" ;\n    fso:suppliesFluidTo ex:check_valve .',
@@ -115,11 +119,17 @@ def test_a_device_whose_upstream_model_lacks_its_quantity_is_a_boundary_input_wi
     store = GraphStore.embedded(None)
     store.load_model("moved", text.encode())
     model = assemble(store, "moved")
-    sensor = model.component_for_node(EX + "coil_outlet_water_temperature_sensor").iri
-    assert sensor in model.boundary_inputs and sensor not in model.targets
-    assert any(f"{EX}check_valve is modelled by HotWaterLoop, which has no output carrying 'temperature' there" in note
-               and note.endswith("coil_outlet_water_temperature_sensor is a boundary input, not a calibration target")
-               for note in model.notes)
+    assert model.component_for_node(EX + "coil_outlet_water_temperature_sensor") is None  # nothing reads it either
+    assert [note for note in model.notes if "coil_outlet_water_temperature_sensor" in note] == [
+        next(note for note in model.notes
+             if f"{EX}check_valve is modelled by HotWaterLoop, which has no output carrying 'temperature' there" in note
+             and note.endswith("coil_outlet_water_temperature_sensor cannot be a calibration target and no component "
+                               "reads it: left out, its column is not needed"))]
+    data = tmp_path / "without_its_column.csv"
+    case_study_data(data, seed=0, n_days=0.5)
+    frame = pd.read_csv(data).drop(columns=["coil_outlet_water_temperature"])
+    frame.to_csv(data, index=False)
+    assert read_model_data(model, data).series  # the data file need not have the column
 
 
 def test_two_nearest_partners_alike_are_a_note_naming_both():
@@ -413,7 +423,9 @@ def test_a_misspelt_class_that_leaves_its_node_out_is_an_incomplete_model_and_wi
     model = assemble(store, "typo", allow_incomplete=True)
     assert model.component_for_node(FLEXLAB + "heating_coil") is None
     assert dropped in model.notes
-    assert "heating_coil_valve_command: measured, but no component reads it (what it drives or sets is not in the model)" in model.notes
+    assert ("heating_coil_valve_command: measured, but no component reads it (what it drives or sets is not in the "
+            "model): left out, its column is not needed") in model.notes
+    assert model.component_for_node(FLEXLAB + "heating_coil_valve_command") is None  # no column asked of the data
     store.load_model("right", text.encode())
     right = assemble(store, "right")
     assert not any("declared by no loaded ontology" in n or "heating_coil_valve_command" in n for n in right.notes), right.notes
