@@ -16,7 +16,7 @@ from rich.table import Table
 
 from service.cli.common import DEFAULT_STORE, StoreOption, app, console, error_console, fail, open_store, reports_errors
 from service.errors import InputError, NotFoundError
-from service.graph.namespaces import local_name
+from service.graph.namespaces import GTR, local_name
 from service.graph.units import quantity_text
 
 __all__ = []
@@ -83,15 +83,22 @@ _DECIMALS = {f"http://www.w3.org/2001/XMLSchema#{t}" for t in ("double", "float"
 
 
 def _table_cell(term) -> str:
-    """A query result's term as a table shows it: an IRI by its local name, a floating-point
-    number to six significant digits, anything else as written."""
+    """A query result's term as a table shows it: an IRI by its local name (a run's result, whose
+    local names repeat from run to run, by its path after ``gtr:run/``: ``case-point-1a2b/diagnosis``),
+    a floating-point number to six significant digits, anything else as written."""
     value = term.value
     if isinstance(term, ox.Literal) and term.datatype.value in _DECIMALS:
         try:
             return f"{float(value):.6g}"
         except ValueError:
             return value
+    if value.startswith(RUN_RESULTS):
+        return value[len(RUN_RESULTS):]
     return local_name(value) if value.startswith("http") else value
+
+
+#: Where a calibration run's results are named (``service.calibration.triples.run_iri``).
+RUN_RESULTS = f"{GTR}run/"
 
 
 def _binding(text: str) -> tuple[str, str]:

@@ -11,6 +11,7 @@ spliced port carries (``value_in``) to ``value_out``. Details: ``docs/components
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -121,6 +122,11 @@ class ComponentModel:
     #: An effect's parameter that is a heat rate into the air [W] (its sign is checked against the
     #: host's :attr:`air_heat_sign`); None for effects that add no heat of their own.
     heat_rate_parameter: ClassVar[str | None] = None
+    #: An effect's parameter that is a valve's stem position (a leak's, a stuck stem's): the diagnosis
+    #: states it too as the flow share its host's valve passes there (:meth:`valve_flow_share`).
+    stem_position_parameter: ClassVar[str | None] = None
+    #: A component modelling a valve: the parameters that shape its :meth:`valve_flow_share`.
+    valve_characteristic: ClassVar[tuple[str, ...]] = ()
     #: How long the states take to forget their start [s], at the slowest the priors allow: the
     #: warm-up a simulated window needs (:func:`service.data.model_series.model_warmup_s`). None: a
     #: day for a model with states (:data:`DEFAULT_SETTLING_S`), nothing for a memoryless one.
@@ -131,6 +137,12 @@ class ComponentModel:
     #: (:meth:`service.calibration.model_data.ModelData.unscored_start_s`). Shorter than :attr:`settling_s`,
     #: which holds at the priors' slowest corner.
     start_memory_s: ClassVar[float] = 0.0
+
+    @classmethod
+    def valve_flow_share(cls, position: float, params: Mapping[str, float]) -> float:
+        """The flow coefficient of the valve this component models at stem ``position`` (0–1), as a share
+        of the fully open one, with ``params`` (the component's, by name); NaN where it models none."""
+        return float("nan")
 
     @classmethod
     def parameters_fixed_by_measurement(cls, measured_outputs: frozenset[str]) -> dict[str, float]:

@@ -185,6 +185,7 @@ class HotWaterLoop(ComponentModel):
     """Heating coil + motorised valve + check valve + pump (see the module docstring)."""
 
     air_heat_sign = 1
+    valve_characteristic = ("valve_rangeability",)
 
     inputs = (
         Port("valve_position", "1", "motorised valve position commanded by the controller, u"),
@@ -223,6 +224,11 @@ class HotWaterLoop(ComponentModel):
     #: A day: every state forgets its start at least as fast as standing water (τ_loss ≤ 12 h leaves
     #: e⁻² of a wrong start), and the states start in steady state with the first inputs.
     settling_s = 86400.0
+
+    @classmethod
+    def valve_flow_share(cls, position, params):
+        """φ(u) of the valve's inherent characteristic (:func:`_valve_share`) at its rangeability."""
+        return float(_valve_share(min(max(float(position), 0.0), 1.0), float(params["valve_rangeability"])))
 
     @staticmethod
     def _inputs(inputs) -> list[np.ndarray]:

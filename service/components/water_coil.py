@@ -54,6 +54,14 @@ class WaterCoil(ComponentModel):
         Parameter("supply_water_temperature", "degC", 45.0, 2.0, 90.0, "water temperature entering the coil, T_w"),
     ) + _FLOW_AND_CONDUCTANCES
 
+    valve_characteristic = ("valve_dead_band",)
+
+    @classmethod
+    def valve_flow_share(cls, position, params):
+        """The opening (u − u₀)/(1 − u₀), clipped to 0–1: a linear valve behind its dead band."""
+        dead_band = float(params["valve_dead_band"])
+        return float(min(max((float(position) - dead_band) / (1.0 - dead_band), 0.0), 1.0))
+
     def step(self, params, inputs, state, dt_s):
         dead_band = params["valve_dead_band"]
         opening = np.minimum(np.maximum((inputs["valve_position"] - dead_band) / (1.0 - dead_band), 0.0), 1.0)

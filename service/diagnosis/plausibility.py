@@ -18,7 +18,7 @@ from service.graph.namespaces import local_name
 from service.graph.units import quantity_text
 from service.model.assembled_model import AssembledModel
 
-__all__ = ["BOUND_SHARE", "at_bound", "bound_note", "demotion_reasons"]
+__all__ = ["BOUND_SHARE", "at_bound", "bound_note", "demotion_reasons", "flow_share_text"]
 
 #: A fitted value this share of its prior range from a bound sits at the bound.
 BOUND_SHARE = 0.005
@@ -38,6 +38,49 @@ def bound_note(value: float, spec) -> str:
     return f" (at its {side} bound {quantity_text(getattr(spec, side), spec.unit, 'g')})" if side else ""
 
 
+def _host(model: AssembledModel, node: str, effect_columns: list[int]):
+    """The component modelling ``node`` that the effect at ``effect_columns`` is spliced on."""
+    effects = {model.estimated_parameters[j].component for j in effect_columns}
+    return next((c for iri, c in model.components.items() if node in c.modeled_nodes and iri not in effects), None)
+
+
+def flow_share_text(model: AssembledModel, node: str, theta: np.ndarray, standard_errors: np.ndarray,
+                    effect_columns: list[int]) -> str:
+    """An effect's stem position (a leak's λ, a stuck stem's s; ``stem_position_parameter``) stated as
+    the share of the fully open flow coefficient its host's valve passes there (``valve_flow_share``)
+    at the fitted characteristic, with the share's range over the characteristic's ±2 standard errors,
+    or over its whole prior where the data do not identify it: a leak of λ = 0.29 is 14 % of the open
+    flow at a rangeability of 7.7 and 3 % at 99. Empty where the host models no valve."""
+    refs, host = model.estimated_parameters, _host(model, node, effect_columns)
+    if host is None or not host.model_class.valve_characteristic:
+        return ""
+    stem = next((j for j in effect_columns
+                 if refs[j].name == model.components[refs[j].component].model_class.stem_position_parameter), None)
+    if stem is None:
+        return ""
+    values = ({r.name: r.value for r in model.mapped_parameters if r.component == host.iri}
+              | {r.name: float(theta[k]) for k, r in enumerate(refs) if r.component == host.iri})
+    spans, unidentified = {}, []
+    for k, r in enumerate(refs):
+        if r.component == host.iri and r.name in host.model_class.valve_characteristic:
+            se, width = float(standard_errors[k]), r.spec.upper - r.spec.lower
+            if np.isfinite(se) and se <= width:
+                spans[r.name] = np.linspace(max(theta[k] - 2 * se, r.spec.lower), min(theta[k] + 2 * se, r.spec.upper), 9)
+            else:
+                spans[r.name] = np.linspace(r.spec.lower, r.spec.upper, 21)
+                unidentified.append(r.name)
+    share = host.model_class.valve_flow_share(theta[stem], values)
+    grid = np.meshgrid(*spans.values()) if spans else []
+    shares = [host.model_class.valve_flow_share(theta[stem], values | dict(zip(spans, point)))
+              for point in zip(*(g.ravel() for g in grid))] or [share]
+    at = ", ".join(f"{name} = {values[name]:.3g}" for name in host.model_class.valve_characteristic if name in values)
+    spread = (f"; {100 * min(shares):.2g}–{100 * max(shares):.2g} % over "
+              + (f"the whole range of {', '.join(unidentified)}, which these data do not identify" if unidentified
+                 else "±2 standard errors of it")) if max(shares) - min(shares) > 0.005 else ""
+    return (f"{refs[stem].name} {theta[stem]:.3g} passes {100 * share:.2g} % of the valve's fully open flow "
+            f"coefficient ({at}{spread})")
+
+
 def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect_columns: list[int]) -> str:
     """Why the ranking puts the effect at ``node`` (its parameters at ``effect_columns`` of ``model``'s
     estimated parameters, fitted to ``theta``) below the plausible ones; empty when nothing does."""
@@ -49,8 +92,7 @@ def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect
         if side:
             bound = quantity_text(getattr(spec, side), spec.unit, "g")
             reasons.append(f"{refs[j].name} fits only at its {side} bound {bound}")
-    effects = {refs[j].component for j in effect_columns}
-    host = next((c for iri, c in model.components.items() if node in c.modeled_nodes and iri not in effects), None)
+    host = _host(model, node, effect_columns)
     for j in effect_columns:
         heat_parameter = model.components[refs[j].component].model_class.heat_rate_parameter
         spec = refs[j].spec

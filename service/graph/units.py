@@ -95,12 +95,14 @@ def unit_spec(unit: str, *, where: str = "") -> UnitSpec:
     local = unit[len(QUDT_UNIT_NAMESPACE):] if unit.startswith(QUDT_UNIT_NAMESPACE) else unit
     if local in QUDT_UNITS:
         return QUDT_UNITS[local]
-    raise UnitError(f"unknown unit {unit!r}{f' for {where}' if where else ''}{closest_unit_hint(unit)}{KNOWN_UNITS}")
+    known = KNOWN_UNITS if unit.startswith(QUDT_UNIT_NAMESPACE) else f"{KNOWN_UNITS}{_AND_PORT_UNITS}"
+    raise UnitError(f"unknown unit {unit!r}{f' for {where}' if where else ''}{closest_unit_hint(unit)}{known}")
 
 
-#: What an unknown unit's message ends with (a list of several such problems says it once).
-KNOWN_UNITS = (f": graphtwin knows the QUDT units {', '.join(sorted(QUDT_UNITS))} (as {QUDT_UNIT_NAMESPACE}<name>) "
-               f"and the port units {', '.join(sorted(PORT_UNITS))}")
+#: What an unknown unit's message ends with (a list of several such problems says it once); a unit
+#: not written as a QUDT IRI (a signature's port) also lists the simulator's port units.
+KNOWN_UNITS = f": graphtwin knows the QUDT units {', '.join(sorted(QUDT_UNITS))} (as {QUDT_UNIT_NAMESPACE}<name>)"
+_AND_PORT_UNITS = f" and the port units {', '.join(sorted(PORT_UNITS))}"
 
 
 def closest_unit_hint(unit: str) -> str:

@@ -367,6 +367,10 @@ def test_a_query_table_shows_floating_point_numbers_to_six_digits_and_iris_by_na
     assert _table_cell(ox.Literal("123456789", datatype=ox.NamedNode(xsd + "integer"))) == "123456789"
     assert _table_cell(ox.Literal("2026-01-15T00:00:00")) == "2026-01-15T00:00:00"
     assert _table_cell(ox.NamedNode(EX + "supply_fan")) == "supply_fan"
+    # a run's results repeat their local names from run to run ("diagnosis" on every row): the run says which
+    run = "https://w3id.org/graphtwin/resource/run/case-point-1a2b3c4d"
+    assert _table_cell(ox.NamedNode(run + "/diagnosis")) == "case-point-1a2b3c4d/diagnosis"
+    assert _table_cell(ox.NamedNode(run)) == "case-point-1a2b3c4d"
 
 
 def test_query_prints_csv_or_json_with_full_iris_and_refuses_an_unknown_model(tmp_path):

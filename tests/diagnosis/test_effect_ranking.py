@@ -290,3 +290,56 @@ def test_the_evidence_sentence_says_how_the_residual_follows_the_effect_or_that_
     assert evidence.explanation.endswith("against the base model it removes 40 % of the test error over all sensors; fit")
     _explain(evidence, observed, null, null, "E at n", "fit", "", {"a": 1.0, "b": 1.0})
     assert evidence.explanation.startswith("E at n, as fitted, adds nothing at any sensor (it sits at its null); ")
+
+
+def test_a_leaks_stem_position_is_also_said_as_the_share_of_the_open_flow_its_valve_passes():
+    """A user read "leakage_fraction = 0.287 ± 0.023" as a 29 % leak; through the fitted equal-percentage
+    characteristic (R = 7.7) it passes 14 % of the open flow, at R = 99 under 3 %, and the data did not
+    pin R. The sentence says the share at the fitted characteristic, and its range over R's prior where
+    R is not identified (over ±2 standard errors where it is). A FLEXLAB coil's linear valve behind a
+    dead band passes (λ − u₀)/(1 − u₀)."""
+    from case_study import EX
+
+    from service.diagnosis.plausibility import flow_share_text
+    from service.graph.store import GraphStore
+    from service.model.assembly import assemble
+    from service.model.effect_splicing import EffectRequest
+    from service.resources import examples_dir
+
+    store = GraphStore.embedded(None)
+    store.load_model("case", examples_dir() / "ventilation_case_study" / "model.ttl")
+    model = assemble(store, "case", extra_effects=[EffectRequest("ValveLeakage", EX + "heating_valve")])
+    refs = model.estimated_parameters
+    leak = next(j for j, r in enumerate(refs) if r.name == "leakage_fraction")
+    rangeability = next(j for j, r in enumerate(refs) if r.name == "valve_rangeability")
+    theta = np.array([r.spec.default for r in refs])
+    theta[leak], theta[rangeability] = 0.287, 7.7
+    unidentified = np.full(len(refs), np.inf)
+    share = 7.7 ** (0.287 - 1) - (1 - 0.287) / 7.7
+    at_99 = 99 ** (0.287 - 1) - (1 - 0.287) / 99
+    text = flow_share_text(model, EX + "heating_valve", theta, unidentified, [leak])
+    assert text.startswith(f"leakage_fraction 0.287 passes {100 * share:.2g} % of the valve's fully open flow "
+                           "coefficient (valve_rangeability = 7.7; ")
+    low, high = (float(v) for v in text.split("; ")[1].split(" %")[0].split("–"))
+    assert low == pytest.approx(100 * at_99, abs=0.5) and high == pytest.approx(28.7, abs=0.5)  # R = 100 … R = 1
+    assert text.endswith("over the whole range of valve_rangeability, which these data do not identify)")
+    identified = unidentified.copy()
+    identified[rangeability] = 0.5
+    assert "±2 standard errors of it" in flow_share_text(model, EX + "heating_valve", theta, identified, [leak])
+    offset = assemble(store, "case", extra_effects=[EffectRequest("SensorOffset", EX + "coil_outlet_air_temperature_sensor")])
+    assert flow_share_text(offset, EX + "coil_outlet_air_temperature_sensor",
+                           np.array([r.spec.default for r in offset.estimated_parameters]), unidentified, [0]) == ""
+
+    flexlab = "https://example.org/flexlab-x3a#"
+    store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+    model = assemble(store, "flexlab", extra_effects=[EffectRequest("ValveLeakage", flexlab + "heating_coil_valve")])
+    refs = model.estimated_parameters
+    leak = next(j for j, r in enumerate(refs) if r.name == "leakage_fraction")
+    dead_band = next(j for j, r in enumerate(refs) if r.name == "valve_dead_band" and "heating" in r.component)
+    theta = np.array([r.spec.default for r in refs])
+    theta[leak], theta[dead_band] = 0.57, 0.1
+    identified = np.full(len(refs), np.inf)
+    identified[dead_band] = 0.001
+    assert flow_share_text(model, flexlab + "heating_coil_valve", theta, identified, [leak]) == (
+        f"leakage_fraction 0.57 passes {100 * (0.57 - 0.1) / 0.9:.2g} % of the valve's fully open flow coefficient "
+        "(valve_dead_band = 0.1)")

@@ -18,6 +18,7 @@ class ValveLeakage(SplicedEffect):
     tight valve (``docs/components.md``).
     """
 
+    stem_position_parameter = "leakage_fraction"
     inputs = (Port("value_in", "1", "commanded valve position"),)
     outputs = (Port("value_out", "1", "effective valve position"),)
     parameters = (

@@ -15,6 +15,7 @@ class ValveStuck(SplicedEffect):
     linkage or an actuator that reaches only part of its travel). Null: w = 0 (s then has no effect).
     """
 
+    stem_position_parameter = "stuck_position"
     inputs = (Port("value_in", "1", "commanded position"),)
     outputs = (Port("value_out", "1", "effective position"),)
     parameters = (
