@@ -77,7 +77,7 @@ def flow_share_text(model: AssembledModel, node: str, theta: np.ndarray, standar
     spread = (f"; {100 * min(shares):.2g}–{100 * max(shares):.2g} % over "
               + (f"the whole range of {', '.join(unidentified)}, which these data do not identify" if unidentified
                  else "±2 standard errors of it")) if max(shares) - min(shares) > 0.005 else ""
-    return (f"{refs[stem].name} {theta[stem]:.3g} passes {100 * share:.2g} % of the valve's fully open flow "
+    return (f"at {refs[stem].name} {theta[stem]:.3g} the valve passes {100 * share:.2g} % of its fully open flow "
             f"coefficient ({at}{spread})")
 
 

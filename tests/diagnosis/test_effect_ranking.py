@@ -318,7 +318,7 @@ def test_a_leaks_stem_position_is_also_said_as_the_share_of_the_open_flow_its_va
     share = 7.7 ** (0.287 - 1) - (1 - 0.287) / 7.7
     at_99 = 99 ** (0.287 - 1) - (1 - 0.287) / 99
     text = flow_share_text(model, EX + "heating_valve", theta, unidentified, [leak])
-    assert text.startswith(f"leakage_fraction 0.287 passes {100 * share:.2g} % of the valve's fully open flow "
+    assert text.startswith(f"at leakage_fraction 0.287 the valve passes {100 * share:.2g} % of its fully open flow "
                            "coefficient (valve_rangeability = 7.7; ")
     low, high = (float(v) for v in text.split("; ")[1].split(" %")[0].split("–"))
     assert low == pytest.approx(100 * at_99, abs=0.5) and high == pytest.approx(28.7, abs=0.5)  # R = 100 … R = 1
@@ -341,5 +341,5 @@ def test_a_leaks_stem_position_is_also_said_as_the_share_of_the_open_flow_its_va
     identified = np.full(len(refs), np.inf)
     identified[dead_band] = 0.001
     assert flow_share_text(model, flexlab + "heating_coil_valve", theta, identified, [leak]) == (
-        f"leakage_fraction 0.57 passes {100 * (0.57 - 0.1) / 0.9:.2g} % of the valve's fully open flow coefficient "
-        "(valve_dead_band = 0.1)")
+        f"at leakage_fraction 0.57 the valve passes {100 * (0.57 - 0.1) / 0.9:.2g} % of its fully open flow "
+        "coefficient (valve_dead_band = 0.1)")
