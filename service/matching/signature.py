@@ -163,6 +163,17 @@ class Signature:
         """The quantity the signature gives its output ``port`` (None: no such output)."""
         return next((o.quantity for o in self.outputs if o.port == port), None)
 
+    def stating_property(self, parameter: str) -> str | None:
+        """The property IRI a graph states ``parameter`` with, where the pattern names one: the fixed
+        ``iri`` node beside the value node the parameter maps from (``s4bldg:nominalPowerRate`` for a
+        fan's nominal power, read from a property value that is the value of that property)."""
+        mapping = next((m for m in self.parameters if m.name == parameter), None)
+        if mapping is None:
+            return None
+        holders = {t.subject for t in self.triples if t.object == mapping.node}
+        return next((self.nodes[t.object].iri for t in self.triples
+                     if t.subject in holders and t.object in self.nodes and self.nodes[t.object].iri), None)
+
 
 def signature_iri(signature_id: str) -> str:
     return f"{GTR}signature/{signature_id}"

@@ -7,7 +7,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from service.graph.namespaces import distinct_local_names, namespace_of
+from service.graph.namespaces import compact_iri, distinct_local_names, namespace_of
 from service.graph.units import unit_label
 from service.model.assembled_model import AssembledModel, ParameterRef
 from service.model.wiring import without_model
@@ -92,8 +92,10 @@ def print_assembly(model: AssembledModel, console: Console | None = None) -> Non
         parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
                            f"{_value_source(model, ref)} {ref.value:g}")
     for ref in model.estimated_parameters:
+        stating = model.components[ref.component].signature.stating_property(ref.name)
         parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
-                           f"estimate in [{ref.spec.lower:g}, {ref.spec.upper:g}]")
+                           f"estimate in [{ref.spec.lower:g}, {ref.spec.upper:g}]"
+                           + (f"; the graph states none ({compact_iri(stating)})" if stating else ""))
     console.print(parameters)
     fixed = sum(_value_source(model, ref) == "fixed" for ref in model.mapped_parameters)
     console.print(f"{len(model.connections)} connections, {len(model.boundary_inputs)} boundary inputs, "

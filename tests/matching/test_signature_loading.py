@@ -175,3 +175,14 @@ def test_the_library_refuses_yielding_to_an_effect_it_does_not_have(tmp_path):
     with pytest.raises(SignatureError, match=re.escape(f"{tmp_path / 'e.toml'}: yields_to[0]: 'WaterSensorLagg' is not "
                                                        "an effect of the library; its effects: E")):
         SignatureLibrary.load(tmp_path)
+
+
+def test_a_parameter_the_graph_can_state_names_its_property_and_a_curve_coefficient_none():
+    """``graphtwin assemble`` says which property would state an estimated parameter: a user who left
+    out a fan's nominal power saw its curve and power one flat direction, and no word of the cause."""
+    library = SignatureLibrary.load()
+    s4bldg = "https://saref.etsi.org/saref4bldg/"
+    assert library["Fan"].stating_property("nominal_power") == s4bldg + "nominalPowerRate"
+    assert library["Fan"].stating_property("nominal_air_flow") == s4bldg + "nominalAirFlowRate"
+    assert library["Fan"].stating_property("c1") is None
+    assert library["HotWaterLoop"].stating_property("valve_flow_coefficient") == s4bldg + "flowCoefficient"
