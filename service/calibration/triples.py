@@ -20,7 +20,7 @@ import pyoxigraph as ox
 
 from service import __version__
 from service.calibration.metrics import on_interval_scale
-from service.calibration.record import CalibrationRecord, PredictiveBand
+from service.calibration.record import CalibrationDiagnostics, CalibrationRecord, PredictiveBand
 from service.graph.namespaces import GT, GTR, PROV, RDF, RDFS, XSD, distinct_local_names
 from service.graph.units import difference_unit
 
@@ -78,6 +78,7 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
     if record.test_window is not None:
         t += [ox.Triple(run, GT.testStart, _time(record.test_window[0])),
               ox.Triple(run, GT.testEnd, _time(record.test_window[1]))]
+    t += _diagnostics_triples(run, record.diagnostics)
     for estimate in record.estimates:
         node = ox.NamedNode(f"{run.value}/estimate/{_component_slug(estimate.component)}/{estimate.name}")
         t += [
@@ -149,6 +150,23 @@ def band_json(band: PredictiveBand) -> str:
         return [float(f"{v:.6g}") if math.isfinite(v) else None for v in values[::stride].tolist()]
 
     return json.dumps({"level": band.level, "stride": stride, "lower": series(band.lower), "upper": series(band.upper)})
+
+
+def _diagnostics_triples(run: ox.NamedNode, diagnostics: CalibrationDiagnostics) -> list[ox.Triple]:
+    """What the run noticed: each warning (``gt:runWarning``), the point fit's least-squares cost, and
+    how the Bayesian sampler ended (converged or not, IAT, steps, acceptance): an unconverged posterior
+    is then told from a converged one by a query, not only in the terminal that ran it."""
+    t = [ox.Triple(run, GT.runWarning, ox.Literal(warning)) for warning in diagnostics.warnings]
+    if diagnostics.cost is not None and math.isfinite(diagnostics.cost):
+        t.append(ox.Triple(run, GT.leastSquaresCost, _double(diagnostics.cost)))
+    sampler = diagnostics.sampler
+    if sampler is not None:
+        t += [ox.Triple(run, GT.converged, ox.Literal("true" if sampler.converged else "false", datatype=XSD.boolean)),
+              ox.Triple(run, GT.sampledSteps, ox.Literal(str(int(sampler.n_steps)), datatype=XSD.integer)),
+              ox.Triple(run, GT.acceptanceFraction, _double(sampler.acceptance))]
+        if math.isfinite(sampler.iat):
+            t.append(ox.Triple(run, GT.integratedAutocorrelationTime, _double(sampler.iat)))
+    return t
 
 
 def _metric_triples(node: ox.NamedNode, run: ox.NamedNode, sensor: str, window: str, name: str, value: float,

@@ -30,7 +30,7 @@ from service.cli.common import (
     open_store,
     reports_errors,
 )
-from service.cli.printing import plot_run, print_calibration, print_data_warnings, print_diagnosis, save_diagnosis_plots
+from service.cli.printing import print_calibration, print_data_warnings, print_diagnosis, save_diagnosis_plots
 from service.data.windows import parse_window
 from service.workflows.requests import CalibrateRequest, DiagnoseRequest, checked_request
 
@@ -48,11 +48,15 @@ def calibrate_command(
                                              "docs/calibration.md).")] = "point",
     name: NameOption = None,
     seed: SeedOption = 0,
-    plots: Annotated[Path | None, typer.Option(help="Folder for measured-vs-model plots.")] = None,
+    plots: Annotated[Path | None, typer.Option(help="Folder for the plots: <run id>-fit.png (measured vs model), "
+                                                    "for --method bayes -trace.png and -corner.png too.")] = None,
     only_when: OnlyWhenOption = None,
     gp_input: Annotated[list[str] | None, typer.Option(
         help="An input of the discrepancy GP (--method bayes): 'time' (the default) or a boundary input "
              "(node local name, IRI or CSV column); repeat for several.")] = None,
+    max_steps: Annotated[int | None, typer.Option(
+        help="The sampler's step limit (--method bayes; default 4000): a run not converged by then stops and "
+             "says so.")] = None,
     start_from: StartFromOption = None,
     as_json: JsonOption = False,
     store: StoreOption = DEFAULT_STORE,
@@ -65,13 +69,14 @@ def calibrate_command(
     with loaded_model_file(graph_store, model, name) as model_name:
         request = checked_request(CalibrateRequest, model=model_name, measurements=str(data), train=train, test=test,
                                   method=method, seed=seed, only_when=only_when or [],
-                                  gp_inputs=gp_input or None, start_from=start_from)
+                                  gp_inputs=gp_input or None, start_from=start_from, max_steps=max_steps)
         # the bar shows on a terminal; written to a file or a pipe, each convergence check is a line
         said = None if as_json or console.is_terminal else (lambda m: console.print(f"{m}…", markup=False))
         outcome = calibrate_model(graph_store, request, data, progress=not as_json, on_progress=said)
-    if plots is not None:
-        plots.mkdir(parents=True, exist_ok=True)
-        plot_run(outcome, plots / f"{outcome.record.run_id}.png")
+    if plots is not None:  # the fit, and a Bayesian run's trace and corner plots (docs/report.md)
+        from service.report.calibration_plots import plot_calibration
+
+        plot_calibration(outcome, plots)
     if as_json:
         console.print_json(json.dumps(outcome.record.to_dict(), default=str))
     else:

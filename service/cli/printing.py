@@ -25,10 +25,9 @@ from service.model.wiring import parameter_label
 
 if TYPE_CHECKING:  # the calibration and diagnosis modules load with the commands that run them
     from service.calibration.record import CalibrationRecord
-    from service.calibration.run import CalibrationOutcome
     from service.diagnosis.report import DiagnosisReport
 
-__all__ = ["print_metrics", "print_calibration", "print_regimes", "print_data_warnings", "plot_run", "print_diagnosis",
+__all__ = ["print_metrics", "print_calibration", "print_regimes", "print_data_warnings", "print_diagnosis",
            "save_diagnosis_plots"]
 
 #: A parameter key (``<component IRI>#<name>``) in a sentence, read as ``<node>.<name>`` (:func:`parameter_label`).
@@ -120,20 +119,6 @@ def print_data_warnings(warnings: list[str]) -> None:
     points, gaps, unused columns; signature choices; a loop broken by a delay), as they are."""
     for warning in warnings:
         console.print(Text(f"note: {warning}", style="yellow"))
-
-
-def plot_run(outcome: CalibrationOutcome, path: Path) -> Path:
-    """Measured against model over the run's test window (its training window without one), with
-    the 90 % prediction interval of a Bayesian run; the PNG's path."""
-    from service.report.plots import plot_measured_vs_model
-
-    window = outcome.test if outcome.test is not None else outcome.train
-    key = "test" if outcome.test is not None else "train"
-    md = outcome.model_data
-    intervals = {n: levels[0.9] for n, levels in outcome.intervals.get(key, {}).items()}
-    return plot_measured_vs_model(path, md.data.timestamps[window], md.observed(window),
-                                  {"model": outcome.predictions[key]}, md.units, intervals or None,
-                                  title=f"{outcome.record.model_name}: {key} window")
 
 
 def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path | None = None,

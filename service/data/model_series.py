@@ -10,16 +10,21 @@ are not scored, nor :data:`GAP_RECOVERY_S` after a gap in a boundary input (``do
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
+
+import numpy as np
 
 from service.data.measurements import MeasuredData, SeriesSpec, read_measurements
 from service.errors import InputError, SignatureError
+from service.graph.namespaces import local_name
+from service.graph.units import convert
 from service.matching.signature import QUANTITY_UNITS
 from service.model.assembled_model import AssembledModel, mapped_values_outside_bounds
 
 __all__ = ["GAP_RECOVERY_S", "SETTLING_S", "WARMUP_PERIOD_S", "device_unit", "series_specs",
            "check_mapped_parameters", "model_warmup_s", "model_start_memory_s", "warmup_period_steps",
-           "read_model_data"]
+           "read_model_data", "with_series_of"]
 
 #: After a gap in a boundary input (held by the simulator), targets are not compared for this long [s]:
 #: the model's states come out of the gap off (as at a window's start).
@@ -87,6 +92,29 @@ def warmup_period_steps(n_steps: int, step_s: float) -> int:
     """Steps of :data:`WARMUP_PERIOD_S` when data of ``n_steps`` cover it, else 1 (hold the first value)."""
     period = int(round(WARMUP_PERIOD_S / step_s))
     return period if n_steps >= period else 1
+
+
+def with_series_of(data: MeasuredData, model: AssembledModel) -> tuple[MeasuredData, list[str]]:
+    """``data`` with the series ``model`` needs and ``data`` lacks, taken from the file's columns that no
+    device of the model it was read for claims (:attr:`MeasuredData.other_columns`, converted from the
+    device's unit to its port unit): a room sensor that only an effect reads, left out of the base model.
+    Also the columns the file lacks for ``model`` (``data`` unchanged where there is one)."""
+    added: dict[str, tuple[np.ndarray, SeriesSpec, str]] = {}
+    lacking = []
+    for node, spec in series_specs(model).items():
+        if node in data.series:
+            continue
+        column = next((name for name in spec.names() if name in data.other_columns), None)
+        if column is None or spec.unit is None:
+            lacking.append(spec.series_id or local_name(node))
+        else:
+            added[node] = (convert(data.other_columns[column], spec.unit, spec.port_unit), spec, column)
+    if lacking or not added:
+        return data, lacking
+    return replace(data, series=data.series | {n: a[0] for n, a in added.items()},
+                   units=data.units | {n: a[1].port_unit for n, a in added.items()},
+                   columns=data.columns | {n: a[2] for n, a in added.items()},
+                   source_units=data.source_units | {n: a[1].unit for n, a in added.items()}), []
 
 
 def read_model_data(model: AssembledModel, path: Path | str, *, max_gap_steps: int = 5,

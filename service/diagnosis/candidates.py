@@ -24,6 +24,7 @@ import numpy as np
 
 from service.calibration.lockstep import with_prefetched_rows
 from service.calibration.model_data import ModelData
+from service.data.model_series import with_series_of
 from service.diagnosis.drift import (
     DriftEvidence,
     drift_beyond_range,
@@ -339,6 +340,16 @@ def rank_catalog(store: GraphStore, model_name: str, library: dict[str, Signatur
     train_slice, test_slice = base.train, base.test
     say("testing the effect catalog")
     candidates, skipped = effect_candidates(store, model_name, library)
+    readable = []  # an effect may read a device the base leaves out (a room sensor): its column joins the data
+    for candidate in candidates:
+        extended, lacking = with_series_of(data, candidate.model)
+        if lacking:
+            skipped.append(f"{candidate.signature.id} at {local_name(candidate.node)}: it reads the column "
+                           f"{', '.join(lacking)}, which the data file lacks")
+        else:
+            data = extended
+            readable.append(candidate)
+    candidates = readable
     fit_windows, run_window, evaluation = split_windows(train_slice, test_slice)
     scales = dict(md.problem(train_slice).target_scales)
     say("refitting the base model on the comparison's fit windows")

@@ -110,6 +110,27 @@ def _rule(rule: str) -> str:
     return html.escape(rule).replace(" or ", "<br>or ")
 
 
+def _sampler_text(sampler: dict) -> str:
+    """How a Bayesian run's sampler ended, in words: its chain's length in IATs says how far to trust it."""
+    lengths = (f"{sampler['n_steps']} steps, {sampler['n_steps'] / sampler['iat']:.0f} × its IAT of "
+               f"{sampler['iat']:.0f} steps" if np.isfinite(sampler["iat"]) else f"{sampler['n_steps']} steps, IAT unknown")
+    return (f"{'converged' if sampler['converged'] else 'NOT converged'} after {lengths}; "
+            f"acceptance {sampler['acceptance']:.2f}")
+
+
+def _run_notes(run: StoredRun) -> str:
+    """A banner over a posterior whose sampler did not converge, and what the run noticed (its warnings)."""
+    out = []
+    if run.sampler and not run.sampler["converged"]:
+        out.append('<p class="bad">The sampler did not converge: the chain stopped at its step limit before it was '
+                   '20 integrated autocorrelation times long, so the estimates, intervals and bands below are not '
+                   'to be trusted. Run it again with more steps, or fewer discrepancy inputs.</p>')
+    if run.warnings:
+        out.append("<p>What the run noticed:</p><ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in run.warnings)
+                   + "</ul>")
+    return "".join(out)
+
+
 def _sensor_section(run: StoredRun, diagnosis: StoredDiagnosis | None, series: RunSeries | None,
                     series_note: str) -> str:
     from service.report.plots import measured_vs_model_figure
@@ -360,6 +381,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         *([("training window not scored over its first", f"{run.settings['unscored_start_s'] / 3600:g} h")]
           if "unscored_start_s" in run.settings else []),
         *([("started from", _start_text(run.settings["start_from"]))] if "start_from" in run.settings else []),
+        *([("sampler", _sampler_text(run.sampler))] if run.sampler else []),
         ("finished", run.ended), ("run graph", store.run_graph(run.run_id).value),
         ("diagnosis", diagnosis.iri if diagnosis else "none"),
     ])
@@ -371,7 +393,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         f"<meta http-equiv=\"Content-Security-Policy\" content=\"{CONTENT_SECURITY_POLICY}\">"
         f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{html.escape(title)}</title>"
         f"<style>{_STYLE}</style></head><body>"
-        f"<h1>{html.escape(title)}</h1><dl class=\"facts\">{facts}</dl>{summary}"
+        f"<h1>{html.escape(title)}</h1><dl class=\"facts\">{facts}</dl>{_run_notes(run)}{summary}"
         f"{_sensor_section(run, diagnosis, series, series_note)}{_estimates_section(run)}"
         f"{_topology_section(store, run, diagnosis)}"
         f"{_regimes_section(run)}{_diagnosis_sections(diagnosis)}{_history_section(store, run)}"

@@ -29,12 +29,16 @@ PREFIX rdfs: <http://www.w3.org/2000/01/rdf-schema#>
 PREFIX dcterms: <http://purl.org/dc/terms/>
 """
 _RUN_QUERY = _PREFIXES + """
-SELECT ?model ?version ?method ?source ?train_start ?train_end ?test_start ?test_end ?ended ?settings WHERE { GRAPH ?g {
+SELECT ?model ?version ?method ?source ?train_start ?train_end ?test_start ?test_end ?ended ?settings
+       ?converged ?iat ?steps ?acceptance WHERE { GRAPH ?g {
   ?run a gt:CalibrationRun ; gt:forModel ?model ; gt:modelVersion ?version ; gt:method ?method ;
        gt:dataSource ?source ; gt:trainStart ?train_start ; gt:trainEnd ?train_end ; prov:endedAtTime ?ended ;
        gt:settings ?settings .
   OPTIONAL { ?run gt:testStart ?test_start ; gt:testEnd ?test_end }
+  OPTIONAL { ?run gt:converged ?converged ; gt:sampledSteps ?steps ; gt:acceptanceFraction ?acceptance }
+  OPTIONAL { ?run gt:integratedAutocorrelationTime ?iat }
 } }"""
+_WARNINGS_QUERY = _PREFIXES + "SELECT ?warning WHERE { GRAPH ?g { ?run gt:runWarning ?warning } }"
 _ESTIMATES_QUERY = _PREFIXES + """SELECT ?component ?name ?node ?unit ?identified ?median ?quantile16 ?quantile84
        ?lower ?upper
 WHERE { GRAPH ?g {
@@ -128,7 +132,9 @@ class StoredRun:
     """A calibration run as stored: provenance, estimates (``component#name`` → estimate), metrics
     (``metrics[window][sensor][metric] = value``, ``units[sensor]``) and the operating regimes of
     its test window (``{"regime", "rule", "share", "rmse": {sensor: value}}``, by regime number), and
-    a Bayesian run's predictive ``bands`` (sensor → :class:`StoredBand`)."""
+    a Bayesian run's predictive ``bands`` (sensor → :class:`StoredBand`), how its sampler ended
+    (``{"converged", "iat", "n_steps", "acceptance"}``, None for a point fit or a run stored without
+    it) and the run's ``warnings``."""
 
     run_id: str
     model: str
@@ -144,6 +150,8 @@ class StoredRun:
     units: dict[str, str]
     regimes: list[dict]
     bands: dict[str, StoredBand] = field(default_factory=dict)
+    sampler: dict | None = None
+    warnings: list[str] = field(default_factory=list)
 
 
 def stored_band(series: str, window: str) -> StoredBand:
@@ -224,6 +232,10 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         regimes=sorted(regimes.values(), key=lambda r: int(r["regime"]) if r["regime"].isdigit() else r["regime"]),
         bands={b["sensor"].value: stored_band(b["series"].value, b["window"].value)
                for b in store.query(_BANDS_QUERY, substitutions={"run": run})},
+        sampler={"converged": row["converged"].value == "true", "iat": _float(row, "iat"),
+                 "n_steps": int(row["steps"].value), "acceptance": float(row["acceptance"].value)}
+        if "converged" in row else None,
+        warnings=sorted(w["warning"].value for w in store.query(_WARNINGS_QUERY, substitutions={"run": run})),
     )
 
 

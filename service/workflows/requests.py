@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Literal, TypeVar
 
 import pyoxigraph as ox
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from service.calibration.model_data import DEFAULT_GP_INPUTS
 from service.data.operating_filter import parse_condition
@@ -105,8 +105,18 @@ class CalibrateRequest(FitRequest):
     gp_inputs: list[str] | None = Field(default=None, min_length=1, description=(
         f"inputs of the discrepancy GP, method bayes only (default {list(DEFAULT_GP_INPUTS)}): 'time' and boundary "
         "inputs by node IRI, local name or CSV column"))
+    max_steps: int | None = Field(default=None, ge=200, le=200_000, description=(
+        "the sampler's step limit, method bayes only (default 4000): a run that has not converged by then "
+        "stops and says so"))
 
     _windows = field_validator("train", "test")(_check_window)
+
+    @model_validator(mode="after")
+    def _sampling_only(self) -> CalibrateRequest:
+        if self.method == "point" and self.max_steps is not None:
+            raise ValueError("max_steps limits the sampler of a Bayesian calibration (method bayes); a point "
+                             "calibration has none")
+        return self
 
 
 class DiagnoseRequest(FitRequest):

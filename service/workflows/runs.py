@@ -39,7 +39,8 @@ def calibrate_model(store: GraphStore, request: CalibrateRequest, data: Path, *,
     return calibrate(store, request.model, data, train=parse_window(request.train),
                      test=parse_window(request.test) if request.test else None, method=request.method,
                      seed=request.seed, progress=progress, on_progress=on_progress, only_when=request.only_when,
-                     gp_inputs=request.gp_inputs, start_from=request.start_from)
+                     gp_inputs=request.gp_inputs, start_from=request.start_from,
+                     bayes_settings={"max_steps": request.max_steps} if request.max_steps else None)
 
 
 def diagnose_model(store: GraphStore, request: DiagnoseRequest, data: Path, *,

@@ -303,3 +303,32 @@ def test_a_refit_stopped_at_its_evaluation_limit_says_so_and_is_ranked_below_the
         assert (higher.significant, not higher.demoted) >= (lower.significant, not lower.demoted)
     leak = next(e for e in diagnosed(40) if e.effect == "ValveLeakage")
     assert "did not converge" not in leak.demoted, leak.demoted
+
+
+def test_a_sensor_only_an_effect_reads_is_left_out_of_the_base_and_its_column_joins_the_data_for_that_effect(tmp_path):
+    """The plant room's air temperature drives nothing in the base model, so the base leaves it out
+    and needs no column for it; the duct's exchange with the room reads it, and its candidate gets the
+    column from the file (as read for the model with the effect; ``rank_catalog``). A file without the
+    column leaves that candidate untried, saying why."""
+    from service.data.model_series import with_series_of
+    from service.model.effect_splicing import EffectRequest
+
+    store = GraphStore.embedded(None)
+    store.load_model("case", CASE_STUDY.read_bytes() + b"\n" + PLANT_ROOM.read_bytes())
+    data = tmp_path / "data.csv"
+    generate_synthetic_data(store, "case", data, library=LIBRARY, hidden_effect="DuctHeatExchange",
+                            node=EX + "heating_coil_air_side", seed=2, n_days=1.0)
+    room = EX + "plant_room_air_temperature_sensor"
+    base = assemble(store, "case")
+    assert base.component_for_node(room) is None
+    with_room = assemble(store, "case", extra_effects=[EffectRequest("DuctHeatExchange", EX + "heating_coil_air_side")])
+    extended, lacking = with_series_of(read_model_data(base, data), with_room)
+    assert lacking == [] and np.array_equal(extended.series[room], read_model_data(with_room, data).series[room],
+                                            equal_nan=True)
+    header = data.read_text().splitlines()[0].split(",")
+    column = header.index("plant_room_air_temperature")
+    lines = [",".join(c for i, c in enumerate(line.split(",")) if i != column) for line in data.read_text().splitlines()]
+    without = tmp_path / "without_room.csv"
+    without.write_text("\n".join(lines) + "\n")
+    unchanged, lacking = with_series_of(read_model_data(base, without), with_room)
+    assert lacking == ["plant_room_air_temperature"] and room not in unchanged.series
