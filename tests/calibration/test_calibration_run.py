@@ -224,6 +224,18 @@ def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_
     assert corner.shape[:2] == (round(1.1 * n_par * 90),) * 2
     assert outcome.calibrator.chain_.shape[0] == 20  # the trace shows every step, burn-in included
 
+    # how the sampler ended is stored with the run: a query and the report page tell an unconverged posterior
+    from service.report.page import report_html
+    from service.report.stored_run import read_run
+
+    sampler = read_run(store, record.run_id).sampler
+    assert sampler["converged"] is False and sampler["n_steps"] == 20
+    assert sampler["acceptance"] == pytest.approx(record.diagnostics.sampler.acceptance)
+    latest = store.run_named_query("calibrated-parameters", model="case")
+    assert {r["converged"].value for r in latest if r["run"].value.endswith(record.run_id)} == {"false"}
+    page = report_html(store, record.run_id)
+    assert "<dt>sampler</dt><dd>NOT converged after 20 steps" in page and "The sampler did not converge" in page
+
 
 def test_the_discrepancy_runs_over_the_boundary_inputs_the_user_chooses(synthetic):
     """``gp_inputs``: time and the supply air flow (named by its CSV column) are the GP's inputs, one
@@ -529,3 +541,20 @@ def test_a_sensor_the_started_model_fits_worse_than_the_model_it_started_from_is
     assert worse_than_start(store, [run_iri(record.run_id).value], replace(worse, data_source="other.csv"), model,
                             start, theta) == []
     assert worse_than_start(store, [run_iri(record.run_id).value], record, model, start, theta) == []
+
+
+def test_a_point_runs_warnings_and_cost_are_stored_with_it(point_run, synthetic):
+    """What the run noticed (a window note, a unit mix-up) was said in the terminal and lost: each
+    warning is a gt:runWarning of the run, its cost a gt:leastSquaresCost; a point fit has no sampler."""
+    from service.calibration.triples import run_iri
+    from service.report.stored_run import read_run
+
+    store, _, _ = synthetic
+    record = point_run.record
+    stored = read_run(store, record.run_id)
+    assert record.diagnostics.warnings and stored.warnings == sorted(record.diagnostics.warnings)
+    assert stored.sampler is None
+    cost = store.query("PREFIX gt: <https://w3id.org/graphtwin/ontology#> "
+                       "SELECT ?c WHERE { GRAPH ?g { ?run gt:leastSquaresCost ?c } }",
+                       substitutions={"run": run_iri(record.run_id)})
+    assert float(cost[0]["c"].value) == pytest.approx(record.diagnostics.cost)

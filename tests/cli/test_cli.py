@@ -563,3 +563,17 @@ def test_metrics_of_data_logged_in_fahrenheit_say_what_a_kelvin_of_error_is_in_t
     with console.capture() as captured:
         print_metrics("Metrics", metrics)
     assert "as logged" not in captured.get()
+
+
+def test_the_samplers_step_limit_is_an_option_of_a_bayesian_calibration_only(tmp_path):
+    """A run that did not converge by the fixed 4,000 steps could not be run longer: ``--max-steps``
+    (and ``max_steps`` over HTTP) sets the limit; a point fit has no sampler and refuses it."""
+    from service.workflows.requests import CalibrateRequest
+
+    data = tmp_path / "data.csv"
+    assert runner.invoke(app, ["example", "generate", "ventilation_case_study", "--days", "1", "-o", str(data)]).exit_code == 0
+    refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--max-steps", "300"])
+    assert refused.exit_code == 2 and "max_steps limits the sampler of a Bayesian calibration" in refused.output
+    assert CalibrateRequest(model="m", measurements="0123456789abcdef", method="bayes", max_steps=8000).max_steps == 8000
+    with pytest.raises(ValueError, match="greater than or equal to 200"):
+        CalibrateRequest(model="m", measurements="0123456789abcdef", method="bayes", max_steps=10)
