@@ -95,8 +95,9 @@ P = ParamSpec("P")
 
 def reports_errors(command: Callable[P, None]) -> Callable[P, None]:
     """A command whose user errors — graphtwin's (:class:`~service.errors.GraphtwinError`) and a file
-    that cannot be read — end it with their message and exit code 2; anything else is a defect and
-    shows its traceback."""
+    that cannot be read — end it with their message and exit code 2; Ctrl-C with one line and exit
+    code 130 (also where it lands inside compiled code, which raises it as a SystemError); anything
+    else is a defect and shows its traceback."""
 
     @functools.wraps(command)
     def run(*args: P.args, **kwargs: P.kwargs) -> None:
@@ -104,8 +105,24 @@ def reports_errors(command: Callable[P, None]) -> Callable[P, None]:
             command(*args, **kwargs)
         except (GraphtwinError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
             raise fail(exc) from None
+        except (KeyboardInterrupt, SystemError) as exc:
+            if not _interrupted(exc):
+                raise
+            error_console.print("interrupted (Ctrl-C): results the command had not written yet are not in the store",
+                                markup=False)
+            raise typer.Exit(130) from None
 
     return run
+
+
+def _interrupted(exc: BaseException | None) -> bool:
+    """Whether ``exc`` is Ctrl-C, or an error raised while handling it (numba's compiled loops turn a
+    KeyboardInterrupt into "SystemError: … returned a result with an exception set")."""
+    while exc is not None:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def open_store(store: Path, memory: bool, *, reading: bool = False, start_from: str | None = None) -> GraphStore:

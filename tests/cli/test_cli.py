@@ -577,3 +577,27 @@ def test_the_samplers_step_limit_is_an_option_of_a_bayesian_calibration_only(tmp
     assert CalibrateRequest(model="m", measurements="0123456789abcdef", method="bayes", max_steps=8000).max_steps == 8000
     with pytest.raises(ValueError, match="greater than or equal to 200"):
         CalibrateRequest(model="m", measurements="0123456789abcdef", method="bayes", max_steps=10)
+
+
+def test_ctrl_c_inside_compiled_sampling_code_ends_the_command_with_one_line_and_exit_code_130():
+    """Ctrl-C while sampling printed a 279-line traceback ending in numba's "SystemError: …
+    returned a result with an exception set"; any other SystemError is still a defect shown whole."""
+    import typer
+
+    from service.cli.common import reports_errors
+
+    def sampling():
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("CPUDispatcher(<function _loop_step>) returned a result with an exception set")
+
+    with pytest.raises(typer.Exit) as stopped:
+        reports_errors(sampling)()
+    assert stopped.value.exit_code == 130
+
+    def broken():
+        raise SystemError("a defect")
+
+    with pytest.raises(SystemError, match="a defect"):
+        reports_errors(broken)()
