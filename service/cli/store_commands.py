@@ -17,6 +17,7 @@ from rich.table import Table
 from service.cli.common import DEFAULT_STORE, StoreOption, app, console, error_console, fail, open_store, reports_errors
 from service.errors import InputError, NotFoundError
 from service.graph.namespaces import GTR, local_name
+from service.graph.store import GraphStore
 from service.graph.units import quantity_text
 
 __all__ = []
@@ -51,6 +52,10 @@ def query_command(
     text = Path(name).read_text(encoding="utf-8") if own else graph_store.named_query_text(name)
     reads_a_model = not re.search(r"^[^#]*\bGRAPH\b", text, re.IGNORECASE | re.MULTILINE)  # outside comments
     if reads_a_model and model is None:
+        try:  # a syntax error is the problem to name first
+            GraphStore.embedded(None).query(text)
+        except InputError as exc:
+            raise InputError(f"{name}: {exc}") from None
         raise InputError(f"query {name} reads a building model's graphs: give --model")
     bindings = dict(_binding(p) for p in (param or []))
     if model is not None and not reads_a_model:
@@ -61,7 +66,7 @@ def query_command(
         raise InputError(f"{name}: {exc}") from None
     if not isinstance(rows, list) or rows and not isinstance(rows[0], dict):
         raise InputError(f"{name}: not a SELECT query (ASK, CONSTRUCT and DESCRIBE are not shown as a table)")
-    columns = list(dict.fromkeys(k for row in rows for k in row))
+    columns = list(dict.fromkeys([*_projected(text), *(k for row in rows for k in row)]))
     values = [{c: row[c].value for c in columns if c in row} for row in rows]
     if output_format == "json":
         sys.stdout.write(json.dumps(values, indent=1) + "\n")
@@ -99,6 +104,18 @@ def _table_cell(term) -> str:
 
 #: Where a calibration run's results are named (``service.calibration.triples.run_iri``).
 RUN_RESULTS = f"{GTR}run/"
+
+
+def _projected(query: str) -> list[str]:
+    """The variables a SELECT query projects, in order (``(expr AS ?x)`` gives x; ``SELECT *`` none):
+    the columns of a result with no rows, which has no row to name them."""
+    text = re.sub(r"#[^\n]*", "", query)  # comments (an IRI's # is rare in a projection)
+    found = re.search(r"\bSELECT\s+(?:DISTINCT\s+|REDUCED\s+)?(.*?)(?:(?<![?$\w])(?:WHERE|FROM)\b|\{)", text,
+                      re.IGNORECASE | re.DOTALL)
+    if found is None:
+        return []
+    projection = re.sub(r"\((?:[^()]|\([^()]*\))*?\bAS\s+\?(\w+)\s*\)", r"?\1", found.group(1), flags=re.IGNORECASE)
+    return re.findall(r"[?$](\w+)", projection)
 
 
 def _binding(text: str) -> tuple[str, str]:

@@ -421,6 +421,14 @@ def test_query_runs_a_select_query_of_ones_own_and_names_the_file_of_a_bad_one(t
     assert code == 2 and "not a SELECT query" in output
     code, output = _run(["query", str(tmp_path / "missing.rq"), *store])
     assert code == 2 and "missing.rq: no such file" in output
+    broken.write_text("SELECT ?x WHERE { ?x ?p }")  # without --model: the syntax error first, not "give --model"
+    code, output = _run(["query", str(broken), *store])
+    assert code == 2 and "SPARQL syntax error at line 1" in output and "give --model" not in output, output
+    pumps = tmp_path / "pumps.rq"  # no row: the header still says what the columns are
+    pumps.write_text("PREFIX s4bldg: <https://saref.etsi.org/saref4bldg/>\n"
+                     "SELECT ?pump (STR(?pump) AS ?name) WHERE { ?pump a s4bldg:Chiller }\n")
+    code, output = _run(["query", str(pumps), "--model", "ventilation_case_study", *store])
+    assert code == 0 and output == "pump,name\n", output
 
 
 def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(tmp_path):
