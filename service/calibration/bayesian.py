@@ -110,7 +110,9 @@ class BayesianCalibrator(BaseEstimator):
 
     Results: ``samples_`` (ndarray[n_samples, n_parameters], burn-in discarded, thinned),
     ``chain_`` (the whole β = 1 chain, ndarray[n_steps, n_walkers, n_parameters + n_hyper], for traces),
-    ``hyper_samples_``, ``hyper_names_``, ``median_``, ``quantile16_``, ``quantile84_``, ``map_`` and
+    ``hyper_samples_``, ``hyper_names_``, ``discrepancy_`` (per target the quantiles of the GP's σ_f,
+    σ_n and length scales, :meth:`KennedyOHaganLikelihood.hyperparameter_quantiles`), ``median_``,
+    ``quantile16_``, ``quantile84_``, ``map_`` and
     ``map_hyper_`` (the highest-posterior β = 1 sample seen), ``log_probability_`` (of the samples),
     ``converged_``, ``iat_``, ``n_steps_``, ``convergence_``, ``acceptance_`` (β = 1 chain),
     ``swap_rate_`` (per neighbouring temperature pair), ``betas_``, ``point_calibrator_``,
@@ -219,6 +221,7 @@ class BayesianCalibrator(BaseEstimator):
         self.point_calibrator_ = start
         self.likelihood_ = likelihood
         self.problem_ = problem
+        self.discrepancy_ = likelihood.hyperparameter_quantiles(np.hstack([self.samples_, self.hyper_samples_]))
         return self
 
     def predict(self, problem: CalibrationProblem, n_draws: int = 200,

@@ -144,6 +144,19 @@ class KennedyOHaganLikelihood:
             result[key] = TargetHyperparameters(block[:, 0] * scale, block[:, 1:-1], block[:, -1] * scale)
         return result
 
+    def hyperparameter_quantiles(self, batch: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+        """Per target the 16, 50 and 84 % quantiles over ``batch`` (posterior draws) of σ_f and σ_n (the
+        target's unit) and of each length scale in its input's own unit (``length_scale:<input>``; the
+        scaled ℓ times the input's span over the training window)."""
+        levels = [0.16, 0.5, 0.84]
+        result = {}
+        for key, hyper in self.hyperparameters(batch).items():
+            entry = {"amplitude": np.quantile(hyper.amplitude, levels), "noise": np.quantile(hyper.noise_std, levels)}
+            for i, name in enumerate(self.input_names):
+                entry[f"length_scale:{name}"] = np.quantile(hyper.length_scales[:, i] * self.input_span[i], levels)
+            result[key] = entry
+        return result
+
     def log_prior(self, batch: np.ndarray) -> np.ndarray:
         """Log density of the independent uniform / log-uniform priors; −inf outside the bounds."""
         batch = self._check(batch)

@@ -10,15 +10,23 @@ with a test window also keeps every target's posterior predictive band there (:c
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from service.calibration.metrics import TargetMetrics
+from service.graph.namespaces import local_name
+from service.graph.units import difference_unit
+from service.model.assembled_model import AssembledModel
+
+if TYPE_CHECKING:
+    from service.calibration.model_data import ModelData
 
 __all__ = ["ParameterEstimate", "SamplerConvergence", "CalibrationDiagnostics", "CalibrationRecord", "PredictiveBand",
-           "PREDICTIVE_BAND_LEVEL"]
+           "PREDICTIVE_BAND_LEVEL", "parameter_estimates", "discrepancy_table"]
 
 #: Two-sided level of the posterior predictive band a Bayesian run keeps (its 5–95 % quantiles).
 PREDICTIVE_BAND_LEVEL = 0.9
@@ -51,6 +59,38 @@ class ParameterEstimate:
             "map": self.map, "standard_error": self.standard_error, "lower": self.lower, "upper": self.upper,
             "identified": self.identified, "reasons": list(self.reasons),
         }
+
+
+def parameter_estimates(model: AssembledModel, theta, q16, q84, theta_map, se, verdicts) -> list[ParameterEstimate]:
+    """One :class:`ParameterEstimate` per estimated parameter of ``model`` (θ's columns): median,
+    16/84 % quantiles, MAP and standard error, and the identifiability verdict (``verdicts`` by key)."""
+    estimates = []
+    for j, ref in enumerate(model.estimated_parameters):
+        verdict = verdicts.get(ref.key)
+        estimates.append(ParameterEstimate(
+            key=ref.key, name=ref.name, component=ref.component, node=model.components[ref.component].node,
+            unit=ref.spec.unit, lower=ref.spec.lower, upper=ref.spec.upper, median=float(theta[j]),
+            quantile16=float(q16[j]), quantile84=float(q84[j]), map=float(theta_map[j]), standard_error=float(se[j]),
+            identified=bool(verdict.identified) if verdict is not None else True,
+            reasons=tuple(verdict.reasons) if verdict is not None else (),
+        ))
+    return estimates
+
+
+def discrepancy_table(quantiles: Mapping[str, Mapping[str, np.ndarray]], md: ModelData,
+                      gp_nodes: Sequence[str]) -> dict[str, dict[str, tuple[float, float, float, str]]]:
+    """A Bayesian run's discrepancy GP per target, ``name → (median, q16, q84, unit)``: its amplitude σ_f
+    and noise σ_n in the target's difference unit (K for °C), each length scale in its input's unit (h
+    for time, the port unit of a boundary input). ``quantiles``: ``BayesianCalibrator.discrepancy_``."""
+    unit_of = {"time" if node == "time" else local_name(node): "h" if node == "time" else md.data.units[node]
+               for node in gp_nodes}
+    table = {}
+    for target, entries in quantiles.items():
+        error_unit = difference_unit(md.units[target])
+        table[target] = {name: (float(q[1]), float(q[0]), float(q[2]),
+                                unit_of.get(name.partition(":")[2], error_unit) if ":" in name else error_unit)
+                         for name, q in entries.items()}
+    return table
 
 
 @dataclass(frozen=True)
@@ -125,6 +165,8 @@ class CalibrationRecord:
     regime_rule_accuracy: float = float("nan")
     #: Target node → its posterior predictive band (a Bayesian run with a test window; series, not in ``to_dict``).
     predictive_bands: dict[str, PredictiveBand] = field(default_factory=dict)
+    #: A Bayesian run's discrepancy GP per target node (:func:`discrepancy_table`).
+    discrepancy: dict[str, dict[str, tuple[float, float, float, str]]] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
@@ -138,4 +180,7 @@ class CalibrationRecord:
             "metrics": {w: {t: m.to_dict() for t, m in per.items()} for w, per in self.metrics.items()},
             "diagnostics": self.diagnostics.to_dict(),
             "regimes": self.regimes, "regime_rule_accuracy": self.regime_rule_accuracy,
+            **({"discrepancy": {target: {name: {"median": v[0], "quantile16": v[1], "quantile84": v[2], "unit": v[3]}
+                                         for name, v in entries.items()}
+                                for target, entries in self.discrepancy.items()}} if self.discrepancy else {}),
         }

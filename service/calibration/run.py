@@ -32,9 +32,10 @@ from service.calibration.record import (
     PREDICTIVE_BAND_LEVEL,
     CalibrationDiagnostics,
     CalibrationRecord,
-    ParameterEstimate,
     PredictiveBand,
     SamplerConvergence,
+    discrepancy_table,
+    parameter_estimates,
 )
 from service.calibration.regime_breakdown import RegimeBreakdown, regime_breakdown
 from service.calibration.triples import calibration_triples
@@ -160,21 +161,6 @@ class CalibrationOutcome:
     intervals: dict[str, dict[str, dict[float, tuple[np.ndarray, np.ndarray]]]] = field(default_factory=dict)
     calibrator: PointCalibrator | BayesianCalibrator | None = None  # the fitted calibrator (chains for plots)
     regimes: RegimeBreakdown | None = None  # the test-window error per operating regime
-
-
-def _estimates(model: AssembledModel, theta, q16, q84, theta_map, se, verdicts) -> list[ParameterEstimate]:
-    estimates = []
-    for j, ref in enumerate(model.estimated_parameters):
-        instance = model.components[ref.component]
-        verdict = verdicts.get(ref.key)
-        estimates.append(ParameterEstimate(
-            key=ref.key, name=ref.name, component=ref.component, node=instance.node, unit=ref.spec.unit,
-            lower=ref.spec.lower, upper=ref.spec.upper, median=float(theta[j]), quantile16=float(q16[j]),
-            quantile84=float(q84[j]), map=float(theta_map[j]), standard_error=float(se[j]),
-            identified=bool(verdict.identified) if verdict is not None else True,
-            reasons=tuple(verdict.reasons) if verdict is not None else (),
-        ))
-    return estimates
 
 
 def calibrated_start(store: GraphStore, start_from: str, model_name: str,
@@ -475,11 +461,12 @@ def calibrate(
         train_window=(as_datetime(train_slice.start), as_datetime(train_slice.stop - 1)),
         test_window=(as_datetime(test_slice.start), as_datetime(test_slice.stop - 1)) if test_slice else None,
         started=started, finished=finished, settings=settings,
-        estimates=_estimates(model, theta, q16, q84, theta_map, se, verdicts), metrics=metrics,
+        estimates=parameter_estimates(model, theta, q16, q84, theta_map, se, verdicts), metrics=metrics,
         diagnostics=diagnostics,
         regimes=regimes.rows() if regimes is not None else [],
         regime_rule_accuracy=regimes.rule_accuracy if regimes is not None else float("nan"),
         predictive_bands=bands,
+        discrepancy=discrepancy_table(calibrator.discrepancy_, md, gp_nodes) if method == "bayes" else {},
     )
     if start_runs:  # a sensor the model it started from fitted better on these data
         diagnostics.warnings += worse_than_start(store, start_runs, record, model, start, theta)

@@ -133,6 +133,10 @@ def calibration_triples(record: CalibrationRecord, *, model_graph: str, assembly
             node = ox.NamedNode(f"{run.value}/metric/test/{sensor_name[sensor]}/rmse/regime/{row['regime']}")
             t += _metric_triples(node, run, sensor, "test", "rmse", value, units.get(sensor, ""))
             t.append(ox.Triple(node, GT.inRegime, regime))
+    for sensor, entries in record.discrepancy.items():  # the discrepancy GP's posterior medians, queryable as metrics
+        for name, (median, _, _, unit) in entries.items():
+            node = ox.NamedNode(f"{run.value}/metric/train/{sensor_name[sensor]}/gp_{name.replace(':', '/')}")
+            t += _metric_triples(node, run, sensor, "train", f"gp_{name}", median, unit)
     for sensor, band in record.predictive_bands.items():
         node = ox.NamedNode(f"{run.value}/band/{band.window}/{sensor_name[sensor]}")
         t += [ox.Triple(node, RDF.type, GT.PredictiveBand), ox.Triple(node, PROV.wasGeneratedBy, run),

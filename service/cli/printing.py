@@ -84,8 +84,10 @@ def print_calibration(record: CalibrationRecord, logged_units: dict[str, str] | 
     if record.diagnostics.sampler is not None:
         found = record.diagnostics.sampler
         console.print(f"PT-MCMC: {'converged' if found.converged else 'NOT converged'} after {found.n_steps} steps "
-                      f"(20 × IAT: IAT {found.iat:.0f} steps; acceptance {found.acceptance:.2f})",
-                      markup=False, highlight=False)
+                      f"({found.n_steps / found.iat:.0f} × its IAT of {found.iat:.0f} steps, 20 × needed; acceptance "
+                      f"{found.acceptance:.2f})", markup=False, highlight=False)
+    if record.discrepancy:
+        print_discrepancy(record)
     bounds = {"train": record.train_window, "test": record.test_window}
     for window, metrics in record.metrics.items():
         span = bounds.get(window)
@@ -93,6 +95,26 @@ def print_calibration(record: CalibrationRecord, logged_units: dict[str, str] | 
                                                      if span else ""), metrics, logged_units)
     print_regimes(record)
     print_data_warnings(record.diagnostics.warnings)
+
+
+def print_discrepancy(record: CalibrationRecord) -> None:
+    """A Bayesian run's discrepancy GP per target: amplitude σ_f, noise σ_n and length scales, each its
+    posterior median with the 16–84 % interval: how much of the misfit the discrepancy took."""
+    names = list(dict.fromkeys(name for entries in record.discrepancy.values() for name in entries))
+    table = Table(title="Discrepancy GP per sensor (posterior median, 16–84 %)")
+    table.add_column("sensor", overflow="fold")
+    for name in names:
+        table.add_column(name.replace("length_scale:", "length scale, "), overflow="fold")
+
+    def cell(value: tuple[float, float, float, str] | None) -> str:
+        if value is None:
+            return "–"
+        median, q16, q84, unit = value
+        return f"{quantity_text(median, unit)} ({q16:.3g}–{q84:.3g})"
+
+    for target, entries in record.discrepancy.items():
+        table.add_row(local_name(target), *(cell(entries.get(name)) for name in names))
+    console.print(table)
 
 
 def print_regimes(record: CalibrationRecord) -> None:

@@ -110,6 +110,20 @@ def _rule(rule: str) -> str:
     return html.escape(rule).replace(" or ", "<br>or ")
 
 
+def _discrepancy_section(run: StoredRun) -> str:
+    """A Bayesian run's discrepancy GP per sensor (posterior medians): how much misfit it took, how slowly
+    it varies."""
+    if not run.discrepancy:
+        return ""
+    names = list(dict.fromkeys(name for entries in run.discrepancy.values() for name in entries))
+    rows = [[_breakable(sensor)] + [html.escape(quantity_text(*entries[name])) if name in entries else "–"
+                                    for name in names] for sensor, entries in sorted(run.discrepancy.items())]
+    header = ["sensor"] + [html.escape(name.replace("length_scale:", "length scale over ")) for name in names]
+    return ("<h3>The discrepancy, per sensor</h3><p>The Gaussian process of the Kennedy–O'Hagan model: its "
+            "amplitude σ_f (what the model misses, beyond noise), its noise σ_n and its length scales, posterior "
+            "medians.</p>" + _table(header, rows, "discrepancy"))
+
+
 def _sampler_text(sampler: dict) -> str:
     """How a Bayesian run's sampler ended, in words: its chain's length in IATs says how far to trust it."""
     lengths = (f"{sampler['n_steps']} steps, {sampler['n_steps'] / sampler['iat']:.0f} × its IAT of "
@@ -394,7 +408,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{html.escape(title)}</title>"
         f"<style>{_STYLE}</style></head><body>"
         f"<h1>{html.escape(title)}</h1><dl class=\"facts\">{facts}</dl>{_run_notes(run)}{summary}"
-        f"{_sensor_section(run, diagnosis, series, series_note)}{_estimates_section(run)}"
+        f"{_sensor_section(run, diagnosis, series, series_note)}{_estimates_section(run)}{_discrepancy_section(run)}"
         f"{_topology_section(store, run, diagnosis)}"
         f"{_regimes_section(run)}{_diagnosis_sections(diagnosis)}{_history_section(store, run)}"
         f"<p class=\"note\">Generated {generated} by graphtwin from the store's graphs ({html.escape(str(GTR))}…); "

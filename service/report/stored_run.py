@@ -152,6 +152,8 @@ class StoredRun:
     bands: dict[str, StoredBand] = field(default_factory=dict)
     sampler: dict | None = None
     warnings: list[str] = field(default_factory=list)
+    #: A Bayesian run's discrepancy GP per sensor: name (amplitude, noise, length_scale:<input>) → (median, unit).
+    discrepancy: dict[str, dict[str, tuple[float, str]]] = field(default_factory=dict)
 
 
 def stored_band(series: str, window: str) -> StoredBand:
@@ -210,6 +212,7 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         )
     metrics: dict[str, dict[str, dict[str, float]]] = {}
     units: dict[str, str] = {}
+    discrepancy: dict[str, dict[str, tuple[float, str]]] = {}
     regimes = {r["regime"].value: {"regime": local_name(r["regime"].value), "rule": r["rule"].value,
                                    "share": float(r["share"].value), "rmse": {}}
                for r in store.query(_REGIMES_QUERY, substitutions={"run": run})}
@@ -219,6 +222,9 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         sensor = m["sensor"].value
         if "regime" in m:
             regimes[m["regime"].value]["rmse"][sensor] = float(m["value"].value)
+            continue
+        if m["metric"].value.startswith("gp_"):  # the discrepancy GP's posterior median
+            discrepancy.setdefault(sensor, {})[m["metric"].value[3:]] = (float(m["value"].value), m["unit"].value)
             continue
         metrics.setdefault(m["window"].value, {}).setdefault(sensor, {})[m["metric"].value] = float(m["value"].value)
         if m["metric"].value == "rmse":
@@ -236,6 +242,7 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
                  "n_steps": int(row["steps"].value), "acceptance": float(row["acceptance"].value)}
         if "converged" in row else None,
         warnings=sorted(w["warning"].value for w in store.query(_WARNINGS_QUERY, substitutions={"run": run})),
+        discrepancy=discrepancy,
     )
 
 

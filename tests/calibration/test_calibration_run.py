@@ -235,6 +235,14 @@ def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_
     assert {r["converged"].value for r in latest if r["run"].value.endswith(record.run_id)} == {"false"}
     page = report_html(store, record.run_id)
     assert "<dt>sampler</dt><dd>NOT converged after 20 steps" in page and "The sampler did not converge" in page
+    # the discrepancy GP's posterior per sensor, in physical units: printed, stored, on the page
+    gp = record.discrepancy[node]
+    assert set(gp) == {"amplitude", "noise", "length_scale:time"}
+    assert gp["amplitude"][3] == "K" and gp["noise"][3] == "K" and gp["length_scale:time"][3] == "h"
+    assert all(q16 <= median <= q84 for median, q16, q84, _ in gp.values())
+    assert read_run(store, record.run_id).discrepancy[node]["amplitude"] == (pytest.approx(gp["amplitude"][0]), "K")
+    assert '<table class="discrepancy">' in page and "length scale over time" in page
+    assert record.to_dict()["discrepancy"][node]["noise"]["unit"] == "K"
 
 
 def test_the_discrepancy_runs_over_the_boundary_inputs_the_user_chooses(synthetic):
@@ -247,6 +255,8 @@ def test_the_discrepancy_runs_over_the_boundary_inputs_the_user_chooses(syntheti
                         bayes_settings={"max_steps": 10, "check_interval": 10, "n_temperatures": 2},
                         gp_inputs=["time", "supply_air_flow"])
     assert outcome.record.settings["gp_inputs"] == ["time", meter]
+    gp = outcome.record.discrepancy[EX + "coil_outlet_air_temperature_sensor"]
+    assert gp["length_scale:supply_air_flow_meter"][3] == "m3/s" and gp["length_scale:time"][3] == "h"
     calibrator = outcome.calibrator
     scales = [n for n in calibrator.hyper_names_ if ":log_length_scale:" in n]
     assert len(scales) == 2 * 5 and sum(n.endswith(":supply_air_flow_meter") for n in scales) == 5

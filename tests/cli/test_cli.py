@@ -609,3 +609,21 @@ def test_ctrl_c_inside_compiled_sampling_code_ends_the_command_with_one_line_and
 
     with pytest.raises(SystemError, match="a defect"):
         reports_errors(broken)()
+
+
+def test_the_discrepancy_gp_of_a_bayesian_run_is_a_table_in_physical_units():
+    """The KOH discrepancy's amplitude, noise and length scales were in no output: how much misfit the
+    GP absorbed could not be seen. Each is its posterior median with the 16–84 % interval."""
+    from types import SimpleNamespace
+
+    from service.cli.common import console
+    from service.cli.printing import print_discrepancy
+
+    record = SimpleNamespace(discrepancy={EX + "sat": {"amplitude": (0.05, 0.03, 0.08, "K"),
+                                                       "length_scale:time": (3.2, 2.0, 6.5, "h")},
+                                          EX + "fan_power_meter": {"amplitude": (12.0, 8.0, 20.0, "W")}})
+    with console.capture() as captured:
+        print_discrepancy(record)
+    text = captured.get()
+    assert "0.05 K (0.03–0.08)" in text and "3.2 h (2–6.5)" in text and "12 W (8–20)" in text
+    assert "length scale, time" in text and "–" in text  # the meter has no length scale row entry
