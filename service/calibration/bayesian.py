@@ -25,13 +25,32 @@ from service.calibration.koh_likelihood import HyperparameterBounds, KennedyOHag
 from service.calibration.matern_gp import InputDistances, conditional
 from service.calibration.metrics import TargetMetrics, target_metrics
 from service.calibration.parallel_tempering import ParallelTemperingSampler, geometric_betas
-from service.calibration.point import PointCalibrator
+from service.calibration.point import ParameterIdentifiability, PointCalibrator
 from service.calibration.problem import CalibrationProblem
 from service.errors import CalibrationError
 
-__all__ = ["BayesianCalibrator", "PosteriorPredictive", "default_moves"]
+__all__ = ["BayesianCalibrator", "PosteriorPredictive", "default_moves", "posterior_identifiability", "POSTERIOR_NARROWING"]
 
 _DRAW_CHUNK = 8
+
+#: A parameter whose posterior 16–84 % interval is narrower than this share of its uniform prior's
+#: (0.68 of the range) is identified: the data at least halved the range it may lie in.
+POSTERIOR_NARROWING = 0.5
+
+
+def posterior_identifiability(problem: CalibrationProblem, q16: np.ndarray, q84: np.ndarray,
+                              ) -> dict[str, ParameterIdentifiability]:
+    """Per parameter: identified by the data where its posterior 16–84 % interval spans less than
+    :data:`POSTERIOR_NARROWING` of its prior's (the point fit's verdict, which starts the sampler, is a
+    linearisation at one point: a bounded posterior can be narrow where that fit's interval is wide)."""
+    verdicts = {}
+    for j, name in enumerate(problem.parameter_names):
+        share = float((q84[j] - q16[j]) / (0.68 * (problem.upper[j] - problem.lower[j])))
+        why = () if share < POSTERIOR_NARROWING else (
+            f"its posterior 16–84 % interval spans {100 * share:.0f} % of its prior's: the data narrow it less than "
+            f"{1 / POSTERIOR_NARROWING:g}-fold",)
+        verdicts[name] = ParameterIdentifiability(name, not why, why)
+    return verdicts
 
 
 @dataclass(frozen=True)
@@ -115,6 +134,7 @@ class BayesianCalibrator(BaseEstimator):
     ``quantile16_``, ``quantile84_``, ``map_`` and
     ``map_hyper_`` (the highest-posterior β = 1 sample seen), ``log_probability_`` (of the samples),
     ``converged_``, ``iat_``, ``n_steps_``, ``convergence_``, ``acceptance_`` (β = 1 chain),
+    ``identifiability_`` (per parameter, from the posterior: :func:`posterior_identifiability`),
     ``swap_rate_`` (per neighbouring temperature pair), ``betas_``, ``point_calibrator_``,
     ``likelihood_``, ``problem_``.
     """
@@ -222,6 +242,7 @@ class BayesianCalibrator(BaseEstimator):
         self.likelihood_ = likelihood
         self.problem_ = problem
         self.discrepancy_ = likelihood.hyperparameter_quantiles(np.hstack([self.samples_, self.hyper_samples_]))
+        self.identifiability_ = posterior_identifiability(problem, self.quantile16_, self.quantile84_)
         return self
 
     def predict(self, problem: CalibrationProblem, n_draws: int = 200,

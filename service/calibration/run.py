@@ -404,7 +404,7 @@ def calibrate(
         theta = calibrator.median_
         q16, q84, theta_map = calibrator.quantile16_, calibrator.quantile84_, calibrator.map_
         se = calibrator.samples_.std(axis=0)
-        verdicts = calibrator.point_calibrator_.identifiability_
+        verdicts = calibrator.identifiability_
         settings.update({k: v for k, v in options.items() if k != "progress"})
         diagnostics.sampler = SamplerConvergence(
             converged=bool(calibrator.converged_), iat=float(calibrator.iat_),

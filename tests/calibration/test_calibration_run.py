@@ -568,3 +568,19 @@ def test_a_point_runs_warnings_and_cost_are_stored_with_it(point_run, synthetic)
                        "SELECT ?c WHERE { GRAPH ?g { ?run gt:leastSquaresCost ?c } }",
                        substitutions={"run": run_iri(record.run_id)})
     assert float(cost[0]["c"].value) == pytest.approx(record.diagnostics.cost)
+
+
+def test_a_bayesian_runs_identifiability_is_the_posteriors():
+    """A Bayesian run showed the point fit's verdict (its Jacobian's 95 % interval of ±5.9e+08 s) beside a
+    posterior of 11–40 s: the verdict is now the posterior's, identified where its 16–84 % interval is
+    under half its uniform prior's."""
+    from types import SimpleNamespace
+
+    from service.calibration.bayesian import posterior_identifiability
+
+    problem = SimpleNamespace(parameter_names=("pinned", "loose"), lower=np.array([0.0, 5.0]),
+                              upper=np.array([1.0, 300.0]))
+    verdicts = posterior_identifiability(problem, np.array([0.40, 11.0]), np.array([0.50, 250.0]))
+    assert verdicts["pinned"].identified and verdicts["pinned"].reasons == ()
+    assert not verdicts["loose"].identified
+    assert verdicts["loose"].reasons[0].startswith("its posterior 16–84 % interval spans 119 % of its prior's")
