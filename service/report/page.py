@@ -263,11 +263,12 @@ def _regimes_section(run: StoredRun) -> str:
 
 def _estimates_section(run: StoredRun) -> str:
     """The run's parameter estimates: median and 16–84 % interval (the point fit's ±1 standard error,
-    the posterior's quantiles), unit, and whether the data identified the parameter."""
+    the posterior's quantiles), unit, and whether the data identified the parameter (and why not)."""
     rows = [[_breakable(e.node), _breakable(e.name), _number(e.median, 4)
              + (f' <span class="bad">at its {e.at_bound} bound</span>' if e.at_bound else ""),
              f"{_number(e.quantile16, 4)} – {_number(e.quantile84, 4)}", f"{_number(e.lower, 4)} – {_number(e.upper, 4)}",
-             html.escape(unit_label(e.unit)), "yes" if e.identified else '<span class="bad">no</span>']
+             html.escape(unit_label(e.unit)),
+             "yes" if e.identified else '<span class="bad">no</span>' + (f": {html.escape(e.reasons)}" if e.reasons else "")]
             for e in run.estimates.values()]
     return ("<h2>Parameter estimates</h2>"
             + _table(["node", "parameter", "estimate", "16–84 %", "bounds", "unit", "identified"], rows, "estimates"))

@@ -40,10 +40,11 @@ SELECT ?model ?version ?method ?source ?train_start ?train_end ?test_start ?test
 } }"""
 _WARNINGS_QUERY = _PREFIXES + "SELECT ?warning WHERE { GRAPH ?g { ?run gt:runWarning ?warning } }"
 _ESTIMATES_QUERY = _PREFIXES + """SELECT ?component ?name ?node ?unit ?identified ?median ?quantile16 ?quantile84
-       ?lower ?upper
+       ?lower ?upper ?reasons
 WHERE { GRAPH ?g {
   ?estimate prov:wasGeneratedBy ?run ; gt:onComponent ?component ; gt:parameterName ?name ; gt:onNode ?node ;
             gt:unit ?unit ; gt:identified ?identified .
+  OPTIONAL { ?estimate rdfs:comment ?reasons }
   OPTIONAL { ?estimate gt:lowerBound ?lower }
   OPTIONAL { ?estimate gt:upperBound ?upper }
   OPTIONAL { ?estimate gt:median ?median }
@@ -101,6 +102,7 @@ class StoredEstimate:
     quantile84: float
     lower: float = float("nan")  # the parameter's bounds (NaN where not stored)
     upper: float = float("nan")
+    reasons: str = ""  # why the data do not identify it ("; "-joined)
 
     @property
     def at_bound(self) -> str:
@@ -208,7 +210,7 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
             name=e["name"].value, node=e["node"].value, unit=e["unit"].value,
             identified=e["identified"].value == "true", median=_float(e, "median"),
             quantile16=_float(e, "quantile16"), quantile84=_float(e, "quantile84"),
-            lower=_float(e, "lower"), upper=_float(e, "upper"),
+            lower=_float(e, "lower"), upper=_float(e, "upper"), reasons=e["reasons"].value if "reasons" in e else "",
         )
     metrics: dict[str, dict[str, dict[str, float]]] = {}
     units: dict[str, str] = {}

@@ -538,7 +538,10 @@ def test_the_page_lists_the_runs_parameter_estimates(case, page):
     assert len(table) == 1 + len(run.estimates) and len(run.estimates) >= 14
     leak = next(row for row in table[1:] if row[1] == "valve_flow_coefficient" or row[1] == "loop_pressure_difference")
     estimate = next(e for e in run.estimates.values() if e.name == leak[1])
-    assert leak[2].split(" at its ")[0] == f"{estimate.median:.4g}" and leak[6] in ("yes", "no")
+    assert leak[2].split(" at its ")[0] == f"{estimate.median:.4g}" and leak[6].split(":")[0] in ("yes", "no")
+    for row, e in zip(table[1:], run.estimates.values(), strict=True):  # "no" says why, as the store does
+        assert row[6] == ("yes" if e.identified else f"no: {e.reasons}" if e.reasons else "no"), row
+    assert any(not e.identified and e.reasons for e in run.estimates.values())
     assert all(np.isfinite(e.lower) and e.lower < e.upper for e in run.estimates.values())
     for row, e in zip(table[1:], run.estimates.values(), strict=True):  # an estimate the bound set is marked
         assert row[3 + 1] == f"{e.lower:.4g} – {e.upper:.4g}" and row[2].endswith(f"at its {e.at_bound} bound") == bool(
