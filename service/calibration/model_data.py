@@ -158,9 +158,12 @@ class ModelData:
         unknown = [name for name in names if name not in known]
         if unknown:
             offered = ", ".join(["time"] + sorted(local_name(n) for n in boundary))
+            targets = set(self.target_nodes) | {local_name(n) for n in self.target_nodes} | {
+                self.data.columns[n] for n in self.target_nodes if n in self.data.columns}
+            why = ("a target's measurements would feed the discrepancy of what it measures" if set(unknown) & targets
+                   else "no device or column of the model has that name")
             raise CalibrationError(f"GP input(s) {', '.join(map(repr, unknown))} are no boundary input of the model "
-                                   f"(a target's measurements would feed the discrepancy of what it measures): "
-                                   f"use {offered}, a node IRI or its CSV column")
+                                   f"({why}): use {offered}, a node IRI or its CSV column")
         return tuple(dict.fromkeys(known[name] for name in names))
 
     def _gp_input_series(self, name: str, window: slice) -> np.ndarray:

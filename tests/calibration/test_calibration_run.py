@@ -273,8 +273,8 @@ def test_the_discrepancy_runs_over_the_boundary_inputs_the_user_chooses(syntheti
 
 
 @pytest.mark.parametrize("method, names, problem", [
-    ("bayes", ["coil_outlet_air_temperature_sensor"], "no boundary input of the model"),
-    ("bayes", ["time", "wind_speed"], "'wind_speed' are no boundary input"),
+    ("bayes", ["coil_outlet_air_temperature_sensor"], "no boundary input of the model \\(a target's measurements"),
+    ("bayes", ["time", "wind_speed"], "'wind_speed' are no boundary input of the model \\(no device or column"),
     ("point", ["supply_air_flow"], "a point calibration has no discrepancy"),
 ])
 def test_gp_inputs_that_are_no_boundary_input_or_go_to_a_point_fit_are_refused(synthetic, method, names, problem):
