@@ -209,8 +209,9 @@ def example_generate(
         "JSON of a calibration (`graphtwin calibrate --json`): its medians are the truth's parameters "
         "(the others drawn as without it)."))] = None,
     truth_json: Annotated[Path | None, typer.Option(help=(
-        "Write the truth here (JSON: the hidden effect, where, and every parameter as `calibrate --json` "
-        "gives it, so --truth-from reads it back): what a calibration of the data should find."))] = None,
+        "Write the truth here (JSON: the hidden effect, where, and each parameter's value as the median under "
+        "the key `calibrate --json` uses, in the parameter's unit, so --truth-from reads it back): what a "
+        "calibration of the data should find."))] = None,
 ) -> None:
     """Synthetic measurements for a model from a known truth, optionally with a hidden effect."""
     from service.data.synthetic import generate_synthetic_data
