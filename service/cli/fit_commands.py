@@ -26,6 +26,7 @@ from service.cli.common import (
     app,
     console,
     data_app,
+    error_console,
     loaded_model_file,
     open_store,
     reports_errors,
@@ -70,8 +71,10 @@ def calibrate_command(
         request = checked_request(CalibrateRequest, model=model_name, measurements=str(data), train=train, test=test,
                                   method=method, seed=seed, only_when=only_when or [],
                                   gp_inputs=gp_input or None, start_from=start_from, max_steps=max_steps)
-        # the bar shows on a terminal; written to a file or a pipe, each convergence check is a line
-        said = None if as_json or console.is_terminal else (lambda m: console.print(f"{m}…", markup=False))
+        # the bar shows on a terminal; written to a file or a pipe, each convergence check is a line (on stderr
+        # beside --json, whose stdout is the JSON alone: a half-hour run had been silent)
+        said = (None if console.is_terminal and not as_json else
+                (lambda m: (error_console if as_json else console).print(f"{m}…", markup=False)))
         outcome = calibrate_model(graph_store, request, data, progress=not as_json, on_progress=said)
     if plots is not None:  # the fit, and a Bayesian run's trace and corner plots (docs/report.md)
         from service.report.calibration_plots import plot_calibration

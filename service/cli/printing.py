@@ -43,7 +43,7 @@ def print_metrics(title: str, metrics: dict, logged_units: dict[str, str] | None
     intervals = any(m.coverage for m in metrics.values())
     table = Table(title=title)
     for column in ("sensor", "RMSE", "noise σ", "RMSE / σ", "MAE", "R²", "CV(RMSE) %", "NMBE %",
-                   *(("ACE 90 %", "90 % width") if intervals else ()), "unit"):
+                   *(("ACE 90 % (points)", "90 % width") if intervals else ()), "unit"):
         table.add_column(column, overflow="fold")
     for node, m in metrics.items():
         interval_cells = []
