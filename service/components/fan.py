@@ -68,11 +68,20 @@ class Fan(ComponentModel):
                   "share of the electric power the impeller's losses put into the air, f_imp"),
     )
 
+    #: What only the electric power depends on: fixed at their defaults where no meter measures it.
+    power_curve_parameters = ("nominal_air_flow", "nominal_power", "c1", "c2", "c3", "c4")
+
     @classmethod
     def parameters_fixed_by_measurement(cls, measured_outputs: frozenset[str]) -> dict[str, float]:
-        """f_imp = ``IMPELLER_HEAT_SHARE`` where a meter measures the fan's electric power, 0 where none
-        does: unmeasured, the fitted power curve would be a heat source of any shape (``docs/components.md``)."""
-        return {"impeller_heat_share": IMPELLER_HEAT_SHARE if "electric_power" in measured_outputs else 0.0}
+        """f_imp = ``IMPELLER_HEAT_SHARE`` where a meter measures the fan's electric power. Where none
+        does, f_imp = 0 and the power curve (:attr:`power_curve_parameters`) at its defaults (the
+        graph's nominal values win): no data pin it, and a fitted curve would make the heat of a motor
+        in the air stream (FanMotorHeat, f_m·P) a heat source of any shape of the flow
+        (``docs/components.md``)."""
+        if "electric_power" in measured_outputs:
+            return {"impeller_heat_share": IMPELLER_HEAT_SHARE}
+        defaults = {p.name: p.default for p in cls.parameters if p.name in cls.power_curve_parameters}
+        return {"impeller_heat_share": 0.0, **defaults}
 
     def step(self, params, inputs, state, dt_s):
         flow = np.maximum(inputs["air_volume_flow"], 0.0)

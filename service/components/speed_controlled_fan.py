@@ -26,10 +26,9 @@ class SpeedControlledFan(ComponentModel):
     )
     outputs = Fan.outputs
     parameters = Fan.parameters
-
-    @classmethod
-    def parameters_fixed_by_measurement(cls, measured_outputs: frozenset[str]) -> dict[str, float]:
-        return Fan.parameters_fixed_by_measurement(measured_outputs)
+    #: The nominal flow sets the air flow here, which the targets see: only the curve is the power's.
+    power_curve_parameters = ("nominal_power", "c1", "c2", "c3", "c4")
+    parameters_fixed_by_measurement = classmethod(Fan.parameters_fixed_by_measurement.__func__)
 
     def step(self, params, inputs, state, dt_s):
         speed = np.minimum(np.maximum(inputs["speed"], 0.0), 1.0)

@@ -28,8 +28,16 @@ def test_a_fan_that_is_off_or_whose_impeller_heat_is_not_counted_leaves_the_air_
 
 
 def test_the_impeller_heat_is_counted_only_where_a_meter_measures_the_power():
+    """Where no meter measures the power, its curve is fixed at the defaults too: fitted, it made the
+    motor's heat in the air stream (f_m·P) a heat source of any cubic shape of the flow."""
+    from service.components.speed_controlled_fan import SpeedControlledFan
+
     assert Fan.parameters_fixed_by_measurement(frozenset({"electric_power"})) == {"impeller_heat_share": 0.3}
-    assert Fan.parameters_fixed_by_measurement(frozenset({"outlet_air_temperature"})) == {"impeller_heat_share": 0.0}
+    curve = {"nominal_power": 1800.0, "c1": 0.0013, "c2": 0.1470, "c3": 0.9506, "c4": -0.0998}
+    assert Fan.parameters_fixed_by_measurement(frozenset({"outlet_air_temperature"})) == {
+        "impeller_heat_share": 0.0, "nominal_air_flow": 1.5, **curve}
+    # a speed-controlled fan's nominal flow sets the air flow the targets see: estimated still
+    assert SpeedControlledFan.parameters_fixed_by_measurement(frozenset()) == {"impeller_heat_share": 0.0, **curve}
 
 
 def test_motor_heat_adds_its_share_on_top_of_the_impellers(run_model, params_for):

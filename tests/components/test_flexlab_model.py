@@ -66,11 +66,13 @@ def test_outdoor_and_return_air_and_commands_drive_the_mixed_and_supply_air_targ
         ("supply_fan", "outlet_air_temperature", "supply_air_temperature_sensor", "measured_value"),
     }
     assert wires == air_path
-    # 3 mixing box + 2 × 5 coil + 6 fan parameters, none stated in the graph
-    # no meter measures the fan's power: its impeller's heat is not counted (a fitted power curve
-    # would be a heat source of any shape)
-    assert len(flexlab.estimated_parameters) == 19
-    assert [(ref.name, ref.value) for ref in flexlab.mapped_parameters] == [("impeller_heat_share", 0.0)]
+    # 3 mixing box + 2 × 5 coil + the fan's nominal flow, none stated in the graph; no meter measures
+    # the fan's power: its impeller's heat is not counted and its power curve is fixed at the defaults
+    # (a fitted curve would be a heat source of any shape)
+    assert len(flexlab.estimated_parameters) == 14
+    assert sorted((ref.name, ref.value) for ref in flexlab.mapped_parameters) == [
+        ("c1", 0.0013), ("c2", 0.147), ("c3", 0.9506), ("c4", -0.0998), ("impeller_heat_share", 0.0),
+        ("nominal_power", 1800.0)]
 
 
 def test_devices_name_their_column_and_unit(flexlab):
