@@ -13,6 +13,7 @@ resampled to the nearer row), longer ones stay NaN. The full contract: ``docs/da
 from __future__ import annotations
 
 import difflib
+import re
 from collections import defaultdict
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -249,9 +250,13 @@ def _check_grid_size(source: str, stamps: np.ndarray, step_s: float) -> None:
 
 
 def _near_header(names: set[str], headers: list[str]) -> str | None:
-    """The header of ``headers`` most like one of ``names`` (difflib's ratio ≥ 0.8, case ignored), or None."""
-    ratio, header = max(((difflib.SequenceMatcher(None, n.lower(), h.lower()).ratio(), h) for n in names
-                         for h in headers), default=(0.0, None))
+    """The header of ``headers`` most like one of ``names`` (difflib's ratio ≥ 0.8, case ignored; a unit
+    in brackets at its end, ``SA-T (°C)``, left out), or None."""
+    def like(name: str, header: str) -> float:
+        return max(difflib.SequenceMatcher(None, name.lower(), h.lower()).ratio()
+                   for h in (header, re.sub(r"\s*[(\[][^)\]]*[)\]]\s*$", "", header)))
+
+    ratio, header = max(((like(n, h), h) for n in names for h in headers), default=(0.0, None))
     return header if ratio >= 0.8 else None
 
 

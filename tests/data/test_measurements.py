@@ -66,6 +66,10 @@ def test_a_misspelt_column_is_pointed_at_and_a_missing_file_said_so(tmp_path):
                           SPECS)
     assert "no column for https://example.org/x#valve" in str(info.value)
     assert "column 3, 'vlave', is near: a misspelling?" in str(info.value)
+    with pytest.raises(MeasurementError) as info:  # a unit in brackets after the name: that column, not a look-alike
+        read_measurements(_write(tmp_path, "time,SAT ,valve-sp,valve (%)\n2025-01-01 00:00,20,1,2\n"
+                                           "2025-01-01 00:10,21,1,2\n"), SPECS)
+    assert "column 4, 'valve (%)', is near: a misspelling?" in str(info.value)
     with pytest.raises(MeasurementError) as info:  # nothing near: no guess
         read_measurements(_write(tmp_path, "time,SAT ,flow\n2025-01-01 00:00,20,1\n2025-01-01 00:10,21,1\n"), SPECS)
     assert "misspelling" not in str(info.value)
