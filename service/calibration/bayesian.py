@@ -38,17 +38,19 @@ _DRAW_CHUNK = 8
 POSTERIOR_NARROWING = 0.5
 
 
-def posterior_identifiability(problem: CalibrationProblem, q16: np.ndarray, q84: np.ndarray,
+def posterior_identifiability(problem: CalibrationProblem, q16: np.ndarray, q84: np.ndarray, converged: bool = True,
                               ) -> dict[str, ParameterIdentifiability]:
     """Per parameter: identified by the data where its posterior 16–84 % interval spans less than
     :data:`POSTERIOR_NARROWING` of its prior's (the point fit's verdict, which starts the sampler, is a
-    linearisation at one point: a bounded posterior can be narrow where that fit's interval is wide)."""
+    linearisation at one point: a bounded posterior can be narrow where that fit's interval is wide).
+    A sampler that did not converge gives no verdict: none is called identified."""
     verdicts = {}
     for j, name in enumerate(problem.parameter_names):
         share = float((q84[j] - q16[j]) / (0.68 * (problem.upper[j] - problem.lower[j])))
-        why = () if share < POSTERIOR_NARROWING else (
-            f"its posterior 16–84 % interval spans {100 * share:.0f} % of its prior's: the data narrow it less than "
-            f"{1 / POSTERIOR_NARROWING:g}-fold",)
+        why = (("the sampler did not converge: its draws are no posterior to judge by",) if not converged else
+               () if share < POSTERIOR_NARROWING else (
+                   f"its posterior 16–84 % interval spans {100 * share:.0f} % of its prior's: the data narrow it less "
+                   f"than {1 / POSTERIOR_NARROWING:g}-fold",))
         verdicts[name] = ParameterIdentifiability(name, not why, why)
     return verdicts
 
@@ -242,7 +244,8 @@ class BayesianCalibrator(BaseEstimator):
         self.likelihood_ = likelihood
         self.problem_ = problem
         self.discrepancy_ = likelihood.hyperparameter_quantiles(np.hstack([self.samples_, self.hyper_samples_]))
-        self.identifiability_ = posterior_identifiability(problem, self.quantile16_, self.quantile84_)
+        self.identifiability_ = posterior_identifiability(problem, self.quantile16_, self.quantile84_,
+                                                          convergence.converged)
         return self
 
     def predict(self, problem: CalibrationProblem, n_draws: int = 200,

@@ -409,6 +409,10 @@ def calibrate(
         diagnostics.sampler = SamplerConvergence(
             converged=bool(calibrator.converged_), iat=float(calibrator.iat_),
             n_steps=int(calibrator.n_steps_), acceptance=calibrator.acceptance_)
+        if not calibrator.converged_:  # said among the warnings too: they travel with every result
+            diagnostics.warnings.append(f"the sampler did not converge in {calibrator.n_steps_} steps (a chain of "
+                                        "20 IATs is needed): the estimates, intervals and bands are not to be trusted; "
+                                        "run it with more steps (--max-steps, max_steps)")
     predictions = {"train": {k: v[0] for k, v in problem.run(theta[None, :]).items()}}
     metrics = {"train": {
         node: target_metrics(problem.observed[node], predictions["train"][node], n_parameters=n_par,

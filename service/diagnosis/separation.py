@@ -110,8 +110,8 @@ def distance_text(fit_z: float | None, held_out_z: float | None) -> str:
         return "its errors were not paired with the answer's"
     (z, where), rest = distances[0], distances[1:]
     more = "".join(f" and {z_more:.1f} on the {where_more}" for z_more, where_more in rest)
-    return (f"its errors lie {z:.1f} standard errors from the answer's on the {where}{more} (within "
-            f"{TIE_STANDARD_ERRORS:g} they would tie)")
+    return (f"its errors lie {z:.1f} standard errors from the answer's on the {where}{more} (they would tie "
+            f"within {TIE_STANDARD_ERRORS:g} on both)")
 
 
 def told_apart(answer: EffectEvidence, ranked: list[EffectEvidence], lookalikes: list[Lookalike]) -> list[ToldApart]:

@@ -201,6 +201,8 @@ def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_
                         bayes_settings={"max_steps": 20, "check_interval": 10, "n_temperatures": 2})
     record = outcome.record
     assert record.method == "bayes" and record.diagnostics.sampler.converged is False  # capped: said so
+    assert any(w.startswith("the sampler did not converge in 20 steps") for w in record.diagnostics.warnings)
+    assert not any(e.identified for e in record.estimates)
     node = EX + "coil_outlet_air_temperature_sensor"
     lower, upper = outcome.intervals["test"][node][0.9]
     median = outcome.predictions["test"][node]
@@ -584,3 +586,8 @@ def test_a_bayesian_runs_identifiability_is_the_posteriors():
     assert verdicts["pinned"].identified and verdicts["pinned"].reasons == ()
     assert not verdicts["loose"].identified
     assert verdicts["loose"].reasons[0].startswith("its posterior 16–84 % interval spans 119 % of its prior's")
+    # an unconverged run's draws are no posterior: nothing is called identified (a helper's 300-step run
+    # called a supply water temperature of 42 [37.5–48.4] °C identified, the truth 71 °C)
+    unconverged = posterior_identifiability(problem, np.array([0.40, 11.0]), np.array([0.50, 250.0]), converged=False)
+    assert not any(v.identified for v in unconverged.values())
+    assert unconverged["pinned"].reasons == ("the sampler did not converge: its draws are no posterior to judge by",)

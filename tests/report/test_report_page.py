@@ -675,5 +675,5 @@ def test_a_significant_candidate_told_apart_from_the_answer_says_how_far(case):
     effects = _effects_with_the_second_marked(case, "gt:toldApartFrom ?a ; gt:fitDistance 7.1e0 ; "
                                                     "gt:heldOutDistance 3.0e0")
     assert effects[1][-1].endswith("Told apart from the answer: its errors lie 7.1 standard errors from the answer's "
-                                   "on the fit windows and 3.0 on the held-out half (within 2 they would tie).")
+                                   "on the fit windows and 3.0 on the held-out half (they would tie within 2 on both).")
     assert "Told apart" not in effects[0][-1]
