@@ -62,7 +62,9 @@ class MeasurementUploads:
                 self._refuse_gaps(measured, model_name)
             info = {
                 "id": upload_id, "model": model_name, "rows": measured.n_steps,
-                "start": str(measured.timestamps[0]), "end": str(measured.timestamps[-1]),
+                # as a window takes them back: ISO, with Z where the file's stamps carried offsets (read as UTC)
+                **{key: np.datetime_as_string(measured.timestamps[i], unit="s") + ("Z" if measured.utc else "")
+                   for key, i in (("start", 0), ("end", -1))},
                 "step_s": measured.step_s, "columns": dict(measured.columns), "warnings": list(measured.warnings),
             }
             (folder / f"{upload_id}.json").write_text(json.dumps(info, indent=1), encoding="utf-8")

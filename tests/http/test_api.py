@@ -821,3 +821,21 @@ def test_a_write_without_its_token_and_an_oversize_body_are_refused_before_the_b
     ask = client.post("/sparql", content=b"ASK {}", headers={"Content-Type": "application/sparql-query"})
     assert ask.status_code == 200 and ask.json()["boolean"] is True
     assert client.put("/models/x", content=b"#" * 10, headers={"Content-Type": "text/turtle"}).status_code == 401
+
+
+def test_an_uploads_first_and_last_stamps_are_given_as_a_window_takes_them_back(client, auth, case_csv, store, tmp_path):
+    """Stamps with a UTC offset are read as UTC; the upload answered "2026-03-02T05:00:00" without one,
+    which a window then refused ("give it with an offset too"): they carry Z now, naive ones nothing."""
+    naive = _upload_csv(client, auth, case_csv.read_text()).json()
+    assert not naive["start"].endswith("Z") and naive["start"].startswith("2026-01-12T00:00")
+    lines = case_csv.read_text().splitlines()
+    offset = [lines[0]] + [line.replace(",", "-05:00,", 1) for line in lines[1:]]
+    stamped = _upload_csv(client, auth, "\n".join(offset) + "\n").json()
+    assert stamped["start"] == "2026-01-12T05:00:00Z", stamped
+    from service.data.model_series import read_model_data
+    from service.model.assembly import assemble
+
+    path = tmp_path / "offset.csv"
+    path.write_text("\n".join(offset) + "\n")
+    window = read_model_data(assemble(store, "case"), path).window(stamped["start"], stamped["end"])
+    assert window == slice(0, stamped["rows"])  # a window takes them as they are: the whole upload
