@@ -253,6 +253,15 @@ def test_a_model_and_an_upload_are_deleted_and_runs_stay(client, auth, case_csv,
     assert client.get("/models/case").status_code == 404 and client.delete("/models/case", headers=auth).status_code == 404
 
 
+def test_a_deleted_models_uploads_stay_listed(client, auth, case_csv):
+    """"Runs and uploads stay" (docs/http.md), but the listing answered 404 once the model was gone."""
+    upload = _upload_csv(client, auth, case_csv.read_text()).json()["id"]
+    assert client.delete("/models/case", headers=auth).status_code == 204
+    listed = client.get("/models/case/measurements")
+    assert listed.status_code == 200 and [u["id"] for u in listed.json()["data"]] == [upload]
+    assert client.get("/models/never/measurements").status_code == 404
+
+
 def test_columns_no_device_claims_are_a_warning_as_in_the_cli(client, auth, case_csv):
     """A BMS export has more columns than the model reads (both real files in ../shared do)."""
     response = _upload_csv(client, auth, _bad_csv(case_csv, "unknown column"))

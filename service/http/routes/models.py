@@ -8,7 +8,7 @@ import pyoxigraph as ox
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
-from service.errors import ConflictError, GraphtwinError, IncompleteModelError, UnsupportedFormatError
+from service.errors import ConflictError, GraphtwinError, IncompleteModelError, InputError, UnsupportedFormatError
 from service.graph.backend import EmbeddedBackend
 from service.graph.rdf_io import rdf_format
 from service.graph.store import GraphStore
@@ -155,9 +155,13 @@ async def post_measurements(name: str, request: Request, service: ServiceDep,
 @router.get("/models/{name}/measurements", response_model=MeasurementsList, tags=["models"],
             dependencies=[ReadAccess], responses=error_responses(401, 403, 404))
 def list_measurements(name: str, service: ServiceDep) -> dict:
-    """The measurement uploads of model ``name``."""
-    require_model(service.store, name)
-    infos = service.uploads.list(name)
+    """The measurement uploads of model ``name``, also of a model deleted since (its uploads stay)."""
+    try:
+        infos = service.uploads.list(GraphStore.check_name(name))
+    except InputError:  # no name a model can have
+        infos = []
+    if not infos:
+        require_model(service.store, name)
     return {"data": infos, "count": len(infos)}
 
 
