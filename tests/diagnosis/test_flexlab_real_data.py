@@ -80,7 +80,8 @@ def test_the_model_fails_on_the_supply_air_temperature(reports, fault):
 
 @pytest.mark.parametrize("fault", sorted(FAULT_DAYS))
 def test_the_top_effect_is_the_heating_valve_passing_water_while_shut(reports, fault):
-    """The heating valve passing water while commanded shut ranks first, fitted as a fault that
+    """The heating valve passing water while commanded shut ranks first (a leak, or a valve stuck a little
+    open), fitted as a fault that
     appeared on the test day (null in training), with the heating coil's capacity, which the
     training day never exercised, fitted with it (the leak's size trades off against the coil's
     water flow and the actuator's dead band, which the training day did not identify either, so it
@@ -95,8 +96,12 @@ def test_the_top_effect_is_the_heating_valve_passing_water_while_shut(reports, f
     (the base's, which hold the misfit it explains, left ~3 per sensor)."""
     effects = reports[fault]["report"].effects
     best = effects[0]
-    assert (best.effect, best.node in HEATING) == ("ValveLeakage", True), \
+    # the two are nested (a leak is a valve stuck at λ with weight 1): on the 40 % leak they remove the same
+    # 90 % of the held-out error, and since the fan's unmetered power curve is no longer fitted (2026-12-01)
+    # the stuck valve's ΔBIC is the better one; the other is the next candidate
+    assert best.effect in ("ValveLeakage", "ValveStuck") and best.node in HEATING, \
         [(e.effect, e.node, e.delta_bic, e.test_improvement) for e in effects[:3]]
+    assert {effects[1].effect, best.effect} == {"ValveLeakage", "ValveStuck"} and effects[1].node in HEATING
     assert best.delta_bic < 0.0 and best.test_improvement >= 0.5, (best.delta_bic, best.test_improvement)
     fan_heat = next(e for e in effects if e.effect == "FanMotorHeat")
     assert "present throughout" in fan_heat.explanation and fan_heat.test_improvement < best.test_improvement
