@@ -170,8 +170,9 @@ def temperature_inputs_misread(md: ModelData, window: slice, scales: Mapping[str
             trial = predict(series | {key[0]: values})
             targets = reached(current, trial)
             before, after = squared_error(current, targets), squared_error(trial, targets)
-            if targets and after * MIXUP_IMPROVEMENT**2 <= before and (best is None or before / after > best[0]):
-                best = (before / after if after > 0 else np.inf, key, trial)
+            ratio = before / after if after > 0 else np.inf
+            if targets and ratio >= MIXUP_IMPROVEMENT**2 and (best is None or ratio > best[0]):
+                best = (ratio, key, trial)
         if best is None:
             break
         improvement, (node, name), current = best
