@@ -356,7 +356,7 @@ _STYLE = """body{font:14px/1.45 system-ui,sans-serif;margin:24px auto;max-width:
 h1{font-size:22px;overflow-wrap:anywhere}h2{font-size:17px;margin-top:30px;border-bottom:1px solid #d5dae1;
 padding-bottom:4px}table{border-collapse:collapse;margin:8px 0;font-size:13px;max-width:100%}th,td{border:1px solid
 #d5dae1;padding:3px 7px;vertical-align:top;text-align:left}th{background:#f1f4f8}td.rule{min-width:22ch;
-max-width:46ch}.note{color:#8a4b00;background:#fff6e5;padding:6px 10px}figure{margin:10px 0}img{max-width:100%}
+max-width:46ch}table.estimates td:last-child{max-width:46ch;overflow-wrap:anywhere}.note{color:#8a4b00;background:#fff6e5;padding:6px 10px}figure{margin:10px 0}img{max-width:100%}
 .bad{color:#b3261e;font-weight:600}.good{color:#2e7d32;font-weight:600}.some{color:#8a4b00;font-weight:600}
 .none{color:#5a6472}.summary{font-weight:600;background:#eef6ee;padding:8px 12px}dl{display:grid;
 grid-template-columns:max-content auto;gap:2px 14px}dt{color:#5a6472}dd{margin:0;overflow-wrap:anywhere}
