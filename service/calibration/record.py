@@ -13,17 +13,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from service.calibration.metrics import TargetMetrics
-from service.graph.namespaces import local_name
+from service.calibration.model_data import ModelData, gp_input_name
 from service.graph.units import difference_unit
 from service.model.assembled_model import AssembledModel
-
-if TYPE_CHECKING:
-    from service.calibration.model_data import ModelData
 
 __all__ = ["ParameterEstimate", "SamplerConvergence", "CalibrationDiagnostics", "CalibrationRecord", "PredictiveBand",
            "PREDICTIVE_BAND_LEVEL", "parameter_estimates", "discrepancy_table"]
@@ -82,8 +78,7 @@ def discrepancy_table(quantiles: Mapping[str, Mapping[str, np.ndarray]], md: Mod
     """A Bayesian run's discrepancy GP per target, ``name → (median, q16, q84, unit)``: its amplitude σ_f
     and noise σ_n in the target's difference unit (K for °C), each length scale in its input's unit (h
     for time, the port unit of a boundary input). ``quantiles``: ``BayesianCalibrator.discrepancy_``."""
-    unit_of = {"time" if node == "time" else local_name(node): "h" if node == "time" else md.data.units[node]
-               for node in gp_nodes}
+    unit_of = {gp_input_name(node): "h" if node == "time" else md.data.units[node] for node in gp_nodes}
     table = {}
     for target, entries in quantiles.items():
         error_unit = difference_unit(md.units[target])
@@ -103,6 +98,13 @@ class SamplerConvergence:
     iat: float
     n_steps: int
     acceptance: float
+
+    def describe(self) -> str:
+        """How it ended, in words: the chain's length in IATs says how far to trust it."""
+        length = (f"{self.n_steps / self.iat:.0f} × its IAT of {self.iat:.0f} steps, 20 × needed"
+                  if np.isfinite(self.iat) else "IAT unknown")
+        return (f"{'converged' if self.converged else 'NOT converged'} after {self.n_steps} steps ({length}; "
+                f"acceptance {self.acceptance:.2f})")
 
 
 @dataclass

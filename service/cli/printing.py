@@ -82,10 +82,7 @@ def print_calibration(record: CalibrationRecord, logged_units: dict[str, str] | 
     if record.diagnostics.start is not None:
         console.print(record.diagnostics.start, markup=False, highlight=False)
     if record.diagnostics.sampler is not None:
-        found = record.diagnostics.sampler
-        console.print(f"PT-MCMC: {'converged' if found.converged else 'NOT converged'} after {found.n_steps} steps "
-                      f"({found.n_steps / found.iat:.0f} × its IAT of {found.iat:.0f} steps, 20 × needed; acceptance "
-                      f"{found.acceptance:.2f})", markup=False, highlight=False)
+        console.print(f"PT-MCMC: {record.diagnostics.sampler.describe()}", markup=False, highlight=False)
     if record.discrepancy:
         print_discrepancy(record)
     bounds = {"train": record.train_window, "test": record.test_window}

@@ -124,18 +124,10 @@ def _discrepancy_section(run: StoredRun) -> str:
             "medians.</p>" + _table(header, rows, "discrepancy"))
 
 
-def _sampler_text(sampler: dict) -> str:
-    """How a Bayesian run's sampler ended, in words: its chain's length in IATs says how far to trust it."""
-    lengths = (f"{sampler['n_steps']} steps, {sampler['n_steps'] / sampler['iat']:.0f} × its IAT of "
-               f"{sampler['iat']:.0f} steps" if np.isfinite(sampler["iat"]) else f"{sampler['n_steps']} steps, IAT unknown")
-    return (f"{'converged' if sampler['converged'] else 'NOT converged'} after {lengths}; "
-            f"acceptance {sampler['acceptance']:.2f}")
-
-
 def _run_notes(run: StoredRun) -> str:
     """A banner over a posterior whose sampler did not converge, and what the run noticed (its warnings)."""
     out = []
-    if run.sampler and not run.sampler["converged"]:
+    if run.sampler and not run.sampler.converged:
         out.append('<p class="bad">The sampler did not converge: the chain stopped at its step limit before it was '
                    '20 integrated autocorrelation times long, so the estimates, intervals and bands below are not '
                    'to be trusted. Run it again with more steps, or fewer discrepancy inputs.</p>')
@@ -356,7 +348,8 @@ _STYLE = """body{font:14px/1.45 system-ui,sans-serif;margin:24px auto;max-width:
 h1{font-size:22px;overflow-wrap:anywhere}h2{font-size:17px;margin-top:30px;border-bottom:1px solid #d5dae1;
 padding-bottom:4px}table{border-collapse:collapse;margin:8px 0;font-size:13px;max-width:100%}th,td{border:1px solid
 #d5dae1;padding:3px 7px;vertical-align:top;text-align:left}th{background:#f1f4f8}td.rule{min-width:22ch;
-max-width:46ch}table.estimates td:last-child{max-width:46ch;overflow-wrap:anywhere}.note{color:#8a4b00;background:#fff6e5;padding:6px 10px}figure{margin:10px 0}img{max-width:100%}
+max-width:46ch}table.estimates td:last-child{max-width:46ch;overflow-wrap:anywhere}
+.note{color:#8a4b00;background:#fff6e5;padding:6px 10px}figure{margin:10px 0}img{max-width:100%}
 .bad{color:#b3261e;font-weight:600}.good{color:#2e7d32;font-weight:600}.some{color:#8a4b00;font-weight:600}
 .none{color:#5a6472}.summary{font-weight:600;background:#eef6ee;padding:8px 12px}dl{display:grid;
 grid-template-columns:max-content auto;gap:2px 14px}dt{color:#5a6472}dd{margin:0;overflow-wrap:anywhere}
@@ -396,7 +389,7 @@ def report_html(store: GraphStore, run_id: str, *, locate_data: Callable[[str], 
         *([("training window not scored over its first", f"{run.settings['unscored_start_s'] / 3600:g} h")]
           if "unscored_start_s" in run.settings else []),
         *([("started from", _start_text(run.settings["start_from"]))] if "start_from" in run.settings else []),
-        *([("sampler", _sampler_text(run.sampler))] if run.sampler else []),
+        *([("sampler", run.sampler.describe())] if run.sampler else []),
         ("finished", run.ended), ("run graph", store.run_graph(run.run_id).value),
         ("diagnosis", diagnosis.iri if diagnosis else "none"),
     ])

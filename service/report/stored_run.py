@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from service.calibration.record import SamplerConvergence
 from service.calibration.triples import run_iri
 from service.components.component import bound_side
 from service.errors import NotFoundError
@@ -134,9 +135,8 @@ class StoredRun:
     """A calibration run as stored: provenance, estimates (``component#name`` → estimate), metrics
     (``metrics[window][sensor][metric] = value``, ``units[sensor]``) and the operating regimes of
     its test window (``{"regime", "rule", "share", "rmse": {sensor: value}}``, by regime number), and
-    a Bayesian run's predictive ``bands`` (sensor → :class:`StoredBand`), how its sampler ended
-    (``{"converged", "iat", "n_steps", "acceptance"}``, None for a point fit or a run stored without
-    it) and the run's ``warnings``."""
+    a Bayesian run's predictive ``bands`` (sensor → :class:`StoredBand`), how its sampler ended (None
+    for a point fit or a run stored without it) and the run's ``warnings``."""
 
     run_id: str
     model: str
@@ -152,7 +152,7 @@ class StoredRun:
     units: dict[str, str]
     regimes: list[dict]
     bands: dict[str, StoredBand] = field(default_factory=dict)
-    sampler: dict | None = None
+    sampler: SamplerConvergence | None = None
     warnings: list[str] = field(default_factory=list)
     #: A Bayesian run's discrepancy GP per sensor: name (amplitude, noise, length_scale:<input>) → (median, unit).
     discrepancy: dict[str, dict[str, tuple[float, str]]] = field(default_factory=dict)
@@ -240,9 +240,8 @@ def read_run(store: GraphStore, run_id: str) -> StoredRun:
         regimes=sorted(regimes.values(), key=lambda r: int(r["regime"]) if r["regime"].isdigit() else r["regime"]),
         bands={b["sensor"].value: stored_band(b["series"].value, b["window"].value)
                for b in store.query(_BANDS_QUERY, substitutions={"run": run})},
-        sampler={"converged": row["converged"].value == "true", "iat": _float(row, "iat"),
-                 "n_steps": int(row["steps"].value), "acceptance": float(row["acceptance"].value)}
-        if "converged" in row else None,
+        sampler=SamplerConvergence(row["converged"].value == "true", _float(row, "iat"), int(row["steps"].value),
+                                   float(row["acceptance"].value)) if "converged" in row else None,
         warnings=sorted(w["warning"].value for w in store.query(_WARNINGS_QUERY, substitutions={"run": run})),
         discrepancy=discrepancy,
     )

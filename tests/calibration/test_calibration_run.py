@@ -231,8 +231,8 @@ def test_a_bayesian_run_with_a_test_window_is_stored_and_plotted(synthetic, tmp_
     from service.report.stored_run import read_run
 
     sampler = read_run(store, record.run_id).sampler
-    assert sampler["converged"] is False and sampler["n_steps"] == 20
-    assert sampler["acceptance"] == pytest.approx(record.diagnostics.sampler.acceptance)
+    assert sampler.converged is False and sampler.n_steps == 20
+    assert sampler.acceptance == pytest.approx(record.diagnostics.sampler.acceptance)
     latest = store.run_named_query("calibrated-parameters", model="case")
     assert {r["converged"].value for r in latest if r["run"].value.endswith(record.run_id)} == {"false"}
     page = report_html(store, record.run_id)
