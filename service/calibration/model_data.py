@@ -28,10 +28,15 @@ from service.graph.namespaces import local_name
 from service.model.assembled_model import AssembledModel
 from service.model.simulator import SimulationResult, Simulator, held_over_gaps, warmup_index
 
-__all__ = ["DEFAULT_GP_INPUTS", "ModelData"]
+__all__ = ["DEFAULT_GP_INPUTS", "ModelData", "gp_input_name"]
 
 #: The discrepancy GP's inputs unless the user names others: time alone (hours since the data's start).
 DEFAULT_GP_INPUTS: tuple[str, ...] = ("time",)
+
+
+def gp_input_name(node: str) -> str:
+    """A GP input's name, as its length scale is named: ``time``, else the boundary input's local name."""
+    return node if node == "time" else local_name(node)
 
 
 @dataclass
@@ -250,6 +255,6 @@ class ModelData:
             observed={node: np.concatenate(parts) for node, parts in observed.items()}, units=self.units,
             default=start, target_scales=dict(target_scales or {}),
             gp_inputs=np.column_stack(columns) if columns else None,
-            gp_input_names=tuple(name if name == "time" else local_name(name) for name in gp_inputs) or None,
+            gp_input_names=tuple(gp_input_name(name) for name in gp_inputs) or None,
             vectorised_simulate=all(c.model_class.vectorised for c in self.model.components.values()),
         )

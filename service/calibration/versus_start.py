@@ -50,7 +50,7 @@ def worse_than_start(store: GraphStore, start_runs: Sequence[str], record: Calib
         return []
     refs = model.estimated_parameters
     share = np.abs(np.asarray(theta) - np.asarray(start)) / np.array([r.spec.upper - r.spec.lower for r in refs])
-    identified = {f"{e.component}#{e.name}": e.identified for e in record.estimates}
+    identified = {e.key: e.identified for e in record.estimates}
     sensor_of = {model.measurement(c).node: c for c in model.targets}
     reaches = {c: model.targets_reached_from([c]) for c in {r.component for r in refs}}
 

@@ -87,8 +87,9 @@ def run_shipped_job(run: Callable[[GraphStore, JobRequest, WorkContext], JobResu
     """Run ``run`` on a scratch in-memory store holding ``job.dataset``: in a pool process or on a
     Dask worker. Returns the result, the graphs written (:meth:`DeferredWrites.shipped`) and the
     progress messages. Its scratch folder lies beside its progress file, where there is one (the
-service removes that folder at its shutdown, or at its next start after a kill). A user's error travels back as it is, or as a :class:`GraphtwinError` with its
-    message where its type would not unpickle; anything else as :class:`ShippedWorkError`."""
+    service removes that folder at its shutdown, or at its next start after a kill). A user's error
+    travels back as it is, or as a :class:`GraphtwinError` with its message where its type would not
+    unpickle; anything else as :class:`ShippedWorkError`."""
     scratch = GraphStore.embedded(None)
     scratch.backend.store.load(job.dataset, format=ox.RdfFormat.N_QUADS)
     writes = DeferredWrites(scratch.backend)
