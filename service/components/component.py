@@ -47,6 +47,9 @@ class Port:
     when the connections form a cycle, the simulator serves this input one step late. ``reports``
     names, on an output, the input it reports as received (a valve's position feedback reports its
     position input): an effect that leaves readings unchanged rewires such an output to the input's feed.
+    ``fallback_parameter`` names, on an input, the parameter that stands in for it where the graph
+    gives nothing to feed it (a coil's supply water temperature, measured or estimated): the
+    parameter is estimated then, and left out where the input is fed.
     """
 
     name: str
@@ -54,6 +57,7 @@ class Port:
     description: str = ""
     feedback: bool = False
     reports: str | None = None
+    fallback_parameter: str | None = None
 
 
 @dataclass(frozen=True)
@@ -178,6 +182,16 @@ class ComponentModel:
             if parameter.name == name:
                 return parameter
         raise KeyError(f"{cls.__name__} has no parameter {name!r}")
+
+    @classmethod
+    def fallback_inputs(cls) -> dict[str, str]:
+        """Input port → the parameter that stands in for it where nothing feeds it (:class:`Port`)."""
+        return {p.name: p.fallback_parameter for p in cls.inputs if p.fallback_parameter is not None}
+
+    @classmethod
+    def input_or_fallback(cls, name: str, inputs: Signals, params: Params) -> np.ndarray:
+        """The input ``name`` where it is fed, else the parameter standing in for it (:class:`Port`)."""
+        return inputs[name] if name in inputs else params[cls.port(name).fallback_parameter]
 
     @classmethod
     def port(cls, name: str) -> Port:

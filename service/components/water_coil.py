@@ -4,9 +4,11 @@
     1/UA = 1/(hA_w·v^0.8) + 1/(hA_a·(ṁ_a/2 kg/s)^0.8)                                 [K/W]
     Q = ε(NTU, C_r)·C_min·(T_w − T_a,in),   T_a,out = T_a,in + Q/C_a                    [W, °C]
 
-u the valve command, u₀ the actuator's dead band, T_w the supply water temperature (a parameter);
-counter-flow ε-NTU of :mod:`service.components.heat_exchanger`, sensible heat only. Parameters (5):
-T_w, ṁ_w,max, hA_w, hA_a, u₀; the heating and cooling coils differ only in the prior of T_w.
+u the valve command, u₀ the actuator's dead band, T_w the supply water temperature (read from a
+sensor upstream of the valve where the graph has one, else a parameter); counter-flow ε-NTU of
+:mod:`service.components.heat_exchanger`, sensible heat only. Parameters (5, or 4 with T_w measured):
+T_w, ṁ_w,max, hA_w, hA_a, u₀; the heating and cooling coils differ only in the prior of T_w. The
+valve's position (its stem, read by a position sensor) is the command received.
 Details: ``docs/components.md``.
 """
 
@@ -45,10 +47,13 @@ class WaterCoil(ComponentModel):
         Port("valve_position", "1", "valve command, u (0–1)"),
         Port("inlet_air_temperature", "degC", "air temperature entering the coil, T_a,in"),
         Port("air_mass_flow", "kg/s", "air mass flow through the coil, ṁ_a"),
+        Port("supply_water_temperature", "degC", "water temperature entering the valve, T_w",
+             fallback_parameter="supply_water_temperature"),
     )
     outputs = (
         Port("outlet_air_temperature", "degC", "air temperature leaving the coil, T_a,out"),
         Port("heat_rate", "W", "heat given to the air (negative when cooling), Q"),
+        Port("valve_position", "1", "valve position reached (the stem's position feedback)", reports="valve_position"),
     )
     parameters = (
         Parameter("supply_water_temperature", "degC", 45.0, 2.0, 90.0, "water temperature entering the coil, T_w"),
@@ -74,9 +79,10 @@ class WaterCoil(ComponentModel):
             air_conductance_w_per_k=params["air_side_conductance"], air_flow_ratio=air_flow / REFERENCE_AIR_MASS_FLOW,
         )
         heat = coil_heat_rate_w(ua, water_capacity_w_per_k=c_water, air_capacity_w_per_k=c_air,
-                                water_inlet_temperature=params["supply_water_temperature"],
+                                water_inlet_temperature=self.input_or_fallback("supply_water_temperature", inputs, params),
                                 air_inlet_temperature=air_in) * (opening > 0.0)
-        return {"outlet_air_temperature": air_in + heat / np.maximum(c_air, TINY), "heat_rate": heat}
+        return {"outlet_air_temperature": air_in + heat / np.maximum(c_air, TINY), "heat_rate": heat,
+                "valve_position": inputs["valve_position"]}
 
 
 class HeatingWaterCoil(WaterCoil):

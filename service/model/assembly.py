@@ -144,7 +144,8 @@ def assemble(
     devices -= set(unread)
     boundary = tuple(sorted(i for i in devices if i not in fed))
     targets = tuple(sorted(i for i in devices if i in fed))
-    mapped, estimated = split_parameters(instances, measured_outputs(connections, instances, targets))
+    mapped, estimated = split_parameters(instances, measured_outputs(connections, instances, targets),
+                                         connections)
     notes += [f"{problem}: a calibration refuses it; fix the value (or its unit) in the model graph"
               for problem in mapped_values_outside_bounds(mapped, instances)]
     return AssembledModel(

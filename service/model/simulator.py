@@ -201,7 +201,7 @@ class Simulator:
         for iri in self.order:
             cls = model.components[iri].model_class
             fed = {c.target_port for c in feeding[iri]}
-            missing = [p.name for p in cls.inputs if p.name not in fed]
+            missing = [p.name for p in cls.inputs if p.name not in fed and p.fallback_parameter is None]
             if iri in boundary:
                 missing = [m for m in missing if m != "measured_value"]
             if missing:

@@ -172,6 +172,8 @@ def wire(instances: Mapping[str, ComponentInstance]) -> tuple[list[Connection], 
             source_node = instance.bindings.get(mapping.source)
             where = f"input {mapping.port} of {instance.signature.id} at {instance.node}"
             if source_node is None:
+                if mapping.port in instance.model_class.fallback_inputs():
+                    continue  # its parameter stands in
                 unconnected.append(UnconnectedInput(
                     iri, f"{where}: no {mapping.source} node matched, so nothing feeds it", source_modelled=False))
                 continue
@@ -213,15 +215,23 @@ def measured_outputs(connections: Sequence[Connection], instances: Mapping[str, 
 
 def split_parameters(
     instances: Mapping[str, ComponentInstance], measured: Mapping[str, frozenset[str]],
+    connections: Sequence[Connection],
 ) -> tuple[tuple[ParameterRef, ...], tuple[ParameterRef, ...]]:
     """(mapped, estimated): every parameter of ``instances`` with the value the graph maps to it, or
     the value its model fixes given its ``measured`` outputs
     (:meth:`~service.components.component.ComponentModel.parameters_fixed_by_measurement`), or
-    without a value, to be estimated (Eq. 2); by component IRI, then in the model's parameter order."""
+    without a value, to be estimated (Eq. 2); by component IRI, then in the model's parameter order.
+    A parameter standing in for an input that ``connections`` feed is neither."""
+    fed = defaultdict(set)
+    for c in connections:
+        fed[c.target].add(c.target_port)
     mapped, estimated = [], []
     for iri, instance in sorted(instances.items()):
         fixed = instance.model_class.parameters_fixed_by_measurement(measured[iri]) | instance.mapped_parameters
+        replaced = {p for port, p in instance.model_class.fallback_inputs().items() if port in fed[iri]}
         for spec in instance.model_class.parameters:
+            if spec.name in replaced:
+                continue
             if spec.name in fixed:
                 mapped.append(ParameterRef(iri, spec, fixed[spec.name]))
             else:

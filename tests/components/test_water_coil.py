@@ -65,3 +65,18 @@ def test_heating_and_cooling_coils_differ_only_in_the_supply_water_prior():
         assert cls.parameters[1:] == WaterCoil.parameters[1:]
     assert HeatingWaterCoil.parameter("supply_water_temperature").lower > 30.0
     assert CoolingWaterCoil.parameter("supply_water_temperature").upper < 20.0
+
+
+def test_a_fed_supply_water_temperature_drives_the_heat_and_the_parameter_stands_in_otherwise(run_model, params_for):
+    base = {"valve_position": np.array([0.6]), "inlet_air_temperature": np.array([15.0]),
+            "air_mass_flow": np.array([0.8])}
+    params = params_for(HeatingWaterCoil, supply_water_temperature=60.0)
+
+    def heat(inputs):
+        return run_model(HeatingWaterCoil, params, inputs)[0]["heat_rate"][0]
+
+    from_parameter = heat(base)
+    assert heat({**base, "supply_water_temperature": np.array([60.0])}) == pytest.approx(from_parameter, rel=1e-12)
+    # ε-NTU: the heat is proportional to the inlet temperature difference at a fixed flow
+    assert heat({**base, "supply_water_temperature": np.array([80.0])}) == pytest.approx(
+        from_parameter * (80.0 - 15.0) / (60.0 - 15.0), rel=1e-9)

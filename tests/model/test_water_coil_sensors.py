@@ -1,0 +1,87 @@
+"""A command-driven water coil reads the water sensors the graph gives it: a supply water temperature
+sensor upstream of its valve feeds the coil (its parameter is then not estimated), a position sensor
+on the valve reads the stem, and neither is taken for the coil's air inlet."""
+
+import pytest
+
+from service.graph.store import GraphStore
+from service.model.assembly import assemble
+from service.model.effect_splicing import EffectRequest
+from service.resources import examples_dir
+
+EX = "https://example.org/flexlab-x3a#"
+
+WATER_SENSORS = {
+    "saref": """
+ex:hot_water_supply_sensor a s4bldg:Sensor ;
+    saref:observes ex:hot_water_supply_temperature ;
+    saref:isMeasuredIn unit:DEG_C ;
+    gt:timeSeriesId "hot water supply" ;
+    fso:suppliesFluidTo ex:heating_coil_valve .
+ex:hot_water_supply_temperature a saref:Temperature .
+ex:heating_valve_position_sensor a s4bldg:Sensor ;
+    saref:observes ex:heating_coil_valve_position ;
+    saref:isMeasuredIn unit:UNITLESS ;
+    gt:timeSeriesId "heating valve position" .
+""",
+    "brick": """
+ex:hot_water_supply_sensor a brick:Entering_Hot_Water_Temperature_Sensor ;
+    brick:isPointOf ex:heating_coil ;
+    brick:hasUnit unit:DEG_C ;
+    ref:hasExternalReference [ a ref:TimeseriesReference ; ref:hasTimeseriesId "hot water supply" ] .
+ex:hot_water_return_sensor a brick:Leaving_Hot_Water_Temperature_Sensor ;
+    brick:isPointOf ex:heating_coil ;
+    brick:hasUnit unit:DEG_C ;
+    ref:hasExternalReference [ a ref:TimeseriesReference ; ref:hasTimeseriesId "hot water return" ] .
+ex:heating_valve_position_sensor a brick:Valve_Position_Sensor ;
+    brick:isPointOf ex:heating_coil_valve ;
+    brick:hasUnit unit:PERCENT ;
+    ref:hasExternalReference [ a ref:TimeseriesReference ; ref:hasTimeseriesId "heating valve position" ] .
+""",
+}
+
+
+@pytest.fixture(scope="module")
+def store():
+    store = GraphStore.embedded(None)
+    for name, folder in (("saref", "flexlab_ahu"), ("brick", "flexlab_ahu_brick")):
+        text = (examples_dir() / folder / "model.ttl").read_text(encoding="utf-8")
+        store.load_model(name, (text + WATER_SENSORS[name]).encode())
+    return store
+
+
+def _wires(model):
+    name = {iri: c.node.removeprefix(EX) for iri, c in model.components.items()}
+    return {(name[c.source], c.source_port, name[c.target], c.target_port) for c in model.connections}
+
+
+@pytest.mark.parametrize("name", ["saref", "brick"])
+def test_a_supply_water_sensor_feeds_the_coil_and_its_position_sensor_is_a_target(store, name):
+    """In Brick, the coil's entering hot water point is placed upstream of its valve; its leaving water
+    point is a column nothing reads."""
+    model = assemble(store, name)
+    wires = _wires(model)
+    assert ("hot_water_supply_sensor", "measured_value", "heating_coil", "supply_water_temperature") in wires
+    # the water sensor reaches the coil through its valve: it is not the coil's air inlet
+    assert ("cooling_coil", "outlet_air_temperature", "heating_coil", "inlet_air_temperature") in wires
+    assert ("heating_coil", "valve_position", "heating_valve_position_sensor", "measured_value") in wires
+    assert model.component_for_node(EX + "heating_valve_position_sensor").iri in model.targets
+    assert model.component_for_node(EX + "hot_water_supply_sensor").iri in model.boundary_inputs
+    estimated = {(ref.component, ref.name) for ref in model.estimated_parameters}
+    heating, cooling = (model.component_for_node(EX + n).iri for n in ("heating_coil", "cooling_coil"))
+    assert (heating, "supply_water_temperature") not in estimated  # measured instead
+    assert (cooling, "supply_water_temperature") in estimated  # no sensor on the chilled water
+    assert (heating, "water_side_conductance") in estimated
+    if name == "brick":
+        assert "hot_water_return_sensor: measured, but no component reads it (what it drives or sets is not in the " \
+            "model): left out, its column is not needed" in model.notes
+
+
+@pytest.mark.parametrize(("effect", "position_reads_command"), [("ValveLeakage", True), ("ValveStuck", False)])
+def test_a_leak_leaves_the_position_reading_at_the_command_a_stuck_stem_does_not(store, effect, position_reads_command):
+    model = assemble(store, "saref", extra_effects=[EffectRequest(effect, EX + "heating_coil_valve")])
+    sensor = model.component_for_node(EX + "heating_valve_position_sensor").iri
+    feeds = {(model.components[c.source].signature.id, c.source_port)
+             for c in model.connections if c.target == sensor}
+    assert feeds == ({("CommandSignal", "measured_value")} if position_reads_command
+                     else {("HeatingCoil", "valve_position")})
