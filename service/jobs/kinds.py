@@ -1,4 +1,4 @@
-"""The job kinds of the HTTP service — assemble, calibrate, diagnose, add-effect — each a thin
+"""The job kinds of the HTTP service — assemble, calibrate, compare, diagnose, add-effect — each a thin
 wrapper of its workflow (:mod:`service.workflows`) that reports progress and names its results."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from service.workflows.effects import add_effect_version
 from service.workflows.requests import AddEffectRequest, AssembleRequest, CalibrateRequest, DiagnoseRequest
 from service.workflows.runs import assemble_model, calibrate_model, diagnose_model, result_links
 
-__all__ = ["assemble_job", "calibrate_job", "diagnose_job", "add_effect_job", "JOB_KINDS"]
+__all__ = ["assemble_job", "calibrate_job", "compare_job", "diagnose_job", "add_effect_job", "JOB_KINDS"]
 
 
 def assemble_job(store: GraphStore, request: AssembleRequest, context: WorkContext) -> JobResult:
@@ -32,15 +32,22 @@ def calibrate_job(store: GraphStore, request: CalibrateRequest, context: WorkCon
     return JobResult(outcome.record.to_dict(), result_links(store, request.model, outcome.record.run_id))
 
 
-def diagnose_job(store: GraphStore, request: DiagnoseRequest, context: WorkContext) -> JobResult:
+def diagnose_job(store: GraphStore, request: DiagnoseRequest, context: WorkContext, *,
+                 rank_effects: bool = True) -> JobResult:
     """Diagnose the model on its measurement upload, its phases reported as progress (a cancel stops
     it at the next phase). One worker process: the job already runs beside the server's other work
-    (or in a pool process, or on a Dask worker)."""
+    (or in a pool process, or on a Dask worker). ``rank_effects`` False: compare and locate only."""
     data = context.measurements(request.measurements)
-    report = diagnose_model(store, request, data, on_progress=context.report, workers=1)
+    report = diagnose_model(store, request, data, on_progress=context.report, workers=1, rank_effects=rank_effects)
     diagnosis = f"{report.run_id}-diagnosis"  # its page shows the fit, the failures and the effects
     links = result_links(store, request.model, report.run_id, page=diagnosis)
     return JobResult(report.to_dict(), links | {"diagnosis_graph": store.run_graph(diagnosis).value})
+
+
+def compare_job(store: GraphStore, request: DiagnoseRequest, context: WorkContext) -> JobResult:
+    """Calibrate on train, compare on test and locate the failures, without testing the effect
+    catalog (``graphtwin compare``): a diagnosis's first two steps, written as a diagnosis is."""
+    return diagnose_job(store, request, context, rank_effects=False)
 
 
 def add_effect_job(store: GraphStore, request: AddEffectRequest, context: WorkContext) -> JobResult:
@@ -54,5 +61,6 @@ def add_effect_job(store: GraphStore, request: AddEffectRequest, context: WorkCo
 #: Every job kind of the service, by the name its route and records use.
 JOB_KINDS = {
     "assemble": JobKind(AssembleRequest, assemble_job), "calibrate": JobKind(CalibrateRequest, calibrate_job),
-    "diagnose": JobKind(DiagnoseRequest, diagnose_job), "add-effect": JobKind(AddEffectRequest, add_effect_job),
+    "compare": JobKind(DiagnoseRequest, compare_job), "diagnose": JobKind(DiagnoseRequest, diagnose_job),
+    "add-effect": JobKind(AddEffectRequest, add_effect_job),
 }

@@ -57,7 +57,7 @@ def test_health_and_the_openapi_document_list_every_resource(client):
     assert health.status_code == 200 and health.json()["backend"] == "embedded"
     paths = client.get("/openapi.json").json()["paths"]
     for path in ("/models/{name}", "/models/{name}/measurements", "/sparql", "/sparql/update", "/queries/{name}",
-                 "/jobs/calibrate", "/jobs/diagnose", "/jobs/add-effect", "/jobs/assemble", "/jobs/{job_id}/cancel"):
+                 "/jobs/calibrate", "/jobs/compare", "/jobs/diagnose", "/jobs/add-effect", "/jobs/assemble", "/jobs/{job_id}/cancel"):
         assert path in paths
     assert "text/turtle" in paths["/models/{name}"]["put"]["requestBody"]["content"]
     # the statuses a route can answer are documented: reads need a token when reads are not open
@@ -664,8 +664,8 @@ def test_a_job_whose_upload_is_gone_is_refused_at_resubmission_and_an_unknown_ki
         refused = client.post(f"/jobs/{gone.id}/resubmit", headers=auth)
         assert refused.status_code == 404 and "0123456789abcdef" in refused.json()["detail"], refused.json()
         assert client.get("/jobs").json()["count"] == 1  # nothing queued
-        unknown = client.post("/jobs/compare", headers=auth, json={"model": "case"})
-        assert unknown.status_code == 404 and "/jobs/calibrate, /jobs/diagnose" in unknown.json()["detail"]
+        unknown = client.post("/jobs/simulate", headers=auth, json={"model": "case"})
+        assert unknown.status_code == 404 and "/jobs/calibrate, /jobs/compare, /jobs/diagnose" in unknown.json()["detail"]
 
 
 def test_a_body_that_is_no_json_is_refused_naming_where_it_breaks(client, auth):

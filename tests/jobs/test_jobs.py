@@ -274,7 +274,7 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
 
     def fake_diagnose(diag_store, model_name, data_path, *, train, test, seed, on_progress, workers, only_when,
                       start_from, rank_effects):
-        calls.append((model_name, data_path, train, test, seed, workers, list(only_when), start_from))
+        calls.append((model_name, data_path, train, test, seed, workers, list(only_when), start_from, rank_effects))
         on_progress("calibrating the base model")
         gate.wait(10)
         diag_store.write_graph(diag_store.run_graph("m-point-0123abcd"), [_triple(ox.NamedNode(EX + "r"), "run")])
@@ -282,19 +282,23 @@ def test_diagnose_job_reports_its_phases_writes_its_graphs_and_stops_on_cancel(r
         return _Report()
 
     monkeypatch.setitem(sys.modules, "service.diagnosis.loop", types.SimpleNamespace(diagnose=fake_diagnose))
-    runner = runners(store, records, {"diagnose": JOB_KINDS["diagnose"]}, locate_measurements={"u1": data}.__getitem__)
+    kinds = {kind: JOB_KINDS[kind] for kind in ("diagnose", "compare")}
+    runner = runners(store, records, kinds, locate_measurements={"u1": data}.__getitem__)
     request = DiagnoseRequest(model="m", measurements="u1", train="/2026-01-12T12:00", test="2026-01-12T12:10/", seed=3,
                               only_when=["x > 1"], start_from="m0")
     gate.set()
     done = _wait(runner, runner.submit("diagnose", request).id)
     assert done.status == "succeeded" and done.result == {"summary": "nothing significant is missing", "score": 2.0}
-    assert calls == [("m", data, (None, "2026-01-12T12:00"), ("2026-01-12T12:10", None), 3, 1, ["x > 1"], "m0")], \
+    assert calls == [("m", data, (None, "2026-01-12T12:00"), ("2026-01-12T12:10", None), 3, 1, ["x > 1"], "m0", True)], \
         "one diagnosis worker, the operating filter and the start passed on"
     assert [p["message"] for p in done.progress][1:3] == ["calibrating the base model", "testing the effect catalog"]
     assert done.links["run_graph"] == store.run_graph("m-point-0123abcd").value
     assert done.links["calibrated_parameters"] == "/queries/calibrated-parameters?model=m"
     assert done.links["report"] == "/runs/m-point-0123abcd-diagnosis/report"  # the job leads to its page
     assert store.run_graph("m-point-0123abcd") in store.backend.graphs()
+    compared = _wait(runner, runner.submit("compare", request).id)  # the same, without the effect catalog
+    assert compared.status == "succeeded" and calls[-1][-1] is False and calls.pop()[:-1] == calls[0][:-1]
+    assert compared.links["report"] == "/runs/m-point-0123abcd-diagnosis/report"
 
     store.backend.drop_graph(store.run_graph("m-point-0123abcd"))
     gate.clear()

@@ -1,4 +1,4 @@
-"""``/jobs``: assemble, calibrate, diagnose and add-effect run as jobs (202 and the job at once;
+"""``/jobs``: assemble, calibrate, compare, diagnose and add-effect run as jobs (202 and the job at once;
 its status, progress, result and links at ``/jobs/{id}``), cancelled or resubmitted by id."""
 
 from __future__ import annotations
@@ -63,6 +63,16 @@ def submit_calibrate(body: CalibrateRequest, response: Response, service: Servic
     return _submit(service, "calibrate", body, response)
 
 
+@router.post("/jobs/compare", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
+             responses=_JOB_ERRORS)
+def submit_compare(body: DiagnoseRequest, response: Response, service: ServiceDep) -> dict:
+    """Calibrate on train, compare on test and locate the failures (sensor, flow path, regime, time)
+    without testing the effect catalog: a diagnosis's first two steps, in seconds. Checked as a
+    diagnosis is before anything is queued."""
+    _check_fit(service, body)
+    return _submit(service, "compare", body, response)
+
+
 @router.post("/jobs/diagnose", response_model=JobPublic, status_code=202, dependencies=[WriteAccess],
              responses=_JOB_ERRORS)
 def submit_diagnose(body: DiagnoseRequest, response: Response, service: ServiceDep) -> dict:
@@ -90,8 +100,8 @@ def submit_add_effect(body: AddEffectRequest, response: Response, service: Servi
 @router.post("/jobs/{kind}", include_in_schema=False, responses=error_responses(404))
 def unknown_job_kind(kind: str) -> None:
     """A job kind the service does not run (it was a 405 naming nothing)."""
-    raise ApiError(404, f"no job kind {kind!r}: POST /jobs/assemble, /jobs/calibrate, /jobs/diagnose or "
-                        "/jobs/add-effect")
+    raise ApiError(404, f"no job kind {kind!r}: POST /jobs/assemble, /jobs/calibrate, /jobs/compare, "
+                        "/jobs/diagnose or /jobs/add-effect")
 
 
 @router.get("/jobs", response_model=JobList, dependencies=[ReadAccess], responses=error_responses(401, 403))
