@@ -19,6 +19,7 @@ import pyoxigraph as ox
 
 from service.components.library import SignatureLibrary
 from service.components.measuring_device import MeasuringDevice
+from service.components.water_coil import WaterCoil
 from service.errors import AssemblyError, IncompleteModelError, UnitError
 from service.graph.namespaces import RDFS, distinct_local_names
 from service.graph.store import GraphStore
@@ -26,7 +27,7 @@ from service.graph.units import closest_unit_hint, unit_spec
 from service.graph.vocabulary import misspelt_terms
 from service.matching.matcher import MatchSession, match_signature, missing_class_report
 from service.matching.signature import QUANTITY_UNITS, PatternTriple, Rule, Signature, required_outward
-from service.model.assembled_model import AssembledModel, ComponentInstance, mapped_values_outside_bounds
+from service.model.assembled_model import AssembledModel, ComponentInstance, Connection, mapped_values_outside_bounds
 from service.model.effect_splicing import EffectRequest, recorded_effects, splice_effect
 from service.model.wiring import (
     MatchValues,
@@ -144,6 +145,7 @@ def assemble(
     devices -= set(unread)
     boundary = tuple(sorted(i for i in devices if i not in fed))
     targets = tuple(sorted(i for i in devices if i in fed))
+    notes += _coil_outlet_notes(store, model_name, instances, connections)
     mapped, estimated = split_parameters(instances, measured_outputs(connections, instances, targets),
                                          connections)
     notes += [f"{problem}: a calibration refuses it; fix the value (or its unit) in the model graph"
@@ -154,6 +156,28 @@ def assemble(
         estimated_parameters=estimated, building_graph=str(store.model_graph(model_name).value),
         notes=tuple(notes),
     )
+
+
+def _coil_outlet_notes(store: GraphStore, model_name: str, instances: Mapping[str, ComponentInstance],
+                       connections: Iterable[Connection]) -> list[str]:
+    """A measuring device read as a water coil's outlet air where the coil's one node feeds more than
+    one node: its water leaves by that node too, so the device may read the water (a return water
+    sensor), which the coil model does not give. One sentence each, naming how to say which."""
+    notes = []
+    for c in connections:
+        coil, device = instances[c.source], instances[c.target]
+        if c.source_port != "outlet_air_temperature" or not issubclass(coil.model_class, WaterCoil) or \
+                not issubclass(device.model_class, MeasuringDevice):
+            continue
+        fed = sorted({row["to"].value for row in store.run_named_query(
+            "flow-edges", dataset=model_name, **{"from": ox.NamedNode(coil.node)}) if row["kind"].value == "fluid"})
+        if len(fed) > 1:
+            notes.append(
+                f"{short_name(device.node)}: read as the outlet air of {short_name(coil.node)}, whose one node feeds "
+                f"{len(fed)} nodes ({', '.join(map(short_name, fed))}): its water leaves there too. If "
+                f"{short_name(device.node)} reads the water, which this coil model does not give, state it with "
+                f"fso:returnsFluidTo instead of fso:suppliesFluidTo (it is then left out)")
+    return notes
 
 
 def _class_depth(store: GraphStore, dataset: list[ox.NamedNode]) -> ClassDepth:

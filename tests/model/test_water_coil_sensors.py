@@ -85,3 +85,27 @@ def test_a_leak_leaves_the_position_reading_at_the_command_a_stuck_stem_does_not
              for c in model.connections if c.target == sensor}
     assert feeds == ({("CommandSignal", "measured_value")} if position_reads_command
                      else {("HeatingCoil", "valve_position")})
+
+
+@pytest.mark.parametrize("predicate", ["fso:suppliesFluidTo", "fso:returnsFluidTo"])
+def test_a_sensor_on_a_second_outlet_of_a_one_node_coil_is_flagged_or_left_out(predicate):
+    """A return water sensor after a coil that is one node (air and water) reads, to the pattern, the
+    coil's outlet air: the assembly says so and how to state it; stated as returned water, it is left out."""
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text(encoding="utf-8") + f"""
+ex:hot_water_return_sensor a s4bldg:Sensor ;
+    saref:observes ex:hot_water_return_temperature ;
+    saref:isMeasuredIn unit:DEG_C ;
+    gt:timeSeriesId "hot water return" .
+ex:hot_water_return_temperature a saref:Temperature .
+ex:heating_coil {predicate} ex:hot_water_return_sensor .
+"""
+    store = GraphStore.embedded(None)
+    store.load_model("return", text.encode())
+    model = assemble(store, "return")
+    flagged = [n for n in model.notes if n.startswith("hot_water_return_sensor: read as the outlet air of heating_coil")]
+    if predicate == "fso:suppliesFluidTo":
+        assert len(flagged) == 1 and "feeds 2 nodes (hot_water_return_sensor, supply_fan)" in flagged[0]
+        assert model.component_for_node(EX + "hot_water_return_sensor").iri in model.targets
+    else:
+        assert not flagged and model.component_for_node(EX + "hot_water_return_sensor") is None
+    assert not any("supply_air_temperature_sensor: read as" in n for n in model.notes)
