@@ -112,6 +112,9 @@ class MeasurementsInfo(BaseModel):
     step_s: float = Field(description="the regular time step, s")
     columns: dict[str, str] = Field(description="device IRI → CSV column")
     warnings: list[str]
+    sha256: str | None = Field(default=None, description="the file's SHA-256 (absent for uploads kept before it was)")
+    new: bool | None = Field(default=None, description="on upload: false when the same file was uploaded before for this "
+                             "model, whose id is given back (200 instead of 201)")
 
 
 class MeasurementsList(BaseModel):

@@ -3,6 +3,7 @@ kept as ``<root>/<model>/<id>.csv`` with ``<id>.json`` describing them."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -35,7 +36,9 @@ class MeasurementUploads:
             leftover.unlink(missing_ok=True)
 
     def save(self, store: GraphStore, model_name: str, data: bytes, *, allow_gaps: bool = False) -> dict:
-        """Validate ``data`` against ``model_name``'s assembled model and keep it.
+        """Validate ``data`` against ``model_name``'s assembled model and keep it; the same bytes
+        uploaded again for the model keep their first id (``"new": false``, the description
+        refreshed against the model as it is now).
 
         :raises MeasurementError: every problem of the file (nothing is kept then).
         :raises AssemblyError: the model does not assemble.
@@ -49,7 +52,9 @@ class MeasurementUploads:
             raise AssemblyError(f"model {model_name} does not assemble: {exc}") from None
         folder = self.root / model_name
         folder.mkdir(parents=True, exist_ok=True)
-        upload_id = uuid.uuid4().hex[:16]
+        digest = hashlib.sha256(data).hexdigest()
+        earlier = next((info["id"] for info in self.list(model_name) if self._digest(folder, info) == digest), None)
+        upload_id = earlier or uuid.uuid4().hex[:16]
         handle, temporary = tempfile.mkstemp(dir=folder, prefix=_TEMPORARY_PREFIX, suffix=".csv")
         try:
             with os.fdopen(handle, "wb") as out:
@@ -66,14 +71,21 @@ class MeasurementUploads:
                 **{key: np.datetime_as_string(measured.timestamps[i], unit="s") + ("Z" if measured.utc else "")
                    for key, i in (("start", 0), ("end", -1))},
                 "step_s": measured.step_s, "columns": dict(measured.columns), "warnings": list(measured.warnings),
+                "sha256": digest,
             }
             (folder / f"{upload_id}.json").write_text(json.dumps(info, indent=1), encoding="utf-8")
             os.replace(temporary, folder / f"{upload_id}.csv")
         except BaseException:
             Path(temporary).unlink(missing_ok=True)
-            (folder / f"{upload_id}.json").unlink(missing_ok=True)
+            if earlier is None:
+                (folder / f"{upload_id}.json").unlink(missing_ok=True)
             raise
-        return info
+        return info | {"new": earlier is None}
+
+    @staticmethod
+    def _digest(folder: Path, info: dict) -> str:
+        """An upload's SHA-256, from its description (or its file, for uploads described before it was kept)."""
+        return info.get("sha256") or hashlib.sha256((folder / f"{info['id']}.csv").read_bytes()).hexdigest()
 
     @staticmethod
     def _refuse_gaps(measured, model_name: str) -> None:

@@ -2,6 +2,7 @@
 with the store unchanged after each refusal."""
 
 import csv
+import hashlib
 import io
 import threading
 import time
@@ -179,6 +180,12 @@ def test_measurements_are_validated_kept_and_listed(client, auth, case_csv, sett
     listed = client.get("/models/case/measurements").json()
     assert [m["id"] for m in listed["data"]] == [info["id"]]
     assert client.get("/models/case").json()["measurements"] == [info["id"]]
+    assert info["new"] and info["sha256"] == hashlib.sha256(case_csv.read_text().encode()).hexdigest()
+    again = _upload_csv(client, auth, case_csv.read_text())  # the same file: its first id, nothing added
+    assert again.status_code == 200 and again.json()["id"] == info["id"] and not again.json()["new"]
+    assert client.get("/models/case").json()["measurements"] == [info["id"]]
+    other = _upload_csv(client, auth, case_csv.read_text().replace(",", ", ", 1))
+    assert other.status_code == 201 and other.json()["id"] != info["id"]
 
 
 def _bad_csv(case_csv, problem: str) -> str:

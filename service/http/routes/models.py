@@ -140,16 +140,18 @@ def _save_measurements(service: Service, name: str, data: bytes, allow_gaps: boo
 @router.post("/models/{name}/measurements", response_model=MeasurementsInfo, status_code=201, tags=["models"],
              dependencies=[WriteAccess], openapi_extra=_CSV_BODY,
              responses=error_responses(401, 403, 404, 413, 415, 422))
-async def post_measurements(name: str, request: Request, service: ServiceDep,
+async def post_measurements(name: str, request: Request, response: Response, service: ServiceDep,
                             allow_gaps: Annotated[bool, Query(description="accept values missing over long gaps")] = False) -> dict:
     """Upload measurements (CSV, docs/data.md: the data contract) for model ``name``; the id names
-    them in jobs."""
+    them in jobs. The same file uploaded again keeps its id (200, ``"new": false``)."""
     if request.headers.get("content-type", "").split(";")[0].strip().lower().startswith("multipart/"):
         raise UnsupportedFormatError(
             "measurements are the CSV itself as the request body (curl --data-binary @data.csv -H 'Content-Type: "
             "text/csv'), not a multipart form (curl -F)")
     data = await request.body()  # held to the route's limit by the request gate
-    return await run_in_threadpool(_save_measurements, service, name, data, allow_gaps)
+    saved = await run_in_threadpool(_save_measurements, service, name, data, allow_gaps)
+    response.status_code = 201 if saved["new"] else 200
+    return saved
 
 
 @router.get("/models/{name}/measurements", response_model=MeasurementsList, tags=["models"],
