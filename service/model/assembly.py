@@ -254,7 +254,7 @@ def _unit_notes(instance: ComponentInstance) -> list[str]:
     unit, name = instance.measurement.unit, short_name(instance.node)
     if unit is None:
         return [f"{name}: declares no unit (saref:isMeasuredIn, in Brick brick:hasUnit): its column cannot "
-                "be read"]
+                f"be read (add <{instance.node}> saref:isMeasuredIn <a QUDT unit IRI> .)"]
     try:
         declared = unit_spec(unit)
     except UnitError:

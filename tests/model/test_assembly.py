@@ -399,7 +399,7 @@ def test_a_sensor_unit_graphtwin_cannot_read_is_a_note_at_assembly():
         "coil_outlet_air_temperature_sensor: its unit http://qudt.org/vocab/unit/PERCENT is a unit of fraction, but "
         "the device measures a temperature: its column cannot be read",
         "coil_outlet_water_temperature_sensor: declares no unit (saref:isMeasuredIn, in Brick brick:hasUnit): its "
-        "column cannot be read"]
+        f"column cannot be read (add <{EX}coil_outlet_water_temperature_sensor> saref:isMeasuredIn <a QUDT unit IRI> .)"]
 
 
 def test_a_misspelt_class_that_leaves_its_node_out_is_an_incomplete_model_and_with_leave_a_note():
