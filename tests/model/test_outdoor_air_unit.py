@@ -39,10 +39,13 @@ ex:oad_cmd a brick:Damper_Position_Command ; brick:hasUnit unit:PERCENT ;
 """
 
 
-@pytest.mark.parametrize("damper", [False, True])
-def test_the_outdoor_air_sensor_feeds_the_first_coil_of_a_unit_without_return_air(damper):
+ON_THE_COIL = "\nex:oat brick:isPointOf ex:heating_coil .\n"  # what the assumption says to state
+
+
+@pytest.mark.parametrize("extra", ["", DAMPER, ON_THE_COIL], ids=["unit point", "isolation damper", "coil point"])
+def test_the_outdoor_air_sensor_feeds_the_first_coil_of_a_unit_without_return_air(extra):
     store = GraphStore.embedded(None)
-    store.load_model("doas", (UNIT + (DAMPER if damper else "")).encode())
+    store.load_model("doas", (UNIT + extra).encode())
     model = assemble(store, "doas")
     name = {iri: c.node.removeprefix(NS) for iri, c in model.components.items()}
     wires = {(name[c.source], c.source_port, name[c.target], c.target_port) for c in model.connections}
@@ -50,3 +53,6 @@ def test_the_outdoor_air_sensor_feeds_the_first_coil_of_a_unit_without_return_ai
     assert ("heating_coil", "outlet_air_temperature", "supply_fan", "inlet_air_temperature") in wires
     assert [name[t] for t in model.targets] == ["sat"]
     assert not any("oa_damper" in n for n in name.values())  # the damper is passed, not modelled
+    assumed = store.query("""PREFIX gt: <https://w3id.org/graphtwin/ontology#>
+        SELECT ?about WHERE { ?a a gt:AlignmentAssumption ; gt:assumptionAbout ?about }""", model="doas")
+    assert (NS + "oat" in {r["about"].value for r in assumed}) == (extra != ON_THE_COIL)  # a point of the unit only
