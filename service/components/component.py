@@ -129,6 +129,10 @@ class ComponentModel:
     #: An effect's parameter that is a valve's stem position (a leak's, a stuck stem's): the diagnosis
     #: states it too as the flow share its host's valve passes there (:meth:`valve_flow_share`).
     stem_position_parameter: ClassVar[str | None] = None
+    #: An effect whose size is a share of its host's quantity: the host's parameters that scale that
+    #: quantity (a motor's heat, a share of the fan's nominal power). Where the host has none of them
+    #: from the graph or a fit (an assumed default), the share's upper bound is no physical limit.
+    share_of_host_parameters: ClassVar[tuple[str, ...]] = ()
     #: A component modelling a valve: the parameters that shape its :meth:`valve_flow_share`.
     valve_characteristic: ClassVar[tuple[str, ...]] = ()
     #: How long the states take to forget their start [s], at the slowest the priors allow: the

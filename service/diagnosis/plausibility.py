@@ -81,18 +81,31 @@ def flow_share_text(model: AssembledModel, node: str, theta: np.ndarray, standar
             f"coefficient ({at}{spread})")
 
 
+def _share_of_assumed(model: AssembledModel, host, effect: str) -> bool:
+    """The effect component ``effect`` sizes a share of a quantity of ``host`` whose scale the graph
+    does not state and no fit estimates (its parameters fixed at their defaults: a fan's nominal
+    power where no meter measures it)."""
+    scaled_by = model.components[effect].model_class.share_of_host_parameters
+    if not scaled_by or host is None:
+        return False
+    estimated = {(r.component, r.name) for r in model.estimated_parameters}
+    return not any(p in host.mapped_parameters or (host.iri, p) in estimated for p in scaled_by)
+
+
 def demotion_reasons(model: AssembledModel, node: str, theta: np.ndarray, effect_columns: list[int]) -> str:
     """Why the ranking puts the effect at ``node`` (its parameters at ``effect_columns`` of ``model``'s
     estimated parameters, fitted to ``theta``) below the plausible ones; empty when nothing does."""
     refs = model.estimated_parameters
     reasons = []
+    host = _host(model, node, effect_columns)
     for j in effect_columns:
         spec = refs[j].spec
         side = at_bound(theta[j], spec)
+        if side == "upper" and _share_of_assumed(model, host, refs[j].component):
+            continue  # a share of a quantity no one stated or measured: its bound is no limit of the physics
         if side:
             bound = quantity_text(getattr(spec, side), spec.unit, "g")
             reasons.append(f"{refs[j].name} fits only at its {side} bound {bound}")
-    host = _host(model, node, effect_columns)
     for j in effect_columns:
         heat_parameter = model.components[refs[j].component].model_class.heat_rate_parameter
         spec = refs[j].spec

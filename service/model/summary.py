@@ -88,18 +88,21 @@ def print_assembly(model: AssembledModel, console: Console | None = None) -> Non
     parameters = Table(title="Parameters")
     for column in ("component", "parameter", "unit", "value / bounds"):
         parameters.add_column(column, overflow="fold")
-    for ref in model.mapped_parameters:
-        parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
-                           f"{_value_source(model, ref)} {ref.value:g}")
-    for ref in model.estimated_parameters:
+    def states_none(ref) -> str:
         stating = model.components[ref.component].signature.stating_property(ref.name)
+        return f"; the graph states none ({compact_iri(stating)})" if stating else ""
+
+    for ref in model.mapped_parameters:
+        source = _value_source(model, ref)
         parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
-                           f"estimate in [{ref.spec.lower:g}, {ref.spec.upper:g}]"
-                           + (f"; the graph states none ({compact_iri(stating)})" if stating else ""))
+                           f"{source} {ref.value:g}" + (states_none(ref) if source == "fixed" else ""))
+    for ref in model.estimated_parameters:
+        parameters.add_row(without_model(ref.component), ref.name, ref.spec.unit,
+                           f"estimate in [{ref.spec.lower:g}, {ref.spec.upper:g}]" + states_none(ref))
     console.print(parameters)
     fixed = sum(_value_source(model, ref) == "fixed" for ref in model.mapped_parameters)
     console.print(f"{len(model.connections)} connections, {len(model.boundary_inputs)} boundary inputs, "
                   f"{len(model.targets)} targets, {len(model.mapped_parameters) - fixed} mapped, "
-                  f"{fixed} fixed by what is measured and {len(model.estimated_parameters)} estimated parameters")
+                  f"{fixed} fixed by what is or is not measured and {len(model.estimated_parameters)} estimated parameters")
     for note in model.notes:
         console.print(f"[yellow]note:[/yellow] {note}")

@@ -191,6 +191,29 @@ def test_an_effect_fitted_only_at_a_bound_other_than_its_null_or_without_a_heat_
     assert ranked[1].to_dict()["demoted"].startswith("heat_gain fits only")
 
 
+@pytest.mark.parametrize(("example", "power_known"), [("flexlab_ahu", False), ("ventilation_case_study", True)])
+def test_a_motor_heat_at_its_upper_bound_is_demoted_only_where_the_fans_power_is_known(example, power_known):
+    """The motor heat is a share of the fan's power: with a power meter (the case study) a share at 1
+    is the physics' limit; with none and no nominal power stated (FLEXLAB), the power is an assumed
+    default, and a share at 1 says only that the heat exceeds it (a walkthrough's fault-free unit had
+    its motor heat demoted so and a sensor offset named instead)."""
+    from service.diagnosis.plausibility import demotion_reasons
+    from service.graph.store import GraphStore
+    from service.model.assembly import assemble
+    from service.model.effect_splicing import EffectRequest
+    from service.resources import examples_dir
+
+    store = GraphStore.embedded(None)
+    store.load_model("m", examples_dir() / example / "model.ttl")
+    fan = next(c.node for c in assemble(store, "m").components.values() if "Fan" in c.signature.id)
+    model = assemble(store, "m", extra_effects=[EffectRequest("FanMotorHeat", fan)])
+    column = next(j for j, r in enumerate(model.estimated_parameters) if r.name == "motor_heat_fraction")
+    theta = np.array([r.spec.default for r in model.estimated_parameters])
+    theta[column] = 1.0
+    assert demotion_reasons(model, fan, theta, [column]) == (
+        "motor_heat_fraction fits only at its upper bound 1" if power_known else "")
+
+
 def test_an_estimate_the_data_leave_anywhere_in_its_prior_is_called_not_identified():
     from service.components.component import Parameter
     from service.diagnosis.candidates import _estimate_text

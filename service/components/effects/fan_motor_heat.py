@@ -28,6 +28,8 @@ class FanMotorHeat(SplicedEffect):
                   "share of fan power heating the air beyond the base fan's, f_m", null=0.0),
     )
 
+    share_of_host_parameters = ("nominal_power",)
+
     def step(self, params, inputs, state, dt_s):
         rise = fan_heat_rise_k(params["motor_heat_fraction"], inputs["electric_power"], inputs["air_mass_flow"])
         return {"value_out": inputs["value_in"] + rise}
