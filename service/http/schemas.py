@@ -81,6 +81,8 @@ class BrickReportPublic(BaseModel):
     points_without_column: list[str]
     points_without_unit: list[str]
     temperature_points_off_path: list[str]
+    water_points_unread: list[str] = Field(description=(
+        "water temperature points no model reads (a coil's leaving water; a unit's or plant's supply water)"))
 
 
 class AssemblyCheck(BaseModel):

@@ -77,12 +77,14 @@ ORDER BY ?rule ?about ?assumption
 #: Measuring points and commands the Brick rules derived (02/03), with their column and unit if any,
 #: and whether a temperature point is on the flow path.
 _POINTS = _PREFIXES + """
-SELECT DISTINCT ?point ?series ?unit ?temperature ?on_path WHERE {
+SELECT DISTINCT ?point ?series ?unit ?temperature ?water ?on_path WHERE {
   GRAPH ?inferred { ?point saref:observes|saref:controls ?property ; gt:derivedByRule ?rule }
   FILTER(?rule IN ("02-brick-sensors.rq", "03-brick-commands.rq"))
   OPTIONAL { GRAPH ?inferred { ?point gt:timeSeriesId ?series } }
   OPTIONAL { GRAPH ?inferred { ?point saref:isMeasuredIn ?unit } }
   BIND(EXISTS { GRAPH ?inferred { ?point a gt:TemperatureSensor } } AS ?temperature)
+  BIND(EXISTS { GRAPH ?model { ?point a ?class } GRAPH ?ontology { ?class rdfs:subClassOf* brick:Water_Temperature_Sensor } }
+       AS ?water)
   BIND(EXISTS { GRAPH ?inferred { { ?point fso:suppliesFluidTo ?next } UNION { ?previous fso:suppliesFluidTo ?point } } } AS ?on_path)
 }
 ORDER BY ?point
@@ -135,12 +137,14 @@ class BrickReport:
     points_without_column: tuple[str, ...]
     points_without_unit: tuple[str, ...]
     temperature_points_off_path: tuple[str, ...]
+    water_points_unread: tuple[str, ...]
 
     @property
     def is_brick(self) -> bool:
         """Whether the model uses any Brick term the report could speak about."""
         return bool(self.unaligned_classes or self.unread_relations or self.assumptions
-                    or self.points_without_column or self.points_without_unit or self.temperature_points_off_path)
+                    or self.points_without_column or self.points_without_unit or self.temperature_points_off_path
+                    or self.water_points_unread)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -152,7 +156,7 @@ def _rule_terms() -> frozenset[str]:
 
 
 #: An IRI inside a sentence (up to the characters that end one there).
-_IRI = re.compile(r"https?://[^\s<>`'\"(),;]+")
+_IRI = re.compile(r"(?:https?://|urn:)[^\s<>`'\"(),;]+")
 
 
 #: Brick 1.x's own unit namespace, which Brick models state units in and QUDT does not know.
@@ -175,7 +179,7 @@ def _turtle(text: str, own: dict[str, str]) -> str:
         known, namespace = compact_iri(iri), namespace_of(iri)
         return known if known[0] != "<" or namespace not in own else f"{own[namespace]}:{local_name(iri)}"
 
-    return re.sub(r"<(https?://[^\s<>]+)>", lambda m: name(m.group(1)), text)
+    return re.sub(r"<((?:https?://|urn:)[^\s<>]+)>", lambda m: name(m.group(1)), text)
 
 
 def _short(iri: str) -> str:
@@ -260,13 +264,16 @@ def brick_report(store: GraphStore, model_name: str, official: frozenset[str] | 
         Assumption(row["about"].value, row["assumption"].value, row["resolved_by"].value, row["rule"].value)
         for row in store.query(_ASSUMPTIONS, substitutions={"inferred": graphs["inferred"]})
     )
-    points = store.query(_POINTS, substitutions={"inferred": graphs["inferred"]})
+    points = store.query(_POINTS, substitutions=graphs)
     return BrickReport(
         model_name=model_name, unaligned_classes=classes, unread_relations=relations, assumptions=assumptions,
         points_without_column=tuple(sorted({r["point"].value for r in points if "series" not in r})),
         points_without_unit=tuple(sorted({r["point"].value for r in points if "unit" not in r})),
         temperature_points_off_path=tuple(sorted({
-            r["point"].value for r in points if r["temperature"].value == "true" and r["on_path"].value == "false"})),
+            r["point"].value for r in points if r["temperature"].value == "true" and r["on_path"].value == "false"
+            and r["water"].value == "false"})),
+        water_points_unread=tuple(sorted({
+            r["point"].value for r in points if r["water"].value == "true" and r["on_path"].value == "false"})),
     )
 
 
@@ -317,6 +324,9 @@ def print_brick_report(report: BrickReport, console: Console | None = None) -> N
          "state brick:hasUnit with a QUDT unit (a command in percent: unit:PERCENT; a fraction: unit:UNITLESS)"),
         ("Temperature points off the flow path (boundary inputs only)", report.temperature_points_off_path,
          "state which equipment's outlet they read (brick:isPointOf that equipment)"),
+        ("Water temperature points no model reads", report.water_points_unread,
+         "a coil model reads the water entering it (an entering or supply water point of the coil or its valve); "
+         "no model gives a coil's leaving water, nor says which coil a unit's or plant's supply water reaches"),
     ):
         if points:
             console.print(f"[bold]{title}[/bold]: {needed}")

@@ -51,6 +51,32 @@ ex:sat a brick:Supply_Air_Temperature_Sensor .
     assert set(by_class) == {"Humidifier"} and by_class["Humidifier"].unaligned == 1
 
 
+def test_a_coils_leaving_water_point_is_listed_as_read_by_no_model_and_urn_iris_print_short(tmp_path):
+    """A walkthrough's unit named its nodes with urn: IRIs (printed whole and cut mid-name at 80
+    columns) and its heating coil's leaving water point was told to state the point's equipment,
+    which it already did."""
+    text = (examples_dir() / "flexlab_ahu_brick" / "model.ttl").read_text(encoding="utf-8").replace(
+        "https://example.org/flexlab-x3a#", "urn:example:flexlab#") + """
+ex:hw_entering a brick:Entering_Hot_Water_Temperature_Sensor ; brick:isPointOf ex:heating_coil ; brick:hasUnit unit:DEG_C ;
+    ref:hasExternalReference [ a ref:TimeseriesReference ; ref:hasTimeseriesId "hw in" ] .
+ex:hw_leaving a brick:Leaving_Hot_Water_Temperature_Sensor ; brick:isPointOf ex:heating_coil ; brick:hasUnit unit:DEG_C ;
+    ref:hasExternalReference [ a ref:TimeseriesReference ; ref:hasTimeseriesId "hw out" ] .
+"""
+    store = GraphStore.embedded(None)
+    store.load_model("urn", text.encode())
+    report = brick_report(store, "urn")
+    assert report.water_points_unread == ("urn:example:flexlab#hw_leaving",)  # the entering one feeds the coil
+    assert report.temperature_points_off_path == ()
+    model = tmp_path / "urn.ttl"
+    model.write_text(text, encoding="utf-8")
+    result = CliRunner().invoke(app, ["brick-report", str(model), "--memory"], env={"COLUMNS": "80"})
+    assert result.exit_code == 0, result.output
+    flat = result.output.replace("│", "").replace("\n", "")
+    assert "@prefix : <urn:example:flexlab#>" in " ".join(flat.split())  # said once, under the assumptions
+    assert "urn:example:flexlab#outdoor" not in flat.replace(" ", "")  # nodes by their local names
+    assert "Water temperature points no model reads" in result.output
+
+
 
 
 @pytest.mark.skipif(not OFFICIAL_BRICK.is_file(), reason=f"the official Brick.ttl is not at {OFFICIAL_BRICK} (../shared)")
