@@ -299,9 +299,12 @@ def _explain(evidence: EffectEvidence, observed: dict[str, np.ndarray], null: di
     against_base = (f"against the base model it removes {100 * overall:.0f} % of the test error over all sensors"
                     if overall >= 0 else
                     f"against the base model the test error over all sensors grows {100 * -overall:.0f} %")
-    follows = (f"residual on {local_name(best)} follows what {what} adds (cosine {cosine:.2f}); it removes "
-               f"{100 * removed:.0f} % of that sensor's test error (the refit's other parameters kept)"
-               if np.any(c) else f"{what}, as fitted, adds nothing at any sensor (it sits at its null)")
+    if np.any(c):
+        follows = (f"residual on {local_name(best)} follows what {what} adds (cosine {cosine:.2f}); it removes "
+                   f"{100 * removed:.0f} % of that sensor's test error (the refit's other parameters kept)")
+    else:
+        follows = f"{what}, as fitted, adds nothing at any sensor (it sits at its null)"
+        against_base += " (the refit's other parameters moved it, not the effect)"
     evidence.explanation = (f"{lead}; " if lead else "") + f"{follows}; {against_base}; {fit_text}"
 
 

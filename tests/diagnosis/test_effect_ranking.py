@@ -313,6 +313,9 @@ def test_the_evidence_sentence_says_how_the_residual_follows_the_effect_or_that_
     assert evidence.explanation.endswith("against the base model it removes 40 % of the test error over all sensors; fit")
     _explain(evidence, observed, null, null, "E at n", "fit", "", {"a": 1.0, "b": 1.0})
     assert evidence.explanation.startswith("E at n, as fitted, adds nothing at any sensor (it sits at its null); ")
+    evidence.test_improvement = -0.99  # a walkthrough's refit landed elsewhere: not the effect's doing
+    _explain(evidence, observed, null, null, "E at n", "fit", "", {"a": 1.0, "b": 1.0})
+    assert "grows 99 % (the refit's other parameters moved it, not the effect); fit" in evidence.explanation
 
 
 def test_a_leaks_stem_position_is_also_said_as_the_share_of_the_open_flow_its_valve_passes():
