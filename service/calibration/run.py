@@ -196,8 +196,12 @@ def calibrated_start(store: GraphStore, start_from: str, model_name: str,
     if not runs:
         raise CalibrationError(f"start from {start_from!r}: its calibrated parameters ({', '.join(sorted(latest))}) include "
                                f"none that model {model_name} estimates")
-    note = (f"started from the latest calibration of {start_from}: {len(theta) - len(at_default)} of {len(theta)} "
-            "parameters" + (f"; at their defaults: {', '.join(at_default)}" if at_default else ""))
+    made = []
+    for run in sorted(runs):
+        sources = [row["source"].value for row in store.run_named_query("run-data-sources", run=ox.NamedNode(run))]
+        made.append(local_name(run) + (f" on {', '.join(sources)}" if sources else ""))
+    note = (f"started from the latest calibration of {start_from} ({'; '.join(made)}): {len(theta) - len(at_default)} "
+            f"of {len(theta)} parameters" + (f"; at their defaults: {', '.join(at_default)}" if at_default else ""))
     return theta, sorted(runs), note
 
 

@@ -418,6 +418,9 @@ def test_a_model_version_starts_from_the_latest_calibration_of_another(point_run
         assert theta[j] == (ref.spec.default if ref.key in effect_keys else pytest.approx(base[ref.key], rel=1e-12))
     assert [run.rsplit("/", 1)[-1] for run in runs] == [point_run.record.run_id]
     assert f"{len(base)} of {len(theta)} parameters" in note and note.endswith("supply_fan.motor_heat_fraction")
+    # which run, on which data: a walkthrough's version had started from a fit to another file, unsaid
+    assert note.startswith(f"started from the latest calibration of case ({point_run.record.run_id} on "
+                           f"{point_run.record.data_source}): ")
 
 
 def test_recalibrating_after_an_effect_from_the_base_fit_finds_the_truths_basin(tmp_path):
