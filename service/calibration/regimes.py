@@ -11,6 +11,7 @@ rule text: ``docs/calibration.md``, *Operating regimes*.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -302,7 +303,7 @@ class OperatingRegimes(BaseEstimator):
             walk(tree.children_right[node], bounds | {feature: (threshold if lo is None else max(lo, threshold), hi)})
 
         walk(0, {})
-        return leaves
+        return [_merged_paths(paths, self._condition) for paths in leaves]
 
     def _condition(self, feature: int, lower: float | None, upper: float | None) -> RuleCondition:
         n_signals = len(self.signal_names_)
@@ -317,6 +318,34 @@ class OperatingRegimes(BaseEstimator):
             return "no leaf of the rule tree: a minority regime the rules merge into others"
         paths = [" and ".join(c.describe() for c in leaf) or "always" for leaf in leaves]
         return " or ".join(f"({p})" if len(leaves) > 1 and " and " in p else p for p in paths)
+
+
+def _merged_paths(paths: list[list[RuleCondition]], condition) -> list[list[RuleCondition]]:
+    """The rule tree's paths to one regime with any two that differ only in adjacent intervals of one
+    feature joined (``A and x ≤ 29`` or ``A and x > 29`` is ``A``), until no two do; ``condition``
+    makes a :class:`RuleCondition` of (feature, lower, upper)."""
+    bounds = [{c.feature: (c.lower, c.upper) for c in path} for path in paths]
+    joined = True
+    while joined:
+        joined = False
+        for i, j in itertools.combinations(range(len(bounds)), 2):
+            a, b = bounds[i], bounds[j]
+            differing = [f for f in a.keys() | b.keys() if a.get(f) != b.get(f)]
+            if len(differing) != 1:
+                continue
+            f = differing[0]
+            (lo_a, hi_a), (lo_b, hi_b) = a.get(f, (None, None)), b.get(f, (None, None))
+            if hi_a is not None and hi_a == lo_b:
+                union = (lo_a, hi_b)
+            elif hi_b is not None and hi_b == lo_a:
+                union = (lo_b, hi_a)
+            else:
+                continue
+            merged = {k: v for k, v in a.items() if k != f} | ({f: union} if union != (None, None) else {})
+            bounds = [merged if k == i else path for k, path in enumerate(bounds) if k != j]
+            joined = True
+            break
+    return [[condition(f, lo, hi) for f, (lo, hi) in sorted(path.items())] for path in bounds]
 
 
 def per_regime_metrics(

@@ -51,8 +51,11 @@ def parse_condition(text: str) -> OperatingCondition:
     :raises InputError: naming the text and the expected form.
     """
     if re.search(r"\s(and|or)\s", text) and len(re.findall(r">=|<=|>|<|≤|≥", text)) > 1:
+        either = re.search(r"\sor\s", text) is not None
         raise InputError(f"operating condition {text!r}: one condition per --only-when (a rule joined by 'and' is "
-                         "one each; all must hold)")
+                         "one each; all must hold" + ("; a rule joined by 'or' is no filter of all-must-hold "
+                                                  "conditions: give one of its bracketed branches" if either else "")
+                         + ")")
     match = _CONDITION.match(text)
     if match is None:
         raise InputError(f"operating condition {text!r}: expected COLUMN OP NUMBER [UNIT] with OP one of >, >=, <, <= "

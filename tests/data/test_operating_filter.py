@@ -44,6 +44,8 @@ def test_a_regime_rule_as_printed_is_a_condition_its_unit_checked(tmp_path):
     assert operating_mask(data, ["SAT (°F) ≥ 55 DEG_F"]).tolist() == operating_mask(data, ["SAT (°F) >= 55"]).tolist()
     with pytest.raises(ValueError, match=r"one condition per --only-when"):
         operating_mask(data, ["supply fan ≤ 60 % and SAT (°F) ≥ 55 °F"])
+    with pytest.raises(ValueError, match=r"a rule joined by 'or' is no filter .*: give one of its bracketed branches"):
+        operating_mask(data, ["(fan ≤ 60 and SAT (°F) ≥ 55) or fan > 90"])
     # a column whose name holds an operator, and numbers no unit may split
     assert parse_condition("dP > 0 > 0").column == "dP > 0" and parse_condition("temp > 5e-1").value == 0.5
     for split in ("fan > 5,5", "fan > 1.5.2", "fan ≥ 0.5 1"):

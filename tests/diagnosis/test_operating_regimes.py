@@ -167,3 +167,25 @@ def test_per_regime_metrics_and_worst_regime():
     assert worst_regime(rows, "rmse", min_share=0.35)["regime"] == 0
     with pytest.raises(ValueError, match="share of time"):
         worst_regime(rows, "rmse", min_share=0.5)
+
+
+def test_paths_to_one_regime_that_differ_in_adjacent_intervals_of_one_feature_are_one_rule():
+    """A walkthrough's worst regime read '(fan ≤ 11% and oat ≤ 5 °C and water ≤ 29.2 °C) or (fan ≤
+    11% and oat ≤ 5 °C and water > 29.2 °C)', which is 'fan ≤ 11% and oat ≤ 5 °C'; paths that
+    differ in two features stay two."""
+    from service.calibration.regimes import _merged_paths
+
+    def condition(feature, lower, upper):
+        return RuleCondition(feature=feature, signal="xyz"[feature], unit="", is_rate=False, lower=lower, upper=upper,
+                             range_decimals=1)
+
+    def path(**bounds):
+        return [condition("xyz".index(k), *v) for k, v in sorted(bounds.items())]
+
+    merged = _merged_paths([path(x=(None, 11.0), y=(None, 5.0), z=(None, 29.2)),
+                            path(x=(None, 11.0), y=(None, 5.0), z=(29.2, None))], condition)
+    assert OperatingRegimes._rule_text(merged) == "x ≤ 11 and y ≤ 5"
+    three = _merged_paths([path(x=(None, 1.0)), path(x=(1.0, 2.0)), path(x=(2.0, None), y=(None, 0.0))], condition)
+    assert OperatingRegimes._rule_text(three) == "x ≤ 2 or (x > 2 and y ≤ 0)"
+    apart = [path(x=(None, 1.0), y=(None, 0.0)), path(x=(1.0, None), y=(0.0, None))]
+    assert _merged_paths(apart, condition) == apart
