@@ -110,6 +110,8 @@ def _guideline14(unit: str, mean: float, max_abs: float, dof: int, cv: float, nm
         return False, None, f"n − p = {dof} ≤ 0: CV(RMSE) and NMBE undefined"
     if on_interval_scale(unit):
         return False, None, f"not applied: the mean of a value in {unit} depends on the zero of the scale"
+    if not np.isfinite(cv):
+        return False, None, f"not applied: mean {mean:.4g} is near zero (within the noise), the ratios say nothing"
     if abs(mean) < _MEAN_NEAR_ZERO_SHARE * max_abs or mean == 0.0:
         return False, None, (
             f"not applied: mean {mean:.4g} is near zero (below {100 * _MEAN_NEAR_ZERO_SHARE:.0f} % of "
@@ -159,11 +161,14 @@ def target_metrics(
     mean = float(np.mean(y))
     total = float(np.sum((y - mean) ** 2))
     dof = n - p
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cv = float(np.sqrt(np.sum(error**2) / dof) / abs(mean) * 100.0) if dof > 0 and mean != 0.0 else np.nan
-        nmbe = float(np.sum(error) / (dof * abs(mean)) * 100.0) if dof > 0 and mean != 0.0 else np.nan
-    applies, passed, note = _guideline14(unit, mean, float(np.max(np.abs(y))), dof, cv, nmbe)
     residual = np.where(measured, y_all - y_hat_all, np.nan)
+    noise = noise_level(residual, unit, np.where(measured, y_all, np.nan))
+    # relative to a mean no larger than the noise (a valve that stays shut), the ratios say nothing
+    scaled = dof > 0 and abs(mean) > max(noise, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cv = float(np.sqrt(np.sum(error**2) / dof) / abs(mean) * 100.0) if scaled else np.nan
+        nmbe = float(np.sum(error) / (dof * abs(mean)) * 100.0) if scaled else np.nan
+    applies, passed, note = _guideline14(unit, mean, float(np.max(np.abs(y))), dof, cv, nmbe)
     centred = residual - np.nanmean(residual)
     pairs = centred[:-1] * centred[1:]
     variance = float(np.nansum(centred**2))
@@ -183,7 +188,7 @@ def target_metrics(
         r2=1.0 - float(np.sum(error**2)) / total if total > 0.0 else np.nan,
         cv_rmse_percent=cv, nmbe_percent=nmbe, lag1_autocorrelation=lag1,
         guideline14_applies=applies, guideline14_pass=passed, guideline14_note=note,
-        coverage=tuple(coverage), noise=noise_level(residual, unit, np.where(measured, y_all, np.nan)),
+        coverage=tuple(coverage), noise=noise,
     )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 import shlex
 from pathlib import Path
@@ -37,7 +38,7 @@ _PARAMETER_KEY = re.compile(r"\S*/component/[^\s#]+#\w+")
 def print_metrics(title: str, metrics: dict, logged_units: dict[str, str] | None = None) -> None:
     """Per sensor: RMSE, the measurement noise σ its residual shows and RMSE/σ (about 1 for a model
     right to the noise), MAE, R², CV(RMSE), NMBE (– for a temperature in °C or °F, whose mean
-    depends on the scale's zero) and, for a Bayesian run's prediction intervals, the ACE and mean
+    depends on the scale's zero, and for a mean within the noise of zero) and, for a Bayesian run's prediction intervals, the ACE and mean
     width of the 90 % one (every level: ``--json``). ``logged_units``: the unit each sensor's column
     was logged in; where it is not the errors' (°F for K), the caption says what one of theirs is."""
     intervals = any(m.coverage for m in metrics.values())
@@ -50,7 +51,8 @@ def print_metrics(title: str, metrics: dict, logged_units: dict[str, str] | None
         if intervals:
             at_90 = min(m.coverage, key=lambda c: abs(c.level - 0.9), default=None)
             interval_cells = [f"{100 * at_90.ace:+.1f}", f"{at_90.mean_width:.3g}"] if at_90 else ["–", "–"]
-        ratios = ["–", "–"] if on_interval_scale(m.unit) else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"]
+        ratios = (["–", "–"] if on_interval_scale(m.unit) or not math.isfinite(m.cv_rmse_percent)
+                  else [f"{m.cv_rmse_percent:.1f}", f"{m.nmbe_percent:+.1f}"])
         table.add_row(local_name(node), f"{m.rmse:.3g}", f"{m.noise:.3g}", f"{m.rmse / m.noise:.1f}" if m.noise > 0 else "–",
                       f"{m.mae:.3g}", f"{m.r2:.3f}", *ratios, *interval_cells, difference_label(m.unit))
     restated = sorted({scale for node, m in metrics.items()

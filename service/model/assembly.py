@@ -19,7 +19,6 @@ import pyoxigraph as ox
 
 from service.components.library import SignatureLibrary
 from service.components.measuring_device import MeasuringDevice
-from service.components.water_coil import WaterCoil
 from service.errors import AssemblyError, IncompleteModelError, UnitError
 from service.graph.namespaces import RDFS, distinct_local_names
 from service.graph.store import GraphStore
@@ -162,12 +161,16 @@ def _coil_outlet_notes(store: GraphStore, model_name: str, instances: Mapping[st
                        connections: Iterable[Connection]) -> list[str]:
     """A measuring device read as a water coil's outlet air where the coil's one node feeds more than
     one node: its water leaves by that node too, so the device may read the water (a return water
-    sensor), which the coil model does not give. One sentence each, naming how to say which."""
+    sensor), which the coil model does not give. A coil is one node where its signature's valve
+    supplies water to the node its outlet air leaves. One sentence each, naming how to say which."""
     notes = []
     for c in connections:
         coil, device = instances[c.source], instances[c.target]
-        if c.source_port != "outlet_air_temperature" or not issubclass(coil.model_class, WaterCoil) or \
-                not issubclass(device.model_class, MeasuringDevice):
+        if c.source_port != "outlet_air_temperature" or not issubclass(device.model_class, MeasuringDevice):
+            continue
+        air_node = next(o.node for o in coil.signature.outputs if o.port == "outlet_air_temperature")
+        if not any(t.subject == "valve" and t.object == air_node and t.predicate.endswith("suppliesFluidTo")
+                   for t in coil.signature.triples):
             continue
         fed = sorted({row["to"].value for row in store.run_named_query(
             "flow-edges", dataset=model_name, **{"from": ox.NamedNode(coil.node)}) if row["kind"].value == "fluid"})

@@ -61,6 +61,8 @@ def test_guideline14_is_not_applied_where_the_mean_is_meaningless():
     alternating = np.array([-1.0, 1.0, -1.0, 1.1])
     near_zero = target_metrics(alternating, np.zeros(4), unit="W")
     assert not near_zero.guideline14_applies and "near zero" in near_zero.guideline14_note
+    # a mean within the noise of zero (a valve that stays shut, read by a walkthrough as CV(RMSE) 178 %)
+    assert np.isnan(near_zero.cv_rmse_percent) and np.isnan(near_zero.nmbe_percent)
     too_few = target_metrics(OBSERVED, PREDICTED, n_parameters=4, unit="W")
     assert not too_few.guideline14_applies and np.isnan(too_few.cv_rmse_percent) and np.isnan(too_few.nmbe_percent)
 
