@@ -56,3 +56,15 @@ def test_the_outdoor_air_sensor_feeds_the_first_coil_of_a_unit_without_return_ai
     assumed = store.query("""PREFIX gt: <https://w3id.org/graphtwin/ontology#>
         SELECT ?about WHERE { ?a a gt:AlignmentAssumption ; gt:assumptionAbout ?about }""", model="doas")
     assert (NS + "oat" in {r["about"].value for r in assumed}) == (extra != ON_THE_COIL)  # a point of the unit only
+
+
+def test_a_fans_rated_power_in_brick_is_its_nominal_power():
+    """A walkthrough's unmetered fan kept the default 1,800 W: no Brick rule read a rated power."""
+    store = GraphStore.embedded(None)
+    store.load_model("rated", (UNIT + """
+ex:supply_fan brick:ratedPowerInput [ brick:value 2.2 ; brick:hasUnit unit:KiloW ] .
+""").encode())
+    model = assemble(store, "rated")
+    power = [r for r in model.mapped_parameters if r.name == "nominal_power"]
+    assert len(power) == 1 and power[0].value == pytest.approx(2200.0)
+    assert not any(r.name == "nominal_power" for r in model.estimated_parameters)
