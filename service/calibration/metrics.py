@@ -119,7 +119,8 @@ def _guideline14(unit: str, mean: float, max_abs: float, dof: int, cv: float, nm
         )
     passed = cv <= GUIDELINE14_HOURLY_CV_RMSE_PERCENT and abs(nmbe) <= GUIDELINE14_HOURLY_NMBE_PERCENT
     return True, passed, (
-        f"hourly criteria CV(RMSE) ≤ {GUIDELINE14_HOURLY_CV_RMSE_PERCENT:.0f} %, "
+        f"the hourly criteria (the finest Guideline 14 states, applied at the data's step) "
+        f"CV(RMSE) ≤ {GUIDELINE14_HOURLY_CV_RMSE_PERCENT:.0f} %, "
         f"|NMBE| ≤ {GUIDELINE14_HOURLY_NMBE_PERCENT:.0f} %"
     )
 

@@ -129,6 +129,9 @@ class ComponentModel:
     #: An effect's parameter that is a valve's stem position (a leak's, a stuck stem's): the diagnosis
     #: states it too as the flow share its host's valve passes there (:meth:`valve_flow_share`).
     stem_position_parameter: ClassVar[str | None] = None
+    #: An effect's parameter that is the temperature of unmeasured surroundings [°C] (a casing's or
+    #: duct's): the diagnosis says where it fits colder than every temperature the unit measures.
+    surroundings_temperature_parameter: ClassVar[str | None] = None
     #: An effect whose size is a share of its host's quantity: the host's parameters that scale that
     #: quantity (a motor's heat, a share of the fan's nominal power). Where the host has none of them
     #: from the graph or a fit (an assumed default), the share's upper bound is no physical limit.

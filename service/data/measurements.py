@@ -374,10 +374,9 @@ def read_measurements(
         unread = np.zeros(len(times), dtype=bool)
         unread[sorted(unreadable)] = True
         readable = ~(unread[:-1] | unread[1:])  # neither stamp of the step a placeholder
-        for i in np.flatnonzero((steps == 0) & readable)[:10]:
-            problems.append(f"line {i + 3}: duplicate time stamp {stamps[i + 1]}")
-        for i in np.flatnonzero((steps < 0) & readable)[:10]:
-            problems.append(f"line {i + 3}: time stamp {stamps[i + 1]} is before the previous one ({stamps[i]})")
+        for i in np.flatnonzero((steps <= 0) & readable)[:10]:  # in the file's order
+            problems.append(f"line {i + 3}: duplicate time stamp {stamps[i + 1]}" if steps[i] == 0 else
+                            f"line {i + 3}: time stamp {stamps[i + 1]} is before the previous one ({stamps[i]})")
     converted: dict[str, np.ndarray] = {}
     for node, column in claimed.items():
         spec = specs[node]

@@ -33,7 +33,7 @@ from service.diagnosis.drift import (
     drift_sentence,
     step_onset,
 )
-from service.diagnosis.plausibility import bound_note, demotion_reasons, flow_share_text
+from service.diagnosis.plausibility import bound_note, demotion_reasons, flow_share_text, surroundings_caution
 from service.diagnosis.ranking import (
     EffectEvidence,
     delta_bic,
@@ -270,7 +270,8 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
         return evidence
     estimates = "; ".join(filter(None, [
         *(_estimate_text(refs[j].name, theta[j], standard_errors[j], refs[j].spec) for j in effect_columns),
-        flow_share_text(job.model, job.node, theta, standard_errors, effect_columns)]))
+        flow_share_text(job.model, job.node, theta, standard_errors, effect_columns),
+        surroundings_caution(job.model, theta, standard_errors, effect_columns, job.data)]))
     _explain(evidence, observed, null, after, f"{effect} at {local_name(job.node)}",
              f"{estimates}; fitted as an effect {onset}{demotion}", "", job.target_scales)
     return evidence

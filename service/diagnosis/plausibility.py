@@ -6,6 +6,8 @@ An effect parameter at a bound that is neither its null nor a state the physics 
 the prior allows (the effect's size is the limit, not an estimate). A heat rate into the air
 (:attr:`~service.components.component.ComponentModel.heat_rate_parameter`) at a component that can
 only take heat from the air (``air_heat_sign = −1``: a chilled-water coil) has no source there.
+Unmeasured surroundings fitted colder than every temperature measured in the unit are stated so
+(:func:`surroundings_caution`), not demoted: a basement or a ground can be that cold.
 The method: ``docs/diagnosis.md``, "Plausibility".
 """
 
@@ -14,11 +16,12 @@ from __future__ import annotations
 import numpy as np
 
 from service.components.component import bound_side
+from service.data.measurements import MeasuredData
 from service.graph.namespaces import local_name
 from service.graph.units import quantity_text
 from service.model.assembled_model import AssembledModel
 
-__all__ = ["BOUND_SHARE", "at_bound", "bound_note", "demotion_reasons", "flow_share_text"]
+__all__ = ["BOUND_SHARE", "at_bound", "bound_note", "demotion_reasons", "flow_share_text", "surroundings_caution"]
 
 #: A fitted value this share of its prior range from a bound sits at the bound.
 BOUND_SHARE = 0.005
@@ -79,6 +82,28 @@ def flow_share_text(model: AssembledModel, node: str, theta: np.ndarray, standar
                  else "±2 standard errors of it")) if max(shares) - min(shares) > 0.005 else ""
     return (f"at {refs[stem].name} {theta[stem]:.3g} the valve passes {100 * share:.2g} % of its fully open flow "
             f"coefficient ({at}{spread})")
+
+
+def surroundings_caution(model: AssembledModel, theta: np.ndarray, standard_errors: np.ndarray,
+                         effect_columns: list[int], data: MeasuredData) -> str:
+    """Where an effect's unmeasured surroundings (``surroundings_temperature_parameter``) fit colder
+    than the coldest temperature series (°C) in ``data`` by more than two standard errors: that, with
+    the sensor, for the reader to check (a chilled-water leak can fit as a casing cooled by 5 °C
+    surroundings on a summer day); else empty."""
+    lows = {node: float(np.nanmin(values)) for node, values in data.series.items()
+            if data.units.get(node) == "degC" and np.isfinite(values).any()}
+    if not lows:
+        return ""
+    sensor, coldest = min(lows.items(), key=lambda item: item[1])
+    refs = model.estimated_parameters
+    for j in effect_columns:
+        se = float(standard_errors[j])
+        if (refs[j].name == model.components[refs[j].component].model_class.surroundings_temperature_parameter
+                and np.isfinite(se) and theta[j] + 2.0 * se < coldest):
+            return (f"surroundings at {theta[j]:.3g} °C are colder than every temperature measured in the unit "
+                    f"(the coldest {coldest:.3g} °C, at {local_name(sensor)}): only a space that cold or a cold "
+                    "source explains them")
+    return ""
 
 
 def _share_of_assumed(model: AssembledModel, host, effect: str) -> bool:

@@ -108,9 +108,11 @@ class GraphStore:
         :raises InputError: naming the rule.
         """
         if not _NAME.fullmatch(name or ""):
+            spaced = " " in name and _NAME.fullmatch(name.replace(" ", "+"))
             raise InputError(
                 f"model name {name!r}: use letters, digits, '_', '-', '.', '+' (starting with a letter or digit), "
-                "128 characters at most"
+                "128 characters at most" + (f"; in a URL's query a '+' reads as a space: write "
+                                            f"{name.replace(' ', '%2B')!r}" if spaced else "")
             )
         return name
 

@@ -54,7 +54,9 @@ def _error_body(exc: GraphtwinError) -> ErrorBody:
     """What a client reads of ``exc``: the problems listed apart where there are several, the line
     and column of a syntax error, the store's failure named as such."""
     if isinstance(exc, MeasurementError):
-        return ErrorBody(detail=exc.source, problems=list(exc.problems))
+        first = f": {exc.problems[0]}" if exc.problems else ""
+        more = f" (and {len(exc.problems) - 1} more: see problems)" if len(exc.problems) > 1 else ""
+        return ErrorBody(detail=f"{exc.source}{first}{more}", problems=list(exc.problems))
     if isinstance(exc, IncompleteModelError):
         return ErrorBody(detail=exc.headline, problems=list(exc.problems), notes=list(exc.notes) or None)
     if isinstance(exc, ModelLoadError):

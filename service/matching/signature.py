@@ -146,6 +146,9 @@ class Signature:
     #: effects: the ids of more specific effects this one is not proposed beside where they apply at
     #: the same node (its own special case or twin, with a wider prior or one parameter fewer)
     yields_to: tuple[str, ...] = ()
+    #: said by the assembly about each node where this signature is chosen (what the user may add to
+    #: the graph for a more specific one)
+    note: str = ""
 
     @property
     def file_name(self) -> str:
@@ -182,7 +185,7 @@ def signature_iri(signature_id: str) -> str:
 _TOP_KEYS = {
     "id", "label", "comment", "kind", "model", "fmu", "complexity", "modeled_nodes", "nodes",
     "triples", "inputs", "outputs", "parameters", "splice", "extra", "can_appear", "holds_values", "steps",
-    "yields_to",
+    "yields_to", "note",
 }
 _NODE_KEYS = ("classes", "iri", "literal", "any")
 _TRIPLE_KEYS = {"subject", "predicate", "object", "rule", "optional", "or_reverse", "stop_at"}
@@ -274,8 +277,8 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
     kind = data.get("kind", "component")
     if kind not in ("component", "effect"):
         raise signature_error(path, "kind", f"{kind!r} must be 'component' or 'effect'")
-    label, comment = data.get("label", sig_id), data.get("comment", "")
-    for key, value in (("label", label), ("comment", comment)):
+    label, comment, note = data.get("label", sig_id), data.get("comment", ""), data.get("note", "")
+    for key, value in (("label", label), ("comment", comment), ("note", note)):
         if not isinstance(value, str):
             raise signature_error(path, key, f"expected a string, got {_kind_of(value)}")
 
@@ -428,7 +431,7 @@ def signature_from_dict(data: dict[str, Any], path: Path | None = None) -> Signa
         parameters=tuple(parameters), model=model, fmu=fmu_path, complexity=complexity,
         comment=comment, splice=splice, source_file=path,
         extra=dict(extra), can_appear=can_appear, holds_values=holds_values, steps=steps,
-        yields_to=tuple(yields_to),
+        yields_to=tuple(yields_to), note=note,
     )
 
 

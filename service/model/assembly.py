@@ -113,6 +113,7 @@ def assemble(
         instance = instantiate(store, model_name, signature, match, node_name=node_name)
         instances[instance.iri] = instance
 
+    notes += [f"{short_name(modeled_nodes(s, match)[0])}: {s.note}" for s, match in chosen if s.note]
     notes += _values_without_unit(store, instances, session)
     notes += [note for i in instances.values() if i.measurement is not None for note in _unit_notes(i)]
     misspelt = misspelt_terms(store, model_name)  # a misspelt term is often why a pattern misses

@@ -56,6 +56,10 @@ def test_every_problem_is_reported_with_line_and_column(tmp_path):
     assert "line 3: duplicate time stamp" in text
     assert "line 4: time stamp" in text and "before the previous one" in text
     assert "line 4, column 'SAT': '-inf' is not a finite number" in text
+    backwards_then_repeated = "time,SAT,valve\n2025-01-01 00:10,20,1\n2025-01-01 00:00,20,1\n2025-01-01 00:00,20,1\n"
+    with pytest.raises(MeasurementError) as info:  # in the file's order, whatever the kind
+        read_measurements(_write(tmp_path, backwards_then_repeated), SPECS)
+    assert str(info.value).index("line 3: time stamp") < str(info.value).index("line 4: duplicate time stamp")
     with pytest.raises(MeasurementError, match="no column for https://example.org/x#valve"):
         read_measurements(_write(tmp_path, "time,SAT\n2025-01-01 00:00,20\n2025-01-01 00:10,21\n"), SPECS)
 

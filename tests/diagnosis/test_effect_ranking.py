@@ -369,3 +369,38 @@ def test_a_leaks_stem_position_is_also_said_as_the_share_of_the_open_flow_its_va
     assert flow_share_text(model, flexlab + "heating_coil_valve", theta, identified, [leak]) == (
         f"at leakage_fraction 0.57 the valve passes {100 * (0.57 - 0.1) / 0.9:.2g} % of its fully open flow "
         "coefficient (valve_dead_band = 0.1)")
+
+
+def test_unmeasured_surroundings_colder_than_every_reading_in_the_unit_are_stated_so():
+    """A casing's exchange with surroundings at 5.6 ± 0.6 °C where the coldest temperature measured
+    anywhere in the unit is 12.1 °C (a walkthrough's chilled-water valve leak was so named): the
+    diagnosis says so, with the sensor that reads it. Within two standard errors of that reading,
+    above it, or not identified, it says nothing."""
+    from service.data.measurements import MeasuredData
+    from service.diagnosis.plausibility import surroundings_caution
+    from service.graph.store import GraphStore
+    from service.model.assembly import assemble
+    from service.model.effect_splicing import EffectRequest
+    from service.resources import examples_dir
+
+    flexlab = "https://example.org/flexlab-x3a#"
+    store = GraphStore.embedded(None)
+    store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+    model = assemble(store, "flexlab", extra_effects=[EffectRequest("DuctHeatExchangeUnmeasured", flexlab + "cooling_coil")])
+    columns = [j for j, r in enumerate(model.estimated_parameters) if r.component == flexlab + "cooling_coil"
+               or "DuctHeatExchangeUnmeasured" in r.component]
+    column = next(j for j, r in enumerate(model.estimated_parameters) if r.name == "surroundings_temperature")
+    theta = np.array([r.spec.default for r in model.estimated_parameters])
+    errors = np.full(theta.size, 0.01)
+    stamps = np.arange("2026-07-14T00:00", "2026-07-14T00:03", dtype="datetime64[m]").astype("datetime64[s]")
+    data = MeasuredData(timestamps=stamps, step_s=60.0, units={"sat": "degC", "oat": "degC", "fan": "W"},
+                        series={"sat": np.array([12.1, np.nan, 19.0]), "oat": np.array([19.7, 25.0, 30.0]),
+                                "fan": np.array([-300.0, 0.0, 900.0])})
+
+    def caution(surroundings_c: float, error_c: float) -> str:
+        theta[column], errors[column] = surroundings_c, error_c
+        return surroundings_caution(model, theta, errors, columns, data)
+
+    assert caution(5.64, 0.63) == ("surroundings at 5.64 °C are colder than every temperature measured in the unit "
+                                   "(the coldest 12.1 °C, at sat): only a space that cold or a cold source explains them")
+    assert caution(11.0, 0.63) == "" and caution(25.0, 0.1) == "" and caution(5.64, np.inf) == ""

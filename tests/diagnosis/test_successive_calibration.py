@@ -151,15 +151,26 @@ def _readable(key: str) -> str:
     return key.rsplit("/", 1)[-1].replace("#", ".")
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "since the water moves with a transport time of water content / flow (2026-11-28), the supply pipe's and the "
-    "air side's lags move 3-5 % of the low-flow misfit; the claim is to be re-derived (issue 32 closing note)"))
-def test_dynamics_below_the_sampling_barely_move_the_misfit(case):
+def test_lags_below_the_sampling_barely_move_the_misfit_and_the_waters_transport_moves_it_at_low_flow(case):
+    """The coil's metal and air-side lags (minutes at most, below the 10-minute sampling) move at most
+    2 % of the misfit in any regime. The lags of the water (the supply pipe's transport, the water
+    side's, the water standing in the pipe) scale with water content / water flow, which near
+    shut-off is hours, so they move more of it in the low-flow regime than in the high-flow one
+    (measured on seeds 3, 4, 5: metal and air side ≤ 0.7 %; the supply pipe 8–12 % at low flow
+    against 2–5 % at high flow, the standing water 12–16 % against 5–10 %)."""
     md, _, train, _, labels = case
     sensitivity = calibration_morris_by_regime(md.problem(train), labels[train], seed=0)
     names = [_readable(n) for n in sensitivity.names]
-    lags = [i for i, n in enumerate(names) if n.endswith("_time_constant")]
-    assert sensitivity.normalised_mu_star()[:, lags].max() < 0.02
+    share = sensitivity.normalised_mu_star()
+    flow = md.data.series[SUPPLY_FLOW][train]
+    mean_flow = [flow[labels[train] == r].mean() for r in sensitivity.regimes]
+    high_flow, low_flow = int(np.argmax(mean_flow)), int(np.argmin(mean_flow))
+    coil = "heating_coil_air_side."
+    fast = [names.index(coil + n) for n in ("metal_time_constant", "air_side_time_constant")]
+    assert share[:, fast].max() < 0.02
+    for water_lag in ("supply_pipe_time_constant", "water_side_time_constant", "standing_water_time_constant"):
+        column = names.index(coil + water_lag)
+        assert share[low_flow, column] > share[high_flow, column], water_lag
 
 
 def test_morris_puts_the_fan_curve_first_at_high_flow_and_the_coil_first_at_low_flow(case):

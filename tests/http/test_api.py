@@ -300,6 +300,7 @@ def test_measurements_in_a_unit_of_the_wrong_dimension_are_refused(client, auth,
     response = _upload_csv(client, auth, case_csv.read_text(), model="wrong")
     assert response.status_code == 422
     assert any("fan_inlet_air_temperature" in p for p in response.json()["problems"]), response.json()
+    assert response.json()["detail"].startswith("the measurements do not fit model wrong: ")  # the cause, not only its place
     assert snapshot(store) == before
     assert _upload_csv(client, auth, case_csv.read_text(), model="nowhere").status_code == 404
 
@@ -514,6 +515,8 @@ def test_named_queries_are_listed_and_run_with_bindings(client):
     assert no_model.status_code == 404 and "no model 'nope'" in no_model.json()["detail"] and "case" in no_model.json()["detail"]
     unknown = client.get("/queries/calibrated-parameters", params={"modle": "case"})
     assert unknown.status_code == 422 and "model" in unknown.json()["detail"]
+    plus = client.get("/queries/calibrated-parameters?model=case+ValveLeakage")  # an added effect's version, '+' unescaped
+    assert plus.status_code == 422 and "write 'case%2BValveLeakage'" in plus.json()["detail"]
 
 
 def test_a_dropped_models_results_stay_queryable_by_its_name(client, store):

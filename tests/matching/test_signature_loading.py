@@ -38,6 +38,7 @@ def _refused(tmp_path: Path, text: str, key: str, problem: str) -> None:
     (TOP + 'parameters = ["nominal_power"]\n' + NODES, "parameters", "got an array"),
     (TOP + 'extra = "notes"\n' + NODES, "extra", "expected a table, got a string"),
     (TOP + "label = 3\n" + NODES, "label", "expected a string, got an integer"),
+    (TOP + 'note = ["type it"]\n' + NODES, "note", "expected a string, got an array"),
     (TOP + "complexity = true\n" + NODES, "complexity", "must be an integer"),
     (TOP.replace('"service.components.fan:Fan"', "1") + NODES, "model", "1 must read 'module:Class'"),
     (TOP.replace('"service.components.fan:Fan"', '":Fan"') + NODES, "model", "':Fan' must read 'module:Class'"),
@@ -63,7 +64,7 @@ def _refused(tmp_path: Path, text: str, key: str, problem: str) -> None:
      'subject = "a"\npredicate = "fso:suppliesFluidTo"\nobject = "b"\n', "triples",
      "triples[0] not joined to the modelled node 'fan' by required triples"),
 ], ids=["nodes-string", "input-string", "triples-strings", "triples-table", "modeled-nodes-string",
-        "parameters-array", "extra-string", "label-integer", "complexity-boolean", "model-integer", "model-no-module",
+        "parameters-array", "extra-string", "label-integer", "note-array", "complexity-boolean", "model-integer", "model-no-module",
         "fmu-integer", "classes-string", "subject-array", "traverse-to-any", "input-unknown-key", "quantity-array",
         "unit-node-integer", "splice-string", "splice-both-sides", "splice-port-integer", "host-models-string",
         "pattern-in-pieces"])

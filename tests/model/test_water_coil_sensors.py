@@ -109,3 +109,20 @@ ex:heating_coil {predicate} ex:hot_water_return_sensor .
     else:
         assert not flagged and model.component_for_node(EX + "hot_water_return_sensor") is None
     assert not any("supply_air_temperature_sensor: read as" in n for n in model.notes)
+
+
+def test_a_coil_of_unstated_service_is_a_water_coil_and_the_assembly_says_how_to_narrow_it():
+    """A coil typed only s4bldg:Coil gets the WaterCoil, whose supply water prior spans chilled to hot
+    water; the assembly says so and names the types that narrow it (a walkthrough's plain coil got the
+    wide prior in silence). The typed coil beside it gets no such note."""
+    text = (examples_dir() / "flexlab_ahu" / "model.ttl").read_text()
+    assert text.count("ex:cooling_coil a gt:CoolingCoil") == 1
+    store = GraphStore.embedded(None)
+    store.load_model("plain", text.replace("ex:cooling_coil a gt:CoolingCoil", "ex:cooling_coil a s4bldg:Coil").encode(),
+                     "turtle")
+    model = assemble(store, "plain")
+    coils = {c.signature.id for c in model.components.values() if EX + "cooling_coil" in c.modeled_nodes}
+    assert coils == {"WaterCoil"}
+    said = [n for n in model.notes if "unstated service" in n]
+    assert said == ["cooling_coil: modelled as a water coil of unstated service (its supply water, where no sensor reads "
+                    "it, anywhere from 2 to 90 °C): type it gt:CoolingCoil or gt:HeatingCoil to narrow it"]

@@ -58,6 +58,7 @@ class DuctHeatExchangeUnmeasured(SplicedEffect):
 
     inputs = tuple(port for port in DuctHeatExchange.inputs if port.name != "ambient_temperature")
     outputs = DuctHeatExchange.outputs
+    surroundings_temperature_parameter = "surroundings_temperature"
     parameters = DuctHeatExchange.parameters + (
         Parameter("surroundings_temperature", "degC", 20.0, -20.0, 50.0,
                   "temperature of the unmeasured surroundings, T_amb"),
