@@ -246,6 +246,6 @@ def _missing_operation(answer: EffectEvidence, other: EffectEvidence, md: ModelD
     if best is None or best[0] < SEPARATING_ACCURACIES or best[0] < 2.0 * on_data:
         return None
     ratio, sensor, node, value, unit = best
-    return (f"operation the data lack: with {local_name(node)} held at {quantity_text(value, unit)} the two would "
-            f"part at {local_name(sensor)} by {ratio:.1f}× its noise (on these data by {on_data:.1f}×): a day run so "
-            "would tell them apart")
+    return (f"operation the data lack: with {local_name(node)} held at {quantity_text(value, unit)} throughout, the "
+            f"two would part at {local_name(sensor)} by {ratio:.1f}× its noise (on these data by {on_data:.1f}×): a day "
+            "run so would tell them apart")
