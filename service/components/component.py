@@ -132,6 +132,10 @@ class ComponentModel:
     #: An effect's parameter that is the temperature of unmeasured surroundings [°C] (a casing's or
     #: duct's): the diagnosis says where it fits colder than every temperature the unit measures.
     surroundings_temperature_parameter: ClassVar[str | None] = None
+    #: An effect's reading of its host's parameters, by name: the simulator passes the host's values
+    #: (a valve effect reads the actuator's dead band, to act on the stem the actuator sets). A host
+    #: without such a parameter passes nothing, and the effect does without.
+    host_parameters: ClassVar[tuple[str, ...]] = ()
     #: An effect whose size is a share of its host's quantity: the host's parameters that scale that
     #: quantity (a motor's heat, a share of the fan's nominal power). Where the host has none of them
     #: from the graph or a fit (an assumed default), the share's upper bound is no physical limit.

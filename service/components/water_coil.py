@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from service.components.actuator import actuator_stem_position
 from service.components.component import (
     AIR_SPECIFIC_HEAT_J_PER_KG_K,
     WATER_SPECIFIC_HEAT_J_PER_KG_K,
@@ -59,17 +60,8 @@ class WaterCoil(ComponentModel):
         Parameter("supply_water_temperature", "degC", 45.0, 2.0, 90.0, "water temperature entering the coil, T_w"),
     ) + _FLOW_AND_CONDUCTANCES
 
-    valve_characteristic = ("valve_dead_band",)
-
-    @classmethod
-    def valve_flow_share(cls, position, params):
-        """The opening (u − u₀)/(1 − u₀), clipped to 0–1: a linear valve behind its dead band."""
-        dead_band = float(params["valve_dead_band"])
-        return float(min(max((float(position) - dead_band) / (1.0 - dead_band), 0.0), 1.0))
-
     def step(self, params, inputs, state, dt_s):
-        dead_band = params["valve_dead_band"]
-        opening = np.minimum(np.maximum((inputs["valve_position"] - dead_band) / (1.0 - dead_band), 0.0), 1.0)
+        opening = actuator_stem_position(inputs["valve_position"], params["valve_dead_band"])
         air_in = inputs["inlet_air_temperature"]
         air_flow = np.maximum(inputs["air_mass_flow"], 0.0)
         c_air = air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K

@@ -176,6 +176,18 @@ def loop_substeps(model: AssembledModel, step_s: float) -> int:
     return max(1, int(np.ceil(step_s / MAX_LOOP_STEP_S - 1e-9))) if delayed else 1
 
 
+def _effect_host(model: AssembledModel, effect: str) -> str:
+    """The component spliced effect ``effect`` acts on: along its ``value_out`` (an input splice) or
+    back along its ``value_in`` (an output splice), past the other effects spliced on the same port."""
+    side = model.components[effect].signature.splice.side
+    at = effect
+    while at == effect or model.components[at].signature.kind == "effect":
+        at = (next(c.target for c in model.connections if (c.source, c.source_port) == (at, "value_out"))
+              if side == "input" else
+              next(c.source for c in model.connections if (c.target, c.target_port) == (at, "value_in")))
+    return at
+
+
 class Simulator:
     """Prepared simulation of ``model`` at fixed step ``step_s`` (seconds); ``notes`` says how a
     cycle without a feedback port was broken (calibration runs report them with the data's)."""
@@ -209,6 +221,9 @@ class Simulator:
         self.ahead, self.behind = self._memoryless_ends()
         #: Series held between data steps (schedules: a zero-order hold); others are interpolated.
         self.held = {iri for iri in model.boundary_inputs if model.components[iri].signature.steps}
+        #: Effect → the host whose parameters it reads (``host_parameters``).
+        self.hosts = {iri: _effect_host(model, iri) for iri in self.order
+                      if model.components[iri].model_class.host_parameters}
 
     def _memoryless_ends(self) -> tuple[list[str], list[str]]:
         """(ahead, behind): the memoryless components evaluated over all internal steps before the
@@ -239,7 +254,14 @@ class Simulator:
                 params[ref.component][ref.name] = np.full(n_ens, float(fixed[ref.key]))
             else:
                 params[ref.component][ref.name] = np.ascontiguousarray(theta[:, self.column[ref.key]])
+        for iri, host in self.hosts.items():
+            params[iri].update(self._host_values(iri, params[host]))
         return params
+
+    def _host_values(self, iri: str, host_values: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The values in ``host_values`` of the host parameters effect ``iri`` reads (those its host has)."""
+        return {name: host_values[name] for name in self.model.components[iri].model_class.host_parameters
+                if name in host_values}
 
     def _scheduled(self, params: dict[str, dict[str, np.ndarray]], factors: Mapping[str, np.ndarray],
                    n_steps: int, n_internal: int) -> dict[str, dict[str, np.ndarray]]:
@@ -256,6 +278,9 @@ class Simulator:
             if factor.shape != (value.size, n_steps):
                 raise ValueError(f"the factor for {key} has shape {factor.shape}, expected {(value.size, n_steps)}")
             scheduled[ref.component][ref.name] = np.repeat(factor.T, self.substeps, axis=0)[:n_internal] * value
+        for iri, host in self.hosts.items():
+            if tied := self._host_values(iri, scheduled.get(host, {})):
+                scheduled[iri].update(tied)
         return scheduled
 
     def run(

@@ -161,3 +161,38 @@ ex:supply_air_setpoint a gt:SetpointSchedule ; saref:isMeasuredIn unit:DEG_C ; g
     signal = outputs[(controller.iri, "control_signal")][0]
     supply = outputs[(model.component_for_node(EX + "supply_air_temperature_sensor").iri, "measured_value")][0]
     assert 0.05 < signal[-1] < 0.95 and supply[-1] == pytest.approx(20.0, abs=0.2)
+
+
+@pytest.mark.parametrize("effect", ["ValveLeakage", "ValveStuck"])
+def test_a_valve_fault_acts_on_the_stem_past_the_actuators_dead_band(effect):
+    """A seat that leaks 5 % of the open flow, or a stem stuck at 5 %, passes that flow whatever the
+    actuator's dead band: at command 0 the heating coil heats as much behind a dead band of 0.2 as
+    behind none (a walkthrough's 4 % leak behind a fitted dead band of 0.054 had passed nothing, and
+    the leak could not be found). The simulator gives the effect its host's dead band."""
+    from service.model.effect_splicing import EffectRequest
+    from service.model.simulator import Simulator
+
+    ex = "https://example.org/flexlab-x3a#"
+    store = GraphStore.embedded(None)
+    store.load_model("flexlab", examples_dir() / "flexlab_ahu" / "model.ttl")
+    model = assemble(store, "flexlab", extra_effects=[EffectRequest(effect, ex + "heating_coil_valve")])
+    coil = next(c.iri for c in model.components.values() if ex + "heating_coil" in c.modeled_nodes)
+    keys = {r.name: r.key for r in model.estimated_parameters if r.component == coil or effect in r.component}
+    size = ({keys["leakage_fraction"]: 0.05} if effect == "ValveLeakage"
+            else {keys["stuck_weight"]: 1.0, keys["stuck_position"]: 0.05})
+    def level(device) -> float:  # heating valve shut, other commands at 0.6, temperatures at 15 °C
+        if device.node == ex + "heating_coil_valve_command":
+            return 0.0
+        return 15.0 if device.signature.id == "TemperatureSensor" else 0.6
+
+    boundary = {iri: np.full(3, level(model.components[iri])) for iri in model.boundary_inputs}
+    theta = np.array([[r.spec.default for r in model.estimated_parameters]])
+    simulator = Simulator(model, 900.0)
+
+    def heat_w(dead_band: float, fault: dict) -> float:
+        run = simulator.run(boundary, theta, fixed={keys["valve_dead_band"]: dead_band, **fault},
+                            record=[(coil, "heat_rate")])
+        return float(run.outputs[(coil, "heat_rate")][-1, 0])
+
+    assert heat_w(0.2, {}) == 0.0 and heat_w(0.0, size) > 100.0
+    assert heat_w(0.2, size) == pytest.approx(heat_w(0.0, size), rel=1e-9)

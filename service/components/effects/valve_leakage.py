@@ -2,23 +2,27 @@
 
 from __future__ import annotations
 
+from service.components.actuator import actuator_stem_position, command_for_stem
 from service.components.component import Parameter, Port, SplicedEffect
 
 __all__ = ["ValveLeakage"]
 
 
 class ValveLeakage(SplicedEffect):
-    """u_eff = u + λ · (1 − u)   [1]
+    """x_eff = x + λ · (1 − x)   [1]
 
-    u the commanded position (0 shut … 1 open), λ the leak as the stem position whose flow a shut
-    valve passes: on a linear valve the share λ of the open flow coefficient (a parallel leak path
-    Kv_leak = λ·Kv), on a valve with characteristic φ the share φ(λ). Null: λ = 0. The flow opening
-    changes, not the stem: the host's position feedback reads the command (the signature's
-    ``readings_unchanged``). Behind an actuator dead band u₀ a leak λ ≤ u₀ cannot be told from a
-    tight valve (``docs/components.md``).
+    x the stem position the command sets (0 shut … 1 open), λ the leak as the stem position whose
+    flow a shut valve passes: on a linear valve the share λ of the open flow coefficient (a parallel
+    leak path Kv_leak = λ·Kv), on a valve with characteristic φ the share φ(λ). Null: λ = 0. Where
+    the host maps the command through an actuator dead band u₀ (``valve_dead_band``, read from the
+    host), the leak acts past it, on the stem: the seat leaks whatever the actuator does (x and the
+    command returned by :mod:`service.components.actuator`); elsewhere x is the command. The flow
+    opening changes, not the reading: the host's position feedback reads the command (the
+    signature's ``readings_unchanged``).
     """
 
     stem_position_parameter = "leakage_fraction"
+    host_parameters = ("valve_dead_band",)
     inputs = (Port("value_in", "1", "commanded valve position"),)
     outputs = (Port("value_out", "1", "effective valve position"),)
     parameters = (
@@ -26,5 +30,9 @@ class ValveLeakage(SplicedEffect):
     )
 
     def step(self, params, inputs, state, dt_s):
-        position = inputs["value_in"]
-        return {"value_out": position + params["leakage_fraction"] * (1.0 - position)}
+        command, leak = inputs["value_in"], params["leakage_fraction"]
+        if "valve_dead_band" not in params:
+            return {"value_out": command + leak * (1.0 - command)}
+        dead_band = params["valve_dead_band"]
+        stem = actuator_stem_position(command, dead_band)
+        return {"value_out": command_for_stem(stem + leak * (1.0 - stem), command, dead_band)}

@@ -2,20 +2,25 @@
 
 from __future__ import annotations
 
+from service.components.actuator import actuator_stem_position, command_for_stem
 from service.components.component import Parameter, Port, SplicedEffect
 
 __all__ = ["ValveStuck"]
 
 
 class ValveStuck(SplicedEffect):
-    """u_eff = (1 − w) · u + w · s   [1]
+    """x_eff = (1 − w) · x + w · s   [1]
 
-    u the commanded position, s the position the actuator is stuck at, w the share of the time-
+    x the position the command sets, s the position the stem is stuck at, w the share of the time-
     averaged response that ignores the command (w = 1: fully stuck at s; 0 < w < 1: a slipping
     linkage or an actuator that reaches only part of its travel). Null: w = 0 (s then has no effect).
+    Where the host maps the command through an actuator dead band (``valve_dead_band``, read from the
+    host), x and s are stem positions past it (:mod:`service.components.actuator`); elsewhere x is
+    the command.
     """
 
     stem_position_parameter = "stuck_position"
+    host_parameters = ("valve_dead_band",)
     inputs = (Port("value_in", "1", "commanded position"),)
     outputs = (Port("value_out", "1", "effective position"),)
     parameters = (
@@ -25,5 +30,9 @@ class ValveStuck(SplicedEffect):
     )
 
     def step(self, params, inputs, state, dt_s):
-        weight = params["stuck_weight"]
-        return {"value_out": (1.0 - weight) * inputs["value_in"] + weight * params["stuck_position"]}
+        command, weight, stuck = inputs["value_in"], params["stuck_weight"], params["stuck_position"]
+        if "valve_dead_band" not in params:
+            return {"value_out": (1.0 - weight) * command + weight * stuck}
+        dead_band = params["valve_dead_band"]
+        stem = (1.0 - weight) * actuator_stem_position(command, dead_band) + weight * stuck
+        return {"value_out": command_for_stem(stem, command, dead_band)}
