@@ -201,6 +201,9 @@ def print_diagnosis(report: DiagnosisReport, *, stored: bool = True, data: Path 
         command = ["graphtwin", "add-effect", str(model_file), "--effect", answer.effect, "--target", answer.node,
                    "-o", str(added)]
         console.print(f"add it to the model: {shlex.join(command)}", markup=False, soft_wrap=True)  # one line to copy
+        if answer.appears_in_test_window:
+            console.print("  it appeared in the test window: calibrate the model with it on data from after it "
+                          "appeared (before, the effect is at its null and its size cannot be fitted)", markup=False)
     if report.told_apart:
         console.print("  not the answer, though significant:", markup=False)
         for other in report.told_apart:

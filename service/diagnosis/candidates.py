@@ -246,6 +246,7 @@ def _evaluate_candidate(job: CandidateJob, runs: OwnRuns | None = None) -> Effec
     evidence.evaluation_step_errors = step_errors(observed, after, job.target_scales)
     after_error = float(evidence.evaluation_step_errors.sum())
     evidence.theta = theta
+    evidence.appears_in_test_window = onset != "present throughout"
     evidence.fit_step_errors = fit_step_errors
     evidence.test_improvement = 1.0 - after_error / before_error if before_error > 0 else 0.0
     for node, values in observed.items():

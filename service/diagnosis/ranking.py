@@ -68,6 +68,7 @@ class EffectEvidence:
     explanation: str = ""
     demoted: str = ""  # why the ranking puts it below the plausible effects (empty: it does not)
     implausible: bool = False  # demoted for its physics (a fit only at a bound, no heat source), not its refit
+    appears_in_test_window: bool = False  # fitted as a fault appearing there (absent from the training window)
     # for telling look-alikes apart (service.diagnosis.separation), not part of the report: θ of the
     # fit kept (all estimated parameters), each evaluation step's share of the error after it, the model
     theta: np.ndarray | None = field(default=None, repr=False)
@@ -90,6 +91,7 @@ class EffectEvidence:
             "estimates": self.estimates, "standard_errors": self.standard_errors,
             "test_improvement": self.test_improvement, "rmse_before": self.rmse_before,
             "rmse_after": self.rmse_after, "explanation": self.explanation, "demoted": self.demoted,
+            "appears_in_test_window": self.appears_in_test_window,
         }
 
 

@@ -180,6 +180,7 @@ def diagnose_run(run: Run, train: tuple[str, str] = TRAIN) -> dict:
         "truth": truth.to_dict(),
         "top": None if top is None else f"{top.effect}@{top.node.removeprefix(EX)}",
         "top_significant": bool(top is not None and top.significant),
+        "top_appears": bool(top is not None and top.appears_in_test_window),  # fitted as appearing in the test window
         "right_first": bool(top is not None and top.significant and _names_truth(top, true_effects, true_node)),
         "true_rank": true_rank, "any_significant": bool(significant),
         "catalog_claimed": any(not isinstance(e, DriftEvidence) for e in significant),

@@ -278,6 +278,7 @@ def test_diagnose_prints_the_command_that_adds_its_answer_and_that_command_works
             for name, ratio in nmbe.items() if name.startswith(("coil_outlet_air", "fan_power"))}
     assert nmbe["coil_outlet_air"] == "–" and nmbe["fan_power"] != "–", nmbe  # a mean in °C has no ratio
     line = next(t for t in result.output.splitlines() if t.startswith("add it to the model: "))
+    assert "it appeared in the test window" not in result.output  # the hidden leak is there from the start
     command = line.removeprefix("add it to the model: ")
     assert shlex.split(command) == ["graphtwin", "add-effect", str(CASE_STUDY), "--effect", "ValveLeakage", "--target",
                                     f"{EX}heating_valve", "-o", "model+ValveLeakage.ttl"]

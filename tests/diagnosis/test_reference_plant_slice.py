@@ -29,3 +29,4 @@ def test_a_leaking_valve_is_named_first():
     position reading the leak too, a constant heat gain at the coil won)."""
     row = diagnose_run(cell_run("valve_leakage"))
     assert row["right_first"], (row["top"], row["true_rank"])
+    assert row["top_appears"]  # the plant's leak starts on the test window's first day: fitted so, and said so

@@ -325,6 +325,21 @@ def test_wet_bulb_and_differential_temperatures_are_not_read_as_air_temperatures
     assert {"Outside_Air_Wet_Bulb_Temperature_Sensor", "Outside_Air_Temperature_Enable_Differential_Sensor"} <= unaligned
 
 
+@pytest.mark.parametrize("drive", [":sf brick:hasPart :sf_vfd . :sf_vfd a brick:Variable_Frequency_Drive",
+                                   ":sf_vfd a brick:VFD ; brick:feeds :sf"])
+def test_a_speed_command_of_the_fans_drive_controls_the_fans_speed(drive):
+    """A walkthrough's Brick unit put the speed command on the fan's drive (part of the fan, a common
+    Brick pattern) and the command was left out: the fan's drive stands for the fan."""
+    stated = POINTS_ONLY.replace(":fan_cmd a brick:Fan_Speed_Command ; brick:isPointOf :ahu",
+                                 f":sf a brick:Supply_Fan ; brick:isPartOf :ahu .\n{drive} .\n"
+                                 ":fan_cmd a brick:Fan_Speed_Command ; brick:isPointOf :sf_vfd")
+    assert stated != POINTS_ONLY
+    derived = inferred_triples(parse_rdf(stated.encode(), ox.RdfFormat.TURTLE, "vfd"), ontology_triples())
+    controls = {(t.subject.value.removeprefix(EX), t.object.value.removeprefix(EX)) for t in derived
+                if t.predicate.value == "https://saref.etsi.org/core/controls"}
+    assert ("fan_cmd", "sf_speed") in controls
+
+
 def test_a_return_fan_speed_command_does_not_drive_the_supply_fan():
     extra = ':rf_cmd a brick:Fan_Speed_Command ; brick:isPointOf :ahu ; brick:hasUnit unit:PERCENT ; rdfs:label "RF Speed" .\n'
     store = GraphStore.embedded(None)
