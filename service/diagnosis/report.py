@@ -151,7 +151,9 @@ class DiagnosisReport:
         if self.indistinguishable:
             sentence += (" Indistinguishable on these data: "
                          + "; ".join(f"{e.effect.label} at {local_name(e.effect.node)}" for e in self.indistinguishable)
-                         + " (see indistinguishable for what would separate them).")
+                         + " (their per-step errors tie with the answer's within two standard errors on the fit "
+                         "windows and on the held-out half, whatever their ΔBICs; see indistinguishable for what "
+                         "would separate them).")
         return sentence
 
     def residual_structure(self) -> str:
