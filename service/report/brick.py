@@ -323,7 +323,9 @@ def print_brick_report(report: BrickReport, console: Console | None = None) -> N
         ("Points with no unit (brick:hasUnit)", report.points_without_unit,
          "state brick:hasUnit with a QUDT unit (a command in percent: unit:PERCENT; a fraction: unit:UNITLESS)"),
         ("Temperature points off the flow path (boundary inputs only)", report.temperature_points_off_path,
-         "state which equipment's outlet they read (brick:isPointOf that equipment)"),
+         "state which equipment's outlet they read (brick:isPointOf that equipment); a zone's or room's air "
+         "stays an input: a unit's mixing box reads the return air from a brick:Return_Air_Temperature_Sensor "
+         "of the unit"),
         ("Water temperature points no model reads", report.water_points_unread,
          "a coil model reads the water entering it (an entering or supply water point of the coil or its valve); "
          "no model gives a coil's leaving water, nor says which coil a unit's or plant's supply water reaches"),
