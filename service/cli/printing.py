@@ -62,6 +62,13 @@ def print_metrics(title: str, metrics: dict, logged_units: dict[str, str] | None
     console.print(table)
 
 
+def _first_reason(reasons) -> str:
+    """An unidentified parameter's verdict for the table: its first reason, and how many more the JSON
+    and the report page list (the whole list ran to ten lines a parameter on the school AHU)."""
+    more = f" (+{len(reasons) - 1} more in --json)" if len(reasons) > 1 else ""
+    return "no: " + _PARAMETER_KEY.sub(lambda m: parameter_label(m[0]), reasons[0] if reasons else "") + more
+
+
 def print_calibration(record: CalibrationRecord, logged_units: dict[str, str] | None = None) -> None:
     """A calibration run as tables: the estimates, the start and the sampler's convergence, the
     metrics per window (``logged_units``: :func:`print_metrics`), the regimes, the notes."""
@@ -70,8 +77,7 @@ def print_calibration(record: CalibrationRecord, logged_units: dict[str, str] | 
         table.add_column(column, overflow="fold")
     for e in record.estimates:
         table.add_row(local_name(e.node), e.name, f"{e.median:.4g}", f"{e.quantile16:.4g} – {e.quantile84:.4g}", unit_label(e.unit),
-                      "yes" if e.identified
-                      else "no: " + _PARAMETER_KEY.sub(lambda m: parameter_label(m[0]), "; ".join(e.reasons)))
+                      "yes" if e.identified else _first_reason(e.reasons))
     identified = sum(e.identified for e in record.estimates)
     table.caption = f"{identified} of {len(record.estimates)} estimated parameters identified by these data"
     console.print(table)

@@ -445,6 +445,12 @@ def test_calibrate_prints_estimates_metrics_and_the_error_per_operating_regime(t
     assert counted and 0 < int(counted[1]) <= int(counted[2])  # the verdicts counted under the table
     # fewer than half identified is said in a sentence, as it is on the school AHU (0 of 19)
     assert ("Only " in result.output) == (2 * int(counted[1]) < int(counted[2]))
+    # an unidentified parameter's first reason in the table, the count of the others (all in --json)
+    as_json = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--json",
+                                  "--train", f"{stamps[0]}/{stamps[143]}", "--test", f"{stamps[144]}/"])
+    estimates = json.loads(as_json.output)["parameters"].values()
+    several = [e for e in estimates if not e["identified"] and len(e["reasons"]) > 1]
+    assert several and len(re.findall(r"\(\+\d+ more in\s+--json\)", result.output)) == len(several)
     regimes = result.output[result.output.index("Test RMSE per operating regime"):]
     assert "supply air flow meter" in regimes and " %" in regimes and "°C" in regimes  # rules, shares, units
     refused = runner.invoke(app, ["calibrate", str(CASE_STUDY), str(data), "--memory", "--gp-input", "supply_air_flow"])
