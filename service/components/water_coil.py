@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.components.actuator import actuator_stem_position
+from service.components.actuator import DEAD_BAND_PARAMETER, actuator_stem_position
 from service.components.component import (
     AIR_SPECIFIC_HEAT_J_PER_KG_K,
     WATER_SPECIFIC_HEAT_J_PER_KG_K,
@@ -61,7 +61,7 @@ class WaterCoil(ComponentModel):
     ) + _FLOW_AND_CONDUCTANCES
 
     def step(self, params, inputs, state, dt_s):
-        opening = actuator_stem_position(inputs["valve_position"], params["valve_dead_band"])
+        opening = actuator_stem_position(inputs["valve_position"], params[DEAD_BAND_PARAMETER])
         air_in = inputs["inlet_air_temperature"]
         air_flow = np.maximum(inputs["air_mass_flow"], 0.0)
         c_air = air_flow * AIR_SPECIFIC_HEAT_J_PER_KG_K

@@ -90,16 +90,19 @@ def surroundings_caution(model: AssembledModel, theta: np.ndarray, standard_erro
     than the coldest temperature series (°C) in ``data`` by more than two standard errors: that, with
     the sensor, for the reader to check (a chilled-water leak can fit as a casing cooled by 5 °C
     surroundings on a summer day); else empty."""
+    refs = model.estimated_parameters
+    surroundings = [j for j in effect_columns if refs[j].name
+                    == model.components[refs[j].component].model_class.surroundings_temperature_parameter]
+    if not surroundings:
+        return ""
     lows = {node: float(np.nanmin(values)) for node, values in data.series.items()
             if data.units.get(node) == "degC" and np.isfinite(values).any()}
     if not lows:
         return ""
     sensor, coldest = min(lows.items(), key=lambda item: item[1])
-    refs = model.estimated_parameters
-    for j in effect_columns:
+    for j in surroundings:
         se = float(standard_errors[j])
-        if (refs[j].name == model.components[refs[j].component].model_class.surroundings_temperature_parameter
-                and np.isfinite(se) and theta[j] + 2.0 * se < coldest):
+        if np.isfinite(se) and theta[j] + 2.0 * se < coldest:
             return (f"surroundings at {theta[j]:.3g} °C are colder than every temperature measured in the unit "
                     f"(the coldest {coldest:.3g} °C, at {local_name(sensor)}): only a space that cold or a cold "
                     "source explains them")

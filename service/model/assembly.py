@@ -20,7 +20,7 @@ import pyoxigraph as ox
 from service.components.library import SignatureLibrary
 from service.components.measuring_device import MeasuringDevice
 from service.errors import AssemblyError, IncompleteModelError, UnitError
-from service.graph.namespaces import RDFS, distinct_local_names
+from service.graph.namespaces import FSO, RDFS, distinct_local_names
 from service.graph.store import GraphStore
 from service.graph.units import closest_unit_hint, unit_spec
 from service.graph.vocabulary import misspelt_terms
@@ -170,7 +170,7 @@ def _coil_outlet_notes(store: GraphStore, model_name: str, instances: Mapping[st
         if c.source_port != "outlet_air_temperature" or not issubclass(device.model_class, MeasuringDevice):
             continue
         air_node = next(o.node for o in coil.signature.outputs if o.port == "outlet_air_temperature")
-        if not any(t.subject == "valve" and t.object == air_node and t.predicate.endswith("suppliesFluidTo")
+        if not any(t.subject == "valve" and t.object == air_node and t.predicate == FSO.iri("suppliesFluidTo")
                    for t in coil.signature.triples):
             continue
         fed = sorted({row["to"].value for row in store.run_named_query(

@@ -155,8 +155,10 @@ def _rule_terms() -> frozenset[str]:
     return frozenset(t for t in rule_terms() if t.startswith((BRICK, REF, REC)))
 
 
+#: The schemes of the IRIs the report shortens (http(s) and urn: models alike).
+_SCHEMES = r"(?:https?://|urn:)"
 #: An IRI inside a sentence (up to the characters that end one there).
-_IRI = re.compile(r"(?:https?://|urn:)[^\s<>`'\"(),;]+")
+_IRI = re.compile(_SCHEMES + r"[^\s<>`'\"(),;]+")
 
 
 #: Brick 1.x's own unit namespace, which Brick models state units in and QUDT does not know.
@@ -179,7 +181,7 @@ def _turtle(text: str, own: dict[str, str]) -> str:
         known, namespace = compact_iri(iri), namespace_of(iri)
         return known if known[0] != "<" or namespace not in own else f"{own[namespace]}:{local_name(iri)}"
 
-    return re.sub(r"<((?:https?://|urn:)[^\s<>]+)>", lambda m: name(m.group(1)), text)
+    return re.sub(r"<(" + _SCHEMES + r"[^\s<>]+)>", lambda m: name(m.group(1)), text)
 
 
 def _short(iri: str) -> str:

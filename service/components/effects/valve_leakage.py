@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from service.components.actuator import actuator_stem_position, command_for_stem
+from service.components.actuator import DEAD_BAND_PARAMETER, act_on_stem
 from service.components.component import Parameter, Port, SplicedEffect
 
 __all__ = ["ValveLeakage"]
@@ -22,7 +22,7 @@ class ValveLeakage(SplicedEffect):
     """
 
     stem_position_parameter = "leakage_fraction"
-    host_parameters = ("valve_dead_band",)
+    host_parameters = (DEAD_BAND_PARAMETER,)
     inputs = (Port("value_in", "1", "commanded valve position"),)
     outputs = (Port("value_out", "1", "effective valve position"),)
     parameters = (
@@ -30,9 +30,5 @@ class ValveLeakage(SplicedEffect):
     )
 
     def step(self, params, inputs, state, dt_s):
-        command, leak = inputs["value_in"], params["leakage_fraction"]
-        if "valve_dead_band" not in params:
-            return {"value_out": command + leak * (1.0 - command)}
-        dead_band = params["valve_dead_band"]
-        stem = actuator_stem_position(command, dead_band)
-        return {"value_out": command_for_stem(stem + leak * (1.0 - stem), command, dead_band)}
+        leak = params["leakage_fraction"]
+        return {"value_out": act_on_stem(inputs["value_in"], params, lambda stem: stem + leak * (1.0 - stem))}

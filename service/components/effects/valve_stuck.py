@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from service.components.actuator import actuator_stem_position, command_for_stem
+from service.components.actuator import DEAD_BAND_PARAMETER, act_on_stem
 from service.components.component import Parameter, Port, SplicedEffect
 
 __all__ = ["ValveStuck"]
@@ -20,7 +20,7 @@ class ValveStuck(SplicedEffect):
     """
 
     stem_position_parameter = "stuck_position"
-    host_parameters = ("valve_dead_band",)
+    host_parameters = (DEAD_BAND_PARAMETER,)
     inputs = (Port("value_in", "1", "commanded position"),)
     outputs = (Port("value_out", "1", "effective position"),)
     parameters = (
@@ -30,9 +30,6 @@ class ValveStuck(SplicedEffect):
     )
 
     def step(self, params, inputs, state, dt_s):
-        command, weight, stuck = inputs["value_in"], params["stuck_weight"], params["stuck_position"]
-        if "valve_dead_band" not in params:
-            return {"value_out": (1.0 - weight) * command + weight * stuck}
-        dead_band = params["valve_dead_band"]
-        stem = (1.0 - weight) * actuator_stem_position(command, dead_band) + weight * stuck
-        return {"value_out": command_for_stem(stem, command, dead_band)}
+        weight, stuck = params["stuck_weight"], params["stuck_position"]
+        return {"value_out": act_on_stem(inputs["value_in"], params,
+                                         lambda stem: (1.0 - weight) * stem + weight * stuck)}
